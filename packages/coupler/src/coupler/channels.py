@@ -1,0 +1,104 @@
+"""What a participant declares: its channels, capabilities and the set-up of a run.
+
+Plain, frozen Python values; ``coupler.values`` converts them to and from protobuf.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from enum import StrEnum
+
+#: A value on a channel, as Python sees it. Enumerations travel as ``int``.
+Value = float | int | bool | str | bytes
+
+
+class Causality(StrEnum):
+    """Direction of a channel, named as in FMI/SSP."""
+
+    INPUT = "input"
+    OUTPUT = "output"
+    PARAMETER = "parameter"
+
+
+class ValueType(StrEnum):
+    """Type of a channel, named as SSP connector types."""
+
+    REAL = "Real"
+    INTEGER = "Integer"
+    BOOLEAN = "Boolean"
+    STRING = "String"
+    BINARY = "Binary"
+    ENUMERATION = "Enumeration"
+
+
+@dataclass(frozen=True, kw_only=True)
+class Channel:
+    """One channel of a participant."""
+
+    name: str
+    """Channel name; the SSD connector name that refers to it."""
+    causality: Causality
+    """Input, output or parameter."""
+    type: ValueType
+    """Value type."""
+    unit: str = ""
+    """Unit symbol as in the SSD's Units; empty when dimensionless."""
+    start: Value | None = None
+    """Start value, or None when the channel has none."""
+    description: str = ""
+    """Free text for people."""
+    message_type: str = ""
+    """For binary channels: full protobuf message name carried, e.g. ``coupler.v1.TrainState``."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class Capabilities:
+    """What a participant supports beyond the unary calls."""
+
+    streaming: bool = True
+    """Accepts the StepStream RPC."""
+    variable_step_size: bool = True
+    """Accepts any step size."""
+    fixed_step_size: float = 0.0
+    """When non-zero, step sizes must be whole multiples of this [s]."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class Description:
+    """A participant's answer to Describe."""
+
+    name: str
+    """The participant's own name (the SSD may call it differently)."""
+    channels: tuple[Channel, ...]
+    """Every channel, in the participant's order."""
+    capabilities: Capabilities = field(default_factory=Capabilities)
+    """Optional features."""
+    implementation: str = ""
+    """Implementation and version, for run summaries."""
+
+    def channel(self, name: str) -> Channel | None:
+        """The channel called ``name``, or None."""
+        return next((c for c in self.channels if c.name == name), None)
+
+    def of(self, causality: Causality) -> tuple[Channel, ...]:
+        """Channels of one causality, in order."""
+        return tuple(c for c in self.channels if c.causality is causality)
+
+
+@dataclass(frozen=True, kw_only=True)
+class RunSetup:
+    """Everything Initialize carries."""
+
+    run_id: str
+    """Identifies the run in logs and results."""
+    start_time: float
+    """Simulation start time [s]."""
+    step_size: float
+    """Communication step size of this participant [s]."""
+    stop_time: float | None = None
+    """Simulation stop time [s], when known."""
+    parameters: Mapping[str, Value] = field(default_factory=dict)
+    """Parameter values by channel name."""
+    inputs: Mapping[str, Value] = field(default_factory=dict)
+    """Start values of inputs by channel name."""

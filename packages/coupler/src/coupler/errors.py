@@ -1,0 +1,69 @@
+"""Coupler's exception tree. Every error a user sees is one of these.
+
+    CouplerError
+    ├── ScenarioError          bad SSP, wiring or configuration; raised before anything runs
+    │   └── ValidationError    several problems found together (``.problems``)
+    ├── ChannelValueError      a value does not fit its channel (``channel``, ``expected``)
+    └── ParticipantError       a participant failed at run time (``participant``, ``call``, ``status``)
+        ├── ParticipantUnavailable   cannot be reached, or the wrapped simulator is down
+        └── ParticipantTimeout       a call exceeded its deadline
+
+Foreign errors (grpc.aio.AioRpcError, FMI statuses, aiohttp errors) are translated where they
+are caught -- ``coupler.client`` for gRPC, ``coupler.fmu`` for FMI -- with ``raise X(...) from exc``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+
+
+class CouplerError(Exception):
+    """Base of every error Coupler raises on purpose."""
+
+
+class ScenarioError(CouplerError):
+    """The scenario (SSP, wiring, configuration) is wrong; nothing has run."""
+
+
+class ValidationError(ScenarioError):
+    """Several problems found together, each a sentence naming its culprit and the fix."""
+
+    def __init__(self, problems: Iterable[str], *, subject: str = "scenario") -> None:
+        self.problems = list(problems)
+        self.subject = subject
+        lines = "\n".join(f"  - {p}" for p in self.problems)
+        super().__init__(f"{subject}: {len(self.problems)} problem(s)\n{lines}")
+
+
+class ChannelValueError(CouplerError):
+    """A value does not fit its channel: unknown channel, wrong type, out of range."""
+
+    def __init__(self, message: str, *, channel: str, expected: str = "") -> None:
+        self.channel = channel
+        self.expected = expected
+        super().__init__(message)
+
+
+class ParticipantError(CouplerError):
+    """A participant failed at run time.
+
+    ``status`` is the gRPC status code name (``"INVALID_ARGUMENT"``, ...) or the FMI status
+    (``"fmi2Error"``, ...) that the participant reported.
+    """
+
+    def __init__(self, message: str, *, participant: str, call: str, status: str = "") -> None:
+        self.participant = participant
+        self.call = call
+        self.status = status
+        prefix = f"{participant}.{call}"
+        if status:
+            prefix += f" [{status}]"
+        super().__init__(f"{prefix}: {message}")
+
+
+class ParticipantUnavailable(ParticipantError):
+    """The participant cannot be reached, or the simulator it wraps is down."""
+
+
+class ParticipantTimeout(ParticipantError):
+    """A call to the participant exceeded its deadline."""

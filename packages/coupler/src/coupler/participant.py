@@ -1,0 +1,38 @@
+"""The one async interface every participant implements, local or remote.
+
+The master algorithm, the gRPC server runtime and the client all speak it: an FMU run in-process
+(``coupler.fmu.FmuParticipant``), a remote participant (``coupler.client.RemoteParticipant``)
+and a simulator wrapped by an adapter (``coupler.adapter.AdapterParticipant``) look the same.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from collections.abc import Mapping
+
+from coupler.channels import Description, RunSetup, Value
+
+Values = dict[str, Value]
+
+
+class Participant(ABC):
+    """A co-simulation participant. One run at a time: initialize, do_step..., terminate."""
+
+    @abstractmethod
+    async def describe(self) -> Description:
+        """The participant's channels and capabilities."""
+
+    @abstractmethod
+    async def initialize(self, setup: RunSetup) -> Values:
+        """Start a run; return every output at ``setup.start_time``."""
+
+    @abstractmethod
+    async def do_step(self, time: float, step: float, inputs: Mapping[str, Value]) -> Values:
+        """Advance from ``time`` by ``step`` with ``inputs``; return outputs at ``time + step``."""
+
+    @abstractmethod
+    async def terminate(self, reason: str = "") -> None:
+        """End the run and free its resources; the participant may be initialized again."""
+
+    async def close(self) -> None:  # noqa: B027 - optional hook, nothing to do by default
+        """Release what the participant holds beyond a run (connections, processes)."""

@@ -1,0 +1,1 @@
+"""openrails_bridge."""
