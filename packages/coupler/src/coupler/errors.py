@@ -4,12 +4,12 @@
     ├── ScenarioError          bad SSP, wiring or configuration; raised before anything runs
     │   └── ValidationError    several problems found together (``.problems``)
     ├── ChannelValueError      a value does not fit its channel (``channel``, ``expected``)
-    └── ParticipantError       a participant failed at run time (``participant``, ``call``, ``status``)
+    └── ParticipantError       a participant failed at run time (participant, call, status)
         ├── ParticipantUnavailable   cannot be reached, or the wrapped simulator is down
         └── ParticipantTimeout       a call exceeded its deadline
 
 Foreign errors (grpc.aio.AioRpcError, FMI statuses, aiohttp errors) are translated where they
-are caught -- ``coupler.client`` for gRPC, ``coupler.fmu`` for FMI -- with ``raise X(...) from exc``.
+are caught -- ``coupler.client`` for gRPC, ``coupler.fmu`` for FMI -- as ``raise X(...) from exc``.
 """
 
 from __future__ import annotations

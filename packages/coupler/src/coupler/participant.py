@@ -34,5 +34,8 @@ class Participant(ABC):
     async def terminate(self, reason: str = "") -> None:
         """End the run and free its resources; the participant may be initialized again."""
 
+    async def open(self) -> None:  # noqa: B027 - optional hook, nothing to do by default
+        """Get ready to serve: connect to the wrapped simulator, load files. Before describe."""
+
     async def close(self) -> None:  # noqa: B027 - optional hook, nothing to do by default
         """Release what the participant holds beyond a run (connections, processes)."""

@@ -1,0 +1,245 @@
+"""``RemoteParticipant``: a participant behind ``grpc://HOST:PORT``, seen as a local one.
+
+gRPC errors are translated to Coupler's exception tree here, in ``_translate``, and nowhere else.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import time
+from collections.abc import Mapping
+from types import TracebackType
+from typing import Any, TypeVar
+from urllib.parse import urlsplit
+
+import grpc
+from grpc_health.v1 import health_pb2, health_pb2_grpc
+
+from coupler import values
+from coupler.channels import Description, RunSetup, Value
+from coupler.errors import (
+    ChannelValueError,
+    ParticipantError,
+    ParticipantTimeout,
+    ParticipantUnavailable,
+    ScenarioError,
+)
+from coupler.participant import Participant, Values
+from coupler.v1 import component_pb2 as pb
+from coupler.v1 import component_pb2_grpc as pb_grpc
+
+T = TypeVar("T")
+_UNAVAILABLE = {grpc.StatusCode.UNAVAILABLE, grpc.StatusCode.CANCELLED}
+
+
+def parse_address(address: str) -> str:
+    """``grpc://host:port`` (or bare ``host:port``) as the target string grpc wants."""
+    parts = urlsplit(address if "://" in address else f"grpc://{address}")
+    if parts.scheme != "grpc" or not parts.hostname or parts.port is None:
+        raise ScenarioError(
+            f"'{address}' is not a participant address; write grpc://HOST:PORT, "
+            f"e.g. grpc://127.0.0.1:50051"
+        )
+    host = f"[{parts.hostname}]" if ":" in parts.hostname else parts.hostname
+    return f"{host}:{parts.port}"
+
+
+class RemoteParticipant(Participant):
+    """A participant reached over gRPC.
+
+    ``open()`` waits until the participant's health is SERVING (within ``connect_timeout``) and
+    describes it; every call then has a deadline of ``call_timeout`` seconds. With
+    ``streaming`` (and a participant that supports it) steps travel over one StepStream.
+    """
+
+    def __init__(
+        self,
+        address: str,
+        *,
+        name: str | None = None,
+        connect_timeout: float = 10.0,
+        call_timeout: float = 30.0,
+        streaming: bool = True,
+    ) -> None:
+        self.address = address
+        self.target = parse_address(address)
+        self.name = name or address
+        self.connect_timeout = connect_timeout
+        self.call_timeout = call_timeout
+        self.streaming = streaming
+        self._channel: grpc.aio.Channel | None = None
+        self._stub: pb_grpc.GRPCComponentServiceStub | None = None
+        self._codec: values.Codec | None = None
+        self._stream: grpc.aio.StreamStreamCall | None = None
+
+    async def __aenter__(self) -> RemoteParticipant:
+        await self.open()
+        return self
+
+    async def __aexit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        await self.close()
+
+    async def open(self) -> None:
+        if self._channel is not None:
+            return
+        self._channel = grpc.aio.insecure_channel(self.target)
+        self._stub = pb_grpc.GRPCComponentServiceStub(self._channel)
+        await self.wait_until_serving()
+        response = await self._call(
+            "Describe", self._stub.Describe(pb.DescribeRequest(), timeout=self.call_timeout)
+        )
+        self._codec = values.Codec(values.description_from_pb(response))
+
+    async def wait_until_serving(self) -> None:
+        """Poll the health service until SERVING; ParticipantUnavailable after the deadline."""
+        assert self._channel is not None
+        health_stub = health_pb2_grpc.HealthStub(self._channel)
+        deadline = time.monotonic() + self.connect_timeout
+        delay, last = 0.05, "no answer"
+        while True:
+            remaining = deadline - time.monotonic()
+            try:
+                reply = await health_stub.Check(
+                    health_pb2.HealthCheckRequest(service=""), timeout=max(0.1, min(2.0, remaining))
+                )
+                if reply.status == health_pb2.HealthCheckResponse.SERVING:
+                    return
+                last = (
+                    f"health is {health_pb2.HealthCheckResponse.ServingStatus.Name(reply.status)}"
+                )
+            except grpc.aio.AioRpcError as exc:
+                last = f"{exc.code().name}: {exc.details()}"
+            if time.monotonic() + delay > deadline:
+                raise ParticipantUnavailable(
+                    f"not SERVING at {self.address} within {self.connect_timeout:g} s ({last}); "
+                    f"is the participant running and listening on that address?",
+                    participant=self.name,
+                    call="connect",
+                    status="UNAVAILABLE",
+                )
+            await asyncio.sleep(delay)
+            delay = min(delay * 2, 0.5)
+
+    @property
+    def codec(self) -> values.Codec:
+        if self._codec is None:
+            raise ParticipantError(
+                "not connected; call open() first", participant=self.name, call="describe"
+            )
+        return self._codec
+
+    async def describe(self) -> Description:
+        await self.open()
+        return self.codec.description
+
+    async def initialize(self, setup: RunSetup) -> Values:
+        request = self._request("Initialize", lambda: values.initialize_to_pb(setup, self.codec))
+        response = await self._call(
+            "Initialize", self._stubbed().Initialize(request, timeout=self.call_timeout)
+        )
+        if self.streaming and self.codec.description.capabilities.streaming:
+            self._stream = self._stubbed().StepStream()
+        return self._response("Initialize", lambda: values.outputs_from_pb(response, self.codec))
+
+    async def do_step(self, time: float, step: float, inputs: Mapping[str, Value]) -> Values:
+        request = self._request("DoStep", lambda: values.step_to_pb(time, step, inputs, self.codec))
+        if self._stream is not None:
+            response = await self._call("DoStep", self._stream_step(self._stream, request))
+        else:
+            response = await self._call(
+                "DoStep", self._stubbed().DoStep(request, timeout=self.call_timeout)
+            )
+        return self._response("DoStep", lambda: values.outputs_from_pb(response, self.codec))
+
+    async def _stream_step(
+        self, stream: grpc.aio.StreamStreamCall, request: pb.DoStepRequest
+    ) -> pb.DoStepResponse:
+        await stream.write(request)
+        response = await asyncio.wait_for(stream.read(), self.call_timeout)
+        if response is grpc.aio.EOF:  # the server closed the stream: its status says why
+            code = await stream.code()
+            details = await stream.details()
+            raise _translate(
+                code, details, participant=self.name, call="DoStep", address=self.address
+            )
+        return response
+
+    async def terminate(self, reason: str = "") -> None:
+        stream, self._stream = self._stream, None
+        if stream is not None:
+            await stream.done_writing()
+            # the run ends either way; Terminate below reports what matters
+            with contextlib.suppress(grpc.aio.AioRpcError, TimeoutError):
+                await asyncio.wait_for(stream.code(), self.call_timeout)
+        await self._call(
+            "Terminate",
+            self._stubbed().Terminate(values.terminate_to_pb(reason), timeout=self.call_timeout),
+        )
+
+    async def close(self) -> None:
+        if self._stream is not None:
+            self._stream.cancel()
+            self._stream = None
+        if self._channel is not None:
+            await self._channel.close()
+        self._channel = None
+        self._stub = None
+
+    def _stubbed(self) -> pb_grpc.GRPCComponentServiceStub:
+        if self._stub is None:
+            raise ParticipantError(
+                "not connected; call open() first", participant=self.name, call="call"
+            )
+        return self._stub
+
+    def _request(self, call: str, build: Any) -> Any:
+        try:
+            return build()
+        except ChannelValueError as exc:
+            raise ParticipantError(
+                str(exc), participant=self.name, call=call, status="INVALID_ARGUMENT"
+            ) from exc
+
+    def _response(self, call: str, read: Any) -> Values:
+        try:
+            outputs: Values = read()
+        except ChannelValueError as exc:
+            raise ParticipantError(
+                f"answered outside its description: {exc}", participant=self.name, call=call
+            ) from exc
+        return outputs
+
+    async def _call(self, call: str, pending: Any) -> Any:
+        try:
+            return await pending
+        except grpc.aio.AioRpcError as exc:
+            raise _translate(
+                exc.code(), exc.details(), participant=self.name, call=call, address=self.address
+            ) from exc
+        except TimeoutError as exc:
+            raise ParticipantTimeout(
+                f"no answer within {self.call_timeout:g} s",
+                participant=self.name,
+                call=call,
+                status="DEADLINE_EXCEEDED",
+            ) from exc
+
+
+def _translate(
+    code: grpc.StatusCode, details: str | None, *, participant: str, call: str, address: str
+) -> ParticipantError:
+    """The one place gRPC errors become Coupler errors."""
+    details = details or code.name
+    if code in _UNAVAILABLE:
+        return ParticipantUnavailable(
+            f"{details} ({address})", participant=participant, call=call, status=code.name
+        )
+    if code is grpc.StatusCode.DEADLINE_EXCEEDED:
+        return ParticipantTimeout(details, participant=participant, call=call, status=code.name)
+    return ParticipantError(details, participant=participant, call=call, status=code.name)

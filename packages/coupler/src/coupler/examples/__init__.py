@@ -1,0 +1,1 @@
+"""Example participants: small, complete, and the template for new ones."""

@@ -1,0 +1,209 @@
+"""The participant runtime and client against real gRPC servers on port 0.
+
+RemoteParticipant --gRPC--> ParticipantServer(GainParticipant)
+"""
+
+from __future__ import annotations
+
+import asyncio
+from collections.abc import Mapping
+
+import grpc
+import pytest
+from grpc_health.v1 import health_pb2, health_pb2_grpc
+
+from coupler import values
+from coupler.channels import Description, RunSetup, Value
+from coupler.client import RemoteParticipant, parse_address
+from coupler.errors import ParticipantError, ParticipantUnavailable, ScenarioError
+from coupler.examples.gain import GainParticipant
+from coupler.server import ParticipantServer
+from coupler.v1 import component_pb2 as pb
+from coupler.v1 import component_pb2_grpc as pb_grpc
+
+TRAIN = {
+    "time_s": 0.0,
+    "position": {"latitude_deg": 50.5766, "longitude_deg": 13.0104, "altitude_m": 540.0},
+    "heading_deg": 270.0,
+    "distance_m": 100.0,
+    "speed_mps": 10.0,
+    "acceleration_mps2": 0.5,
+    "track_node": 2,
+    "track_offset_m": 40.0,
+    "direction": 1,
+}
+
+
+def setup(**parameters: Value) -> RunSetup:
+    return RunSetup(run_id="t", start_time=0.0, step_size=0.5, parameters=parameters)
+
+
+async def test_every_value_type_round_trips(gain_server: ParticipantServer) -> None:
+    train = values.encode_message("coupler.v1.TrainState", TRAIN)
+    async with RemoteParticipant(gain_server.address, streaming=False) as remote:
+        initial = await remote.initialize(setup(gain=3.0, x0=1.0, offset=5))
+        assert initial == {
+            "y": 0.0,
+            "x": 1.0,
+            "count": 5,
+            "inverted": True,
+            "echo": "",
+            "train_out": b"",
+        }
+        inputs = {"u": 2.0, "n": -7, "flag": True, "label": "Zwönitz ✓", "train": train}
+        out = await remote.do_step(0.0, 0.5, inputs)
+        assert out["y"] == 6.0
+        assert out["x"] == 2.0
+        assert out["count"] == -2
+        assert out["inverted"] is False
+        assert out["echo"] == "Zwönitz ✓"
+        state = values.decode_message("coupler.v1.TrainState", bytes(out["train_out"]))
+        assert state == {**TRAIN, "speed_mps": 30.0, "time_s": 0.5}
+        await remote.terminate()
+
+
+async def test_streaming_gives_the_same_outputs_as_unary(gain_server: ParticipantServer) -> None:
+    steps = [{"u": float(k), "n": k, "flag": k % 2 == 0, "label": f"s{k}"} for k in range(20)]
+    traces = []
+    for streaming in (False, True):
+        async with RemoteParticipant(gain_server.address, streaming=streaming) as remote:
+            trace = [await remote.initialize(setup())]
+            for k, inputs in enumerate(steps):
+                trace.append(await remote.do_step(k * 0.5, 0.5, inputs))
+            await remote.terminate()
+            traces.append(trace)
+    assert traces[0] == traces[1]
+    assert traces[0][-1]["x"] == sum(range(20)) * 0.5
+
+
+async def test_step_before_initialize_is_failed_precondition(
+    gain_server: ParticipantServer,
+) -> None:
+    async with RemoteParticipant(gain_server.address) as remote:
+        with pytest.raises(ParticipantError, match="DoStep before Initialize") as info:
+            await remote.do_step(0.0, 0.5, {})
+    assert info.value.status == "FAILED_PRECONDITION"
+
+
+async def test_second_concurrent_run_is_refused(gain_server: ParticipantServer) -> None:
+    async with (
+        RemoteParticipant(gain_server.address) as first,
+        RemoteParticipant(gain_server.address) as second,
+    ):
+        await first.initialize(setup())
+        with pytest.raises(ParticipantError, match="already in run 't'.*one run at a time") as info:
+            await second.initialize(setup())
+        assert info.value.status == "FAILED_PRECONDITION"
+        await first.terminate()
+        await second.initialize(setup())  # free again after Terminate
+        await second.terminate()
+
+
+@pytest.mark.parametrize(
+    ("binding", "message"),
+    [
+        (pb.VariableBinding(channel="nope", real=1.0), "has no channel 'nope' (input channels: flag"),
+        (pb.VariableBinding(channel="u", text="fast"), "channel 'u' expects Real, got String"),
+        (pb.VariableBinding(channel="n", real=1.5), "channel 'n' expects Integer, got Real"),
+        (pb.VariableBinding(channel="y", real=1.0), "has no input channel 'y'"),
+    ],
+)
+async def test_wrong_channel_or_type_is_invalid_argument(
+    gain_server: ParticipantServer, binding: pb.VariableBinding, message: str
+) -> None:
+    # the raw stub: the client would refuse these before sending
+    async with grpc.aio.insecure_channel(parse_address(gain_server.address)) as channel:
+        stub = pb_grpc.GRPCComponentServiceStub(channel)
+        await stub.Initialize(pb.InitializeRequest(run_id="raw", step_size=0.5))
+        with pytest.raises(grpc.aio.AioRpcError) as info:
+            await stub.DoStep(pb.DoStepRequest(current_time=0, step_size=0.5, inputs=[binding]))
+        assert info.value.code() is grpc.StatusCode.INVALID_ARGUMENT
+        assert message in (info.value.details() or "")
+        await stub.Terminate(pb.TerminateRequest())
+
+
+class Faulty(GainParticipant):
+    """Raises inside do_step when asked to."""
+
+    async def do_step(
+        self, time: float, step: float, inputs: Mapping[str, Value]
+    ) -> dict[str, Value]:
+        if inputs.get("label") == "explode":
+            raise ZeroDivisionError("the model divided by zero at the viaduct")
+        return await super().do_step(time, step, inputs)
+
+
+async def test_participant_exception_is_internal_and_server_keeps_serving() -> None:
+    server = ParticipantServer(Faulty())
+    await server.start()
+    try:
+        async with RemoteParticipant(server.address) as remote:
+            await remote.initialize(setup())
+            with pytest.raises(
+                ParticipantError, match="ZeroDivisionError: the model divided"
+            ) as info:
+                await remote.do_step(0.0, 0.5, {"label": "explode"})
+            assert info.value.status == "INTERNAL"
+        async with RemoteParticipant(server.address, streaming=False) as remote:
+            assert (await remote.do_step(0.5, 0.5, {"u": 1.0}))["x"] == 0.5
+            await remote.terminate()
+    finally:
+        await server.stop(grace=0.1)
+
+
+class SlowToOpen(GainParticipant):
+    def __init__(self) -> None:
+        super().__init__()
+        self.release = asyncio.Event()
+
+    async def open(self) -> None:
+        await self.release.wait()
+
+
+async def health_of(address: str) -> int:
+    async with grpc.aio.insecure_channel(parse_address(address)) as channel:
+        reply = await health_pb2_grpc.HealthStub(channel).Check(health_pb2.HealthCheckRequest())
+        return int(reply.status)
+
+
+async def test_health_follows_the_participant() -> None:
+    participant = SlowToOpen()
+    server = ParticipantServer(participant)
+    starting = asyncio.create_task(server.start())
+    while not server.port:
+        await asyncio.sleep(0.01)
+    assert await health_of(server.address) == health_pb2.HealthCheckResponse.NOT_SERVING
+    participant.release.set()
+    await starting
+    assert await health_of(server.address) == health_pb2.HealthCheckResponse.SERVING
+
+    async with grpc.aio.insecure_channel(parse_address(server.address)) as channel:
+        watch = health_pb2_grpc.HealthStub(channel).Watch(health_pb2.HealthCheckRequest())
+        seen = [(await watch.read()).status]
+        stopping = asyncio.create_task(server.stop(grace=0.5))
+        seen.append((await watch.read()).status)
+        await stopping
+    assert seen == [
+        health_pb2.HealthCheckResponse.SERVING,
+        health_pb2.HealthCheckResponse.NOT_SERVING,
+    ]
+
+
+async def test_unreachable_participant_is_unavailable_within_deadline() -> None:
+    remote = RemoteParticipant("grpc://127.0.0.1:9", connect_timeout=0.5)
+    with pytest.raises(
+        ParticipantUnavailable, match=r"not SERVING at grpc://127.0.0.1:9 within 0.5 s"
+    ):
+        await remote.open()
+    await remote.close()
+
+
+def test_bad_address_says_how_to_write_one() -> None:
+    with pytest.raises(ScenarioError, match="write grpc://HOST:PORT"):
+        parse_address("http://example:80")
+
+
+async def test_describe_over_the_wire_equals_local(gain_server: ParticipantServer) -> None:
+    async with RemoteParticipant(gain_server.address) as remote:
+        remote_description: Description = await remote.describe()
+    assert remote_description == await GainParticipant().describe()
