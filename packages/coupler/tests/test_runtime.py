@@ -102,7 +102,10 @@ async def test_second_concurrent_run_is_refused(gain_server: ParticipantServer) 
 @pytest.mark.parametrize(
     ("binding", "message"),
     [
-        (pb.VariableBinding(channel="nope", real=1.0), "has no channel 'nope' (input channels: flag"),
+        (
+            pb.VariableBinding(channel="nope", real=1.0),
+            "has no channel 'nope' (input channels: flag",
+        ),
         (pb.VariableBinding(channel="u", text="fast"), "channel 'u' expects Real, got String"),
         (pb.VariableBinding(channel="n", real=1.5), "channel 'n' expects Integer, got Real"),
         (pb.VariableBinding(channel="y", real=1.0), "has no input channel 'y'"),

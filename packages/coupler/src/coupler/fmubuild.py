@@ -20,6 +20,7 @@ SRC_ROOT into ``OUT_DIR/<folder name>.fmu`` and prints their paths.
 from __future__ import annotations
 
 import argparse
+import os
 import re
 import shutil
 import subprocess
@@ -27,6 +28,7 @@ import sys
 import tempfile
 import zipfile
 from collections.abc import Iterable, Sequence
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 from xml.etree import ElementTree
@@ -168,13 +170,17 @@ def build_fmu(source_dir: Path, out_path: Path, *, resources: Path | None = None
 
         out_path.parent.mkdir(parents=True, exist_ok=True)
         partial = out_path.with_name(out_path.name + ".part")
-        with zipfile.ZipFile(partial, "w", zipfile.ZIP_DEFLATED) as fmu:
-            fmu.write(md_path, "modelDescription.xml")
-            fmu.write(library, binary)
-            if resources is not None:
-                for path in sorted(p for p in resources.rglob("*") if p.is_file()):
-                    fmu.write(path, f"resources/{path.relative_to(resources).as_posix()}")
-        partial.replace(out_path)
+        try:
+            with zipfile.ZipFile(partial, "w", zipfile.ZIP_DEFLATED) as fmu:
+                fmu.write(md_path, "modelDescription.xml")
+                fmu.write(library, binary)
+                if resources is not None:
+                    for path in sorted(p for p in resources.rglob("*") if p.is_file()):
+                        fmu.write(path, f"resources/{path.relative_to(resources).as_posix()}")
+            partial.replace(out_path)
+        except OSError as exc:
+            partial.unlink(missing_ok=True)
+            raise FmuBuildError(f"cannot write {out_path}: {exc}") from exc
     return out_path
 
 
@@ -184,11 +190,22 @@ def find_model_folders(src_root: Path) -> list[Path]:
 
 
 def build_all(src_root: Path, out_dir: Path) -> list[Path]:
-    """Build every model folder under src_root into ``out_dir/<folder name>.fmu``."""
+    """Build every model folder under src_root into ``out_dir/<folder name>.fmu``.
+
+    gcc runs for several models at once; the first failure is raised after all have finished.
+    """
     folders = find_model_folders(src_root)
     if not folders:
         raise FmuBuildError(f"{src_root}: no model folders (folders with modelDescription.xml)")
-    return [build_fmu(folder, Path(out_dir) / f"{folder.name}.fmu") for folder in folders]
+    names = [folder.name for folder in folders]
+    if len(set(names)) != len(names):
+        raise FmuBuildError(f"{src_root}: model folder names must be unique, got {names}")
+    with ThreadPoolExecutor(max_workers=min(len(folders), os.cpu_count() or 1)) as pool:
+        futures = [
+            pool.submit(build_fmu, folder, Path(out_dir) / f"{folder.name}.fmu")
+            for folder in folders
+        ]
+    return [future.result() for future in futures]
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -1,0 +1,82 @@
+/* Version-independent core shared by the FMI 1.0, 2.0 and 3.0 co-simulation wrappers.
+ *
+ * A model (source.h, feedthrough.h, integrator.h) defines, before including a wrapper:
+ *   - `ModelData`, a struct holding every variable (double, int, bool, char *, Bytes);
+ *   - `MODEL_VARS[]` / `MODEL_NVARS`, one VarInfo per variable (value reference, type,
+ *     causality, offset into ModelData);
+ *   - model_defaults(d)   start values (strings via core_set_string);
+ *   - model_calculate(d, t, initializing)   outputs from parameters, inputs, state and time;
+ *   - model_start(d)      called when initialization mode ends (state := its start value);
+ *   - model_step(d, t, h) advance the state over [t, t+h] (the internal solver step is h).
+ * The wrapper (fmi1_cosim.c, fmi2_cosim.c, fmi3_cosim.c) implements the FMI API over that,
+ * with the helpers of vars.h. A model folder's C file includes the model, then the wrapper.
+ */
+#ifndef COUPLER_FMU_CORE_H
+#define COUPLER_FMU_CORE_H
+
+#include <math.h>
+#include <stdbool.h>
+#include <stddef.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#ifndef M_PI
+#define M_PI 3.14159265358979323846
+#endif
+
+typedef enum { VT_REAL, VT_INTEGER, VT_BOOLEAN, VT_STRING, VT_BINARY } VarType;
+typedef enum { VC_INDEPENDENT, VC_PARAMETER, VC_INPUT, VC_OUTPUT } VarCausality;
+typedef enum { MODE_INSTANTIATED, MODE_INITIALIZATION, MODE_STEP, MODE_TERMINATED } Mode;
+
+typedef struct {
+    unsigned int vr;
+    VarType type;
+    VarCausality causality;
+    size_t offset; /* offsetof(ModelData, field); unused for the independent variable */
+    const char *name;
+} VarInfo;
+
+typedef struct {
+    unsigned char *data;
+    size_t size;
+} Bytes;
+
+#define VAR(vr, type, causality, field) {vr, type, causality, offsetof(ModelData, field), #field}
+#define FIELD(d, var, T) ((T *)((char *)(d) + (var)->offset))
+
+static inline const char *core_type_name(VarType type) {
+    switch (type) {
+    case VT_REAL: return "Real/Float64";
+    case VT_INTEGER: return "Integer/Int32";
+    case VT_BOOLEAN: return "Boolean";
+    case VT_STRING: return "String";
+    default: return "Binary";
+    }
+}
+
+/* Copy src into a fresh buffer owned by *dst; frees the previous value. */
+static inline bool core_set_string(char **dst, const char *src) {
+    size_t n;
+    char *copy;
+    if (src == NULL) src = "";
+    n = strlen(src);
+    copy = (char *)malloc(n + 1);
+    if (copy == NULL) return false;
+    memcpy(copy, src, n + 1);
+    free(*dst);
+    *dst = copy;
+    return true;
+}
+
+static inline bool core_set_bytes(Bytes *dst, const unsigned char *src, size_t size) {
+    unsigned char *copy = (unsigned char *)malloc(size > 0 ? size : 1);
+    if (copy == NULL) return false;
+    if (size > 0) memcpy(copy, src, size);
+    free(dst->data);
+    dst->data = copy;
+    dst->size = size;
+    return true;
+}
+
+#endif
