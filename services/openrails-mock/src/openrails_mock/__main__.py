@@ -1,2 +1,71 @@
-def main() -> None:
-    raise SystemExit("not yet")
+"""``python -m openrails_mock``: run the mock; options override ``OPENRAILS_MOCK_*``."""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import contextlib
+import logging
+from pathlib import Path
+from typing import Any
+
+import structlog
+from aiohttp import web
+
+from .api import SERVER, create_app
+from .config import MockConfig
+
+log = structlog.get_logger("openrails_mock")
+
+
+def _parse(argv: list[str] | None) -> MockConfig:
+    parser = argparse.ArgumentParser(
+        prog="openrails-mock", description="An OpenRails web API with train physics."
+    )
+    parser.add_argument("--host")
+    parser.add_argument("--port", type=int, help="0 picks a free port (default 2150)")
+    parser.add_argument("--mode", choices=["lockstep", "stock"])
+    parser.add_argument("--step-ms", type=float, dest="step_ms")
+    parser.add_argument("--speedup", type=float)
+    parser.add_argument("--railml", type=Path)
+    parser.add_argument("--loading-delay-s", type=float, dest="loading_delay_s")
+    parser.add_argument("--start-time-s", type=float, dest="start_time_s")
+    args = parser.parse_args(argv)
+    overrides: dict[str, Any] = {k: v for k, v in vars(args).items() if v is not None}
+    return MockConfig(**overrides)
+
+
+async def _serve(config: MockConfig) -> None:
+    app = create_app(config)
+    runner = web.AppRunner(app, access_log=None)
+    await runner.setup()
+    site = web.TCPSite(runner, config.host, config.port)
+    await site.start()
+    port = runner.addresses[0][1]
+    consist = app[SERVER].simulation.consist
+    log.info(
+        "openrails_mock.started",
+        host=config.host,
+        port=port,
+        mode=config.mode,
+        step_ms=config.step_ms,
+        railml=str(config.railml) if config.railml else None,
+        consist=consist.name,
+    )
+    print(f"openrails-mock listening on http://{config.host}:{port}/API", flush=True)
+    try:
+        await asyncio.Event().wait()
+    finally:
+        await runner.cleanup()
+        log.info("openrails_mock.stopped")
+
+
+def main(argv: list[str] | None = None) -> None:
+    logging.basicConfig(level=logging.INFO, format="%(message)s")
+    config = _parse(argv)
+    with contextlib.suppress(KeyboardInterrupt):
+        asyncio.run(_serve(config))
+
+
+if __name__ == "__main__":
+    main()

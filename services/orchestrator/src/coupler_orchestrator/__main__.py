@@ -1,2 +1,15 @@
+"""``coupler`` / ``python -m coupler_orchestrator``."""
+
+from __future__ import annotations
+
+import sys
+
+from coupler_orchestrator.cli import main as cli_main
+
+
 def main() -> None:
-    raise SystemExit("not yet")
+    sys.exit(cli_main())
+
+
+if __name__ == "__main__":
+    main()

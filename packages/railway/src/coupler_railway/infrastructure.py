@@ -1,0 +1,94 @@
+"""The infrastructure object model read from railML: tracks, balises, groups, stations."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+from coupler_railway.track import TrackModel
+
+
+@dataclass(frozen=True)
+class Track:
+    """A railML ``<track>`` as declared (positions in its own pos/absPos reference)."""
+
+    id: str
+    name: str
+    begin_pos: float
+    end_pos: float
+    begin_abs_pos: float | None
+    end_abs_pos: float | None
+    line: int
+    """Line of the ``<track>`` element in the source file."""
+
+
+@dataclass(frozen=True)
+class Balise:
+    """One balise placed on the line."""
+
+    id: str
+    """railML ``id`` (XML identity)."""
+    code: int
+    """Numeric balise id (railML ``code``): the value of the FMU's Integer channel."""
+    name: str
+    group: int
+    """Numeric id (``code``) of the balise group it belongs to."""
+    position_in_group: int
+    """1-based rank of its ``baliseRef`` in the group."""
+    distance_m: float
+    """Distance along the line from its start [m]."""
+    direction: str
+    """railML ``dir``: up, down, both, none or unknown (default)."""
+    latitude_deg: float
+    """Latitude of the track point at ``distance_m``."""
+    longitude_deg: float
+    line: int
+    """Line of the ``<balise>`` element in the source file."""
+
+
+@dataclass(frozen=True)
+class BaliseGroup:
+    """A railML ``<baliseGroup>``: its numeric id and its balises in group order."""
+
+    id: str
+    code: int
+    name: str
+    type: str
+    """railML ``type`` (infill, signal, technicalFixed, ...), empty when not given."""
+    balise_ids: tuple[str, ...]
+    distance_m: float
+    """Distance of its first balise along the line [m]."""
+    line: int
+
+
+@dataclass(frozen=True)
+class Station:
+    """A railML ``<ocp>`` with coordinates, projected onto the line."""
+
+    id: str
+    name: str
+    latitude_deg: float
+    longitude_deg: float
+    distance_m: float
+    """Distance along the line of the nearest track point [m]."""
+    offset_m: float
+    """Distance between the ocp's coordinates and the track [m]."""
+    line: int
+
+
+@dataclass(frozen=True, eq=False)
+class Infrastructure:
+    """Everything :func:`~coupler_railway.railml.load_infrastructure` reads from one file."""
+
+    source: Path
+    tracks: tuple[Track, ...]
+    """Tracks in line order (following their connections)."""
+    model: TrackModel
+    balises: tuple[Balise, ...]
+    """Sorted by distance along the line."""
+    groups: tuple[BaliseGroup, ...]
+    """Sorted by distance along the line."""
+    stations: tuple[Station, ...]
+    """Sorted by distance along the line."""
+    warnings: tuple[str, ...]
+    """Content that was read but not interpreted, one message per kind."""

@@ -1,0 +1,327 @@
+"""OpenRails' web API over the simulation: routes under the case-sensitive prefix ``/API``.
+
+Lockstep mode (OpenRails' build for simulation): GET /API/READY gates start-up, and each
+POST /API/CABCONTROLS applies the controls, advances one fixed step and returns the trains.
+Stock mode (upstream OpenRails): POST /API/CABCONTROLS takes a plain list and returns no body;
+the simulation follows the wall clock times ``speedup``. Every request the mock cannot take
+gets 400 with ``{"error": "..."}`` and leaves the simulation as it was.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from collections.abc import Callable
+from typing import Any
+
+from aiohttp import web
+
+from .config import MAX_STEP_MS, MockConfig
+from .route import Route, StraightRoute, load_route
+from .simulation import (
+    CONTROL_SPECS,
+    ControlError,
+    ControlPost,
+    Simulation,
+    Snapshot,
+    TrackLocation,
+)
+
+Clock = Callable[[], float]
+
+DEFAULT_ROUTE_LENGTH_M = 20_000.0
+"""Length of the straight route used when no railML file is configured."""
+
+CONTROL_MODE = "EXPLORER"
+"""OpenRails' TRAIN_CONTROL of a train driven freely, without path or signals."""
+
+
+class BadRequest(Exception):
+    """The request is malformed; answered with 400 and its message."""
+
+
+class MockServer:
+    """The state behind the handlers: the simulation, the mode and the clocks."""
+
+    def __init__(self, config: MockConfig, simulation: Simulation, clock: Clock) -> None:
+        self.config = config
+        self.simulation = simulation
+        self.clock = clock
+        self.ready_at = math.inf
+        self.last_wall_s = 0.0
+
+    def start(self) -> None:
+        """Start the loading phase and the wall clock."""
+        now = self.clock()
+        self.ready_at = now + self.config.loading_delay_s
+        self.last_wall_s = now
+
+    @property
+    def ready(self) -> bool:
+        return self.clock() >= self.ready_at
+
+    def catch_up(self) -> None:
+        """Stock mode: advance the simulation by the wall time since the last request."""
+        now = self.clock()
+        dt = (now - self.last_wall_s) * self.config.speedup
+        self.last_wall_s = now
+        if dt > 0.0:
+            self.simulation.advance(dt)
+
+
+SERVER = web.AppKey("server", MockServer)
+
+
+def create_app(
+    config: MockConfig, *, route: Route | None = None, clock: Clock = time.monotonic
+) -> web.Application:
+    """The mock's aiohttp application.
+
+    ``route`` replaces the one ``config.railml`` names (tests use small routes); ``clock``
+    (monotonic seconds) drives the loading delay and stock mode's wall-clock pacing.
+    """
+    if route is None:
+        route = (
+            load_route(config.railml)
+            if config.railml is not None
+            else StraightRoute(length_m=DEFAULT_ROUTE_LENGTH_M)
+        )
+    simulation = Simulation(
+        consist=config.build_consist(),
+        route=route,
+        start_time_s=config.start_time_s,
+        start_distance_m=config.start_distance_m,
+        train_name=config.train_name,
+    )
+    server = MockServer(config, simulation, clock)
+    app = web.Application(middlewares=[_errors, _pacing])
+    app[SERVER] = server
+
+    async def on_startup(app: web.Application) -> None:
+        app[SERVER].start()
+
+    app.on_startup.append(on_startup)
+    if config.mode == "lockstep":
+        app.router.add_get("/API/READY", ready)
+        app.router.add_post("/API/CABCONTROLS", post_cabcontrols_lockstep)
+    else:
+        app.router.add_post("/API/CABCONTROLS", post_cabcontrols_stock)
+    app.router.add_get("/API/CABCONTROLS", get_cabcontrols)
+    app.router.add_get("/API/TIME", get_time)
+    app.router.add_get("/API/MAP", get_map)
+    app.router.add_get("/API/TRAININFO", get_traininfo)
+    app.router.add_get("/API/TRAINDRIVINGDISPLAY", get_traindrivingdisplay)
+    return app
+
+
+def _error(status: int, message: str) -> web.Response:
+    return web.json_response({"error": message}, status=status)
+
+
+@web.middleware
+async def _errors(request: web.Request, handler: Any) -> web.StreamResponse:
+    """Translate the mock's errors into JSON answers, in this one place."""
+    try:
+        response: web.StreamResponse = await handler(request)
+    except (BadRequest, ControlError) as exc:
+        return _error(400, str(exc))
+    return response
+
+
+@web.middleware
+async def _pacing(request: web.Request, handler: Any) -> web.StreamResponse:
+    """Lockstep: 425 while the route loads. Stock: bring the simulation up to the wall clock."""
+    server = request.app[SERVER]
+    if server.config.mode == "lockstep":
+        if request.path != "/API/READY" and request.path.startswith("/API/") and not server.ready:
+            return _error(425, "the route is still loading; poll GET /API/READY until 200")
+    else:
+        server.catch_up()
+    response: web.StreamResponse = await handler(request)
+    return response
+
+
+async def ready(request: web.Request) -> web.Response:
+    """200 once the route is loaded, 425 (Too Early) before; no body."""
+    return web.Response(status=200 if request.app[SERVER].ready else 425)
+
+
+async def post_cabcontrols_lockstep(request: web.Request) -> web.Response:
+    """Apply ``Controls``, advance one step, return the trains."""
+    server = request.app[SERVER]
+    body = await _json_body(request)
+    if not isinstance(body, dict):
+        raise BadRequest(
+            'the body must be an object {"Controls": [...], "Commands": [], '
+            '"SwitchCommands": {}} in lockstep mode'
+        )
+    controls = body.get("Controls")
+    if not isinstance(controls, list):
+        raise BadRequest('"Controls" must be a list of {LocomotiveName, TypeName, Value}')
+    commands = body.get("Commands", [])
+    if not isinstance(commands, list) or commands:
+        raise BadRequest('"Commands" must be an empty list: the mock has no world commands')
+    switches = body.get("SwitchCommands", {})
+    if not isinstance(switches, dict) or switches:
+        raise BadRequest('"SwitchCommands" must be an empty object: the mock route has no switches')
+    step_ms = body.get("StepMs", server.config.step_ms)
+    if not _is_number(step_ms) or not 0.0 < step_ms <= MAX_STEP_MS:
+        raise BadRequest(f'"StepMs" must be a number in (0, {MAX_STEP_MS:g}], got {step_ms!r}')
+    posts = [_control_post(item, with_locomotive=True) for item in controls]
+    simulation = server.simulation
+    simulation.apply(posts)
+    simulation.advance(float(step_ms) / 1000.0)
+    return web.json_response({"trains": {simulation.train_name: _train(simulation.snapshot())}})
+
+
+async def post_cabcontrols_stock(request: web.Request) -> web.Response:
+    """Apply a plain list of controls; the simulation runs on by itself. No body."""
+    body = await _json_body(request)
+    if not isinstance(body, list):
+        raise BadRequest("the body must be a list of {TypeName, ControlIndex, Value} in stock mode")
+    posts = [_control_post(item, with_locomotive=False) for item in body]
+    request.app[SERVER].simulation.apply(posts)
+    return web.Response(status=200)
+
+
+async def get_cabcontrols(request: web.Request) -> web.Response:
+    simulation = request.app[SERVER].simulation
+    return web.json_response(
+        [
+            {
+                "TypeName": spec.type_name,
+                "MinValue": spec.min_value,
+                "MaxValue": spec.max_value,
+                "RangeFraction": simulation.range_fraction(spec.type_name),
+            }
+            for spec in CONTROL_SPECS.values()
+        ]
+    )
+
+
+async def get_time(request: web.Request) -> web.Response:
+    return web.json_response(request.app[SERVER].simulation.clock_time_s)
+
+
+async def get_map(request: web.Request) -> web.Response:
+    snap = request.app[SERVER].simulation.snapshot()
+    return web.json_response(
+        {
+            "LatLon": {"Lat": snap.latitude_deg, "Lon": snap.longitude_deg},
+            "DirectionDeg": snap.heading_deg,
+        }
+    )
+
+
+async def get_traininfo(request: web.Request) -> web.Response:
+    return web.json_response({"ControlMode": CONTROL_MODE})
+
+
+ABBREVIATIONS = {
+    "Time": "TIME",
+    "Speed": "SPED",
+    "Gradient": "GRAD",
+    "Direction": "DIRC",
+    "Throttle": "THRO",
+    "Train brake": "BTRN",
+    "Dynamic brake": "BDYN",
+}
+"""OpenRails' short labels, used unless ``?normalText=true``."""
+
+
+async def get_traindrivingdisplay(request: web.Request) -> web.Response:
+    raw = request.query.get("normalText", "false").lower()
+    if raw not in ("true", "false"):
+        raise BadRequest(f"normalText must be true or false, got {raw!r}")
+    normal = raw == "true"
+    snap = request.app[SERVER].simulation.snapshot()
+    c = snap.controls
+    t = int(snap.clock_time_s)
+    rows: list[tuple[str, str]] = [
+        ("Time", f"{t // 3600:02d}:{t % 3600 // 60:02d}:{t % 60:02d}"),
+        ("Speed", f"{abs(snap.state.speed_mps) * 3.6:.1f} km/h"),
+    ]
+    if normal:
+        rows.append(("Gradient", f"{snap.gradient_per_mille / 10.0:.1f}%"))
+    rows += [
+        ("Sprtr", ""),
+        ("Direction", {1: "Forward", 0: "N", -1: "Reverse"}[c.direction]),
+        ("Throttle", f"{c.throttle * 100:.0f}%"),
+        ("Train brake", f"{c.train_brake * 100:.0f}%"),
+        ("Dynamic brake", f"{c.dynamic_brake * 100:.0f}%" if c.dynamic_brake > 0 else "Off"),
+    ]
+    return web.json_response(
+        [
+            {
+                "FirstCol": first if normal else ABBREVIATIONS.get(first, first),
+                "LastCol": last,
+                "SymbolCol": "",
+                "KeyPressed": "",
+            }
+            for first, last in rows
+        ]
+    )
+
+
+async def _json_body(request: web.Request) -> Any:
+    text = await request.text()
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise BadRequest(f"the body is not valid JSON: {exc}") from None
+
+
+def _is_number(value: object) -> bool:
+    return isinstance(value, int | float) and not isinstance(value, bool)
+
+
+def _control_post(item: object, *, with_locomotive: bool) -> ControlPost:
+    if not isinstance(item, dict):
+        raise BadRequest(f"each control must be an object with TypeName and Value, got {item!r}")
+    type_name = item.get("TypeName")
+    if not isinstance(type_name, str):
+        raise BadRequest(f"TypeName must be a string, got {type_name!r}")
+    value = item.get("Value")
+    if not _is_number(value):
+        raise BadRequest(f"{type_name} Value must be a number, got {value!r}")
+    index = item.get("ControlIndex", 0)
+    if not isinstance(index, int) or isinstance(index, bool):
+        raise BadRequest(f"{type_name} ControlIndex must be an integer, got {index!r}")
+    locomotive = item.get("LocomotiveName") if with_locomotive else None
+    if locomotive is not None and not isinstance(locomotive, str):
+        raise BadRequest(f"LocomotiveName must be a string, got {locomotive!r}")
+    assert isinstance(value, int | float)
+    return ControlPost(
+        type_name=type_name,
+        value=float(value),
+        control_index=index,
+        locomotive_name=locomotive,
+    )
+
+
+def _track_location(loc: TrackLocation) -> dict[str, float | int]:
+    return {
+        "trackNodeIndex": loc.track_node_index,
+        "trackNodeLength": loc.track_node_length,
+        "trackNodeOffset": loc.track_node_offset,
+        "trackVectorSectionIndex": loc.track_vector_section_index,
+        "movementDirection": loc.movement_direction,
+    }
+
+
+def _train(snap: Snapshot) -> dict[str, Any]:
+    return {
+        "location": {"x": snap.x_m, "y": snap.y_m, "z": snap.z_m},
+        "trackLocation": _track_location(snap.front),
+        "rearTrackLocation": _track_location(snap.rear),
+        "rotation": math.radians(snap.heading_deg),
+        "locomotiveState": {
+            "v": snap.state.speed_mps,
+            "a": snap.state.acceleration_mps2,
+            "distance": snap.state.odometer_m,
+            "wheelslip": False,
+            "wheelskid": False,
+        },
+        "trainLength": {"length": snap.length_m},
+    }

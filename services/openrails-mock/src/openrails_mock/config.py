@@ -1,0 +1,92 @@
+"""The mock's configuration, from ``OPENRAILS_MOCK_*`` environment variables or keywords.
+
+Consist figures start from a preset and can be overridden one by one with
+``OPENRAILS_MOCK_CONSIST__<FIELD>`` (e.g. ``OPENRAILS_MOCK_CONSIST__MASS_KG=90000``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+from typing import Literal
+
+from coupler.errors import ScenarioError
+from pydantic import BaseModel, ConfigDict, Field
+from pydantic_settings import BaseSettings, SettingsConfigDict
+
+from .physics import PRESETS, Consist
+
+MAX_STEP_MS = 500.0
+"""The longest step the lockstep API accepts, as in OpenRails' simulation build."""
+
+
+class ConsistOverrides(BaseModel):
+    """Figures that replace the preset's; unset fields keep the preset value."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+    mass_kg: float | None = Field(default=None, gt=0)
+    """Total mass of the train."""
+    length_m: float | None = Field(default=None, gt=0)
+    """Length of the train."""
+    max_tractive_effort_n: float | None = Field(default=None, ge=0)
+    """Tractive effort at full throttle at low speed."""
+    max_power_w: float | None = Field(default=None, ge=0)
+    """Power at the wheel at full throttle."""
+    davis_a_n: float | None = Field(default=None, ge=0)
+    """Davis A."""
+    davis_b_n_per_mps: float | None = Field(default=None, ge=0)
+    """Davis B."""
+    davis_c_n_per_mps2: float | None = Field(default=None, ge=0)
+    """Davis C."""
+    max_service_brake_decel_mps2: float | None = Field(default=None, ge=0)
+    """Deceleration of a full service brake application."""
+    max_dynamic_brake_force_n: float | None = Field(default=None, ge=0)
+    """Force of the dynamic brake at full application."""
+    rotating_mass_fraction: float | None = Field(default=None, ge=0)
+    """Rotating masses as a fraction of the mass."""
+
+
+class MockConfig(BaseSettings):
+    """How the mock runs: where it listens, its mode, the route and the train."""
+
+    model_config = SettingsConfigDict(
+        env_prefix="OPENRAILS_MOCK_", env_nested_delimiter="__", frozen=True, extra="forbid"
+    )
+
+    host: str = "127.0.0.1"
+    """Address to listen on."""
+    port: int = Field(default=2150, ge=0, le=65535)
+    """TCP port (OpenRails' default is 2150; 0 picks a free one)."""
+    mode: Literal["lockstep", "stock"] = "lockstep"
+    """``lockstep``: each POST /API/CABCONTROLS advances one step; ``stock``: wall clock."""
+    step_ms: float = Field(default=200.0, gt=0, le=MAX_STEP_MS)
+    """Lockstep step size in milliseconds."""
+    speedup: float = Field(default=1.0, gt=0)
+    """Stock mode: simulated seconds per wall-clock second."""
+    railml: Path | None = None
+    """railML infrastructure file of the route; unset: a straight, flat 20 km line."""
+    start_time_s: float = Field(default=8 * 3600.0, ge=0, lt=86400)
+    """Time of day at the start, seconds since midnight."""
+    start_distance_m: float | None = Field(default=None, ge=0)
+    """Route distance of the train's front at the start; unset: the train's rear at 0."""
+    loading_delay_s: float = Field(default=1.0, ge=0)
+    """Lockstep mode: GET /API/READY answers 425 for this long after start-up."""
+    train_name: str = "PLAYER"
+    """Name of the train in the lockstep API (``LocomotiveName``, key of ``trains``)."""
+    consist_preset: str = "br642"
+    """Consist the train starts from (see ``physics.PRESETS``)."""
+    consist: ConsistOverrides = ConsistOverrides()
+    """Per-figure overrides of the preset."""
+
+    def build_consist(self) -> Consist:
+        """The preset with the overrides applied."""
+        try:
+            preset = PRESETS[self.consist_preset]
+        except KeyError:
+            raise ScenarioError(
+                f"unknown consist preset {self.consist_preset!r} "
+                f"(OPENRAILS_MOCK_CONSIST_PRESET); known: {', '.join(sorted(PRESETS))}"
+            ) from None
+        changes = {k: v for k, v in self.consist.model_dump().items() if v is not None}
+        return dataclasses.replace(preset, **changes)

@@ -1,0 +1,236 @@
+"""The simulated world: time of day, one train on one route, and the driver's controls.
+
+Errors::
+
+    CouplerError (coupler.errors)
+    └── ControlError     a posted control is unknown, for an unknown train, or out of range;
+                         nothing was applied
+"""
+
+from __future__ import annotations
+
+import bisect
+import dataclasses
+import math
+from collections.abc import Iterable
+from dataclasses import dataclass
+
+from coupler.errors import CouplerError
+
+from .physics import Consist, Controls, TrainDynamics, TrainState
+from .route import Route
+
+SECONDS_PER_DAY = 86400.0
+ELEVATION_SPACING_M = 10.0
+"""Spacing of the samples of the elevation profile integrated from the gradient."""
+
+
+class ControlError(CouplerError):
+    """A posted control cannot be applied; the simulation is unchanged."""
+
+
+@dataclass(frozen=True)
+class ControlSpec:
+    """A cab control the mock's train has, as listed by GET /API/CABCONTROLS."""
+
+    type_name: str
+    min_value: float
+    max_value: float
+
+
+CONTROL_SPECS: dict[str, ControlSpec] = {
+    spec.type_name: spec
+    for spec in (
+        ControlSpec("THROTTLE", 0.0, 1.0),
+        ControlSpec("TRAIN_BRAKE", 0.0, 1.0),
+        ControlSpec("DYNAMIC_BRAKE", 0.0, 1.0),
+        ControlSpec("DIRECTION", -1.0, 1.0),
+        ControlSpec("REGULATOR", 0.0, 1.0),
+    )
+}
+"""REGULATOR (a steam engine's throttle) drives the same traction as THROTTLE."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class ControlPost:
+    """One control setting as posted, before validation against the train."""
+
+    type_name: str
+    value: float
+    control_index: int = 0
+    locomotive_name: str | None = None
+
+
+@dataclass(frozen=True, kw_only=True)
+class TrackLocation:
+    """A route distance in OpenRails' track terms (see the README for the mapping)."""
+
+    track_node_index: int
+    track_node_length: float
+    track_node_offset: float
+    track_vector_section_index: int
+    movement_direction: int
+
+
+@dataclass(frozen=True, kw_only=True)
+class Snapshot:
+    """Everything the API reports about the train at one instant."""
+
+    clock_time_s: float
+    state: TrainState
+    controls: Controls
+    front: TrackLocation
+    rear: TrackLocation
+    latitude_deg: float
+    longitude_deg: float
+    heading_deg: float
+    x_m: float
+    y_m: float
+    z_m: float
+    gradient_per_mille: float
+    length_m: float
+
+
+class Simulation:
+    """One train on one route; ``advance`` moves time on, ``apply`` changes the controls."""
+
+    def __init__(
+        self,
+        *,
+        consist: Consist,
+        route: Route,
+        start_time_s: float = 8 * 3600.0,
+        start_distance_m: float | None = None,
+        train_name: str = "PLAYER",
+    ) -> None:
+        if route.length < consist.length_m:
+            raise ValueError(
+                f"the route ({route.length:.1f} m) is shorter than the train "
+                f"({consist.length_m:.1f} m)"
+            )
+        self.route = route
+        self.consist = consist
+        self.train_name = train_name
+        self.elapsed_s = 0.0
+        self._start_time_s = start_time_s
+        self.controls = Controls()
+        position = consist.length_m if start_distance_m is None else start_distance_m
+        self.dynamics = TrainDynamics(
+            consist,
+            route.gradient,
+            position_m=position,
+            min_position_m=consist.length_m,
+            max_position_m=route.length,
+        )
+        self._elevation = _ElevationProfile(route)
+
+    @property
+    def clock_time_s(self) -> float:
+        """Time of day, seconds since midnight."""
+        return (self._start_time_s + self.elapsed_s) % SECONDS_PER_DAY
+
+    def apply(self, posts: Iterable[ControlPost]) -> None:
+        """Set the posted controls, all or none: any bad one raises ControlError."""
+        controls = self.controls
+        for post in posts:
+            controls = self._applied(controls, post)
+        self.controls = controls
+
+    def advance(self, dt_s: float) -> None:
+        """Move the simulation on by dt_s seconds with the current controls."""
+        self.dynamics.step(dt_s, self.controls)
+        self.elapsed_s += dt_s
+
+    def range_fraction(self, type_name: str) -> float:
+        """Where a control stands in its range, 0..1."""
+        spec = CONTROL_SPECS[type_name]
+        value = {
+            "THROTTLE": self.controls.throttle,
+            "REGULATOR": self.controls.throttle,
+            "TRAIN_BRAKE": self.controls.train_brake,
+            "DYNAMIC_BRAKE": self.controls.dynamic_brake,
+            "DIRECTION": float(self.controls.direction),
+        }[type_name]
+        return (value - spec.min_value) / (spec.max_value - spec.min_value)
+
+    def snapshot(self) -> Snapshot:
+        """The train's state in the API's terms."""
+        state = self.dynamics.state
+        front = state.position_m
+        rear = front - self.consist.length_m
+        forward = state.speed_mps > 0.0 or (state.speed_mps == 0.0 and self.controls.direction >= 0)
+        point = self.route.position(front)
+        return Snapshot(
+            clock_time_s=self.clock_time_s,
+            state=state,
+            controls=self.controls,
+            front=self._track_location(front, forward),
+            rear=self._track_location(rear, forward),
+            latitude_deg=point.latitude_deg,
+            longitude_deg=point.longitude_deg,
+            heading_deg=point.heading_deg,
+            x_m=point.x_m,
+            y_m=point.y_m,
+            z_m=self._elevation.at(front),
+            gradient_per_mille=self.route.gradient(front - self.consist.length_m / 2.0),
+            length_m=self.consist.length_m,
+        )
+
+    def _track_location(self, distance: float, forward: bool) -> TrackLocation:
+        index, offset = self.route.locate(distance)
+        return TrackLocation(
+            track_node_index=index + 1,
+            track_node_length=self.route.sections[index].length,
+            track_node_offset=offset,
+            track_vector_section_index=0,
+            movement_direction=1 if forward else 0,
+        )
+
+    def _applied(self, controls: Controls, post: ControlPost) -> Controls:
+        if post.locomotive_name is not None and post.locomotive_name != self.train_name:
+            raise ControlError(
+                f"unknown locomotive {post.locomotive_name!r}: this simulation has one train, "
+                f"{self.train_name!r}"
+            )
+        spec = CONTROL_SPECS.get(post.type_name)
+        if spec is None:
+            raise ControlError(
+                f"unknown TypeName {post.type_name!r}; known: {', '.join(CONTROL_SPECS)}"
+            )
+        value = post.value
+        if not math.isfinite(value) or not spec.min_value <= value <= spec.max_value:
+            raise ControlError(
+                f"{spec.type_name} value {value!r} is out of range "
+                f"[{spec.min_value:g}, {spec.max_value:g}]"
+            )
+        if spec.type_name in ("THROTTLE", "REGULATOR"):
+            return dataclasses.replace(controls, throttle=value)
+        if spec.type_name == "TRAIN_BRAKE":
+            return dataclasses.replace(controls, train_brake=value)
+        if spec.type_name == "DYNAMIC_BRAKE":
+            return dataclasses.replace(controls, dynamic_brake=value)
+        if value not in (-1.0, 0.0, 1.0):
+            raise ControlError(
+                f"DIRECTION must be 1 (forward), 0 (neutral) or -1 (reverse), got {value!r}"
+            )
+        return dataclasses.replace(controls, direction=int(value))
+
+
+class _ElevationProfile:
+    """Elevation relative to the route's start, integrated from the gradient."""
+
+    def __init__(self, route: Route) -> None:
+        count = max(1, math.ceil(route.length / ELEVATION_SPACING_M))
+        spacing = route.length / count
+        self._distances = [i * spacing for i in range(count + 1)]
+        gradients = [route.gradient(d) for d in self._distances]
+        self._heights = [0.0]
+        for i in range(count):
+            mean = (gradients[i] + gradients[i + 1]) / 2.0
+            self._heights.append(self._heights[-1] + mean / 1000.0 * spacing)
+
+    def at(self, distance: float) -> float:
+        d = self._distances
+        i = min(max(bisect.bisect_right(d, distance) - 1, 0), len(d) - 2)
+        t = (distance - d[i]) / (d[i + 1] - d[i])
+        return self._heights[i] + t * (self._heights[i + 1] - self._heights[i])

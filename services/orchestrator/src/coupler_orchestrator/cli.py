@@ -1,0 +1,180 @@
+"""The ``coupler`` command: run, validate, describe."""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+from typing import TextIO
+
+from coupler.channels import Description
+from coupler.client import RemoteParticipant
+from coupler.errors import CouplerError, ValidationError
+from coupler.fmu import FmuParticipant
+from coupler.logs import configure_logging
+from coupler.participant import Participant
+
+from coupler_orchestrator.plan import Algorithm
+from coupler_orchestrator.planning import RunOptions
+from coupler_orchestrator.progress import ProgressBar
+from coupler_orchestrator.runner import run_scenario, validate_scenario
+
+EXIT_OK, EXIT_ERROR, EXIT_INTERRUPTED = 0, 1, 130
+
+
+def parser() -> argparse.ArgumentParser:
+    top = argparse.ArgumentParser(
+        prog="coupler", description="Co-simulation of FMUs and gRPC participants from an SSP file."
+    )
+    top.add_argument("--log-level", default="WARNING", help="DEBUG, INFO, WARNING (default)")
+    commands = top.add_subparsers(dest="command", required=True)
+
+    run = commands.add_parser("run", help="run a scenario and record results")
+    run.add_argument("ssp", type=Path, help=".ssp archive or .ssd file")
+    _run_options(run)
+    run.add_argument("--out", type=Path, default=Path("results"), help="results directory")
+    run.add_argument("--realtime-factor", type=float, help="pace at X times real time")
+    run.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+    validate = commands.add_parser("validate", help="check a scenario and its participants")
+    validate.add_argument("ssp", type=Path, help=".ssp archive or .ssd file")
+    _run_options(validate)
+
+    describe = commands.add_parser("describe", help="print a participant's channels")
+    describe.add_argument("target", help="grpc://HOST:PORT or an .fmu file")
+    describe.add_argument("--timeout", type=float, default=10.0, help="connect timeout [s]")
+    return top
+
+
+def _run_options(command: argparse.ArgumentParser) -> None:
+    command.add_argument("--start-time", type=float, help="start time [s]")
+    command.add_argument("--stop-time", type=float, help="stop time [s]")
+    command.add_argument("--step", type=float, help="base communication step [s]")
+    command.add_argument(
+        "--algorithm",
+        choices=[a.value for a in Algorithm],
+        default=Algorithm.JACOBI.value,
+        help="master algorithm (default jacobi)",
+    )
+    command.add_argument(
+        "--param",
+        action="append",
+        default=[],
+        metavar="COMPONENT.NAME=VALUE",
+        help="override a parameter (repeatable)",
+    )
+    command.add_argument("--run-id", default="run", help="run id sent to participants")
+    command.add_argument("--connect-timeout", type=float, default=10.0, help="[s]")
+
+
+def options_of(args: argparse.Namespace) -> RunOptions:
+    parameters = {}
+    for item in args.param:
+        key, sep, value = item.partition("=")
+        if not sep or "." not in key:
+            raise CouplerError(f"--param {item!r}: write COMPONENT.NAME=VALUE")
+        parameters[key] = value
+    return RunOptions(
+        start_time=args.start_time,
+        stop_time=args.stop_time,
+        step_size=args.step,
+        algorithm=Algorithm(args.algorithm),
+        realtime_factor=getattr(args, "realtime_factor", None),
+        parameters=parameters,
+        run_id=args.run_id,
+        connect_timeout=args.connect_timeout,
+    )
+
+
+def main(argv: Sequence[str] | None = None, *, stdout: TextIO | None = None) -> int:
+    out = stdout or sys.stdout
+    args = parser().parse_args(argv)
+    configure_logging(args.log_level)
+    try:
+        return asyncio.run(_dispatch(args, out))
+    except KeyboardInterrupt:
+        print("interrupted; results so far are kept", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    except ValidationError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return EXIT_ERROR
+    except CouplerError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return EXIT_ERROR
+
+
+async def _dispatch(args: argparse.Namespace, out: TextIO) -> int:
+    if args.command == "describe":
+        return await _describe(args.target, args.timeout, out=out)
+    options = options_of(args)
+    if args.command == "validate":
+        scenario = await validate_scenario(args.ssp, options)
+        for warning in scenario.warnings:
+            print(f"warning: {warning}", file=out)
+        print(
+            f"{args.ssp}: valid ({len(scenario.components)} components, "
+            f"{len(scenario.connections)} connections)",
+            file=out,
+        )
+        return EXIT_OK
+    observers = [] if args.no_progress or not sys.stderr.isatty() else [ProgressBar()]
+    outcome = await run_scenario(args.ssp, options, out_dir=args.out, observers=observers)
+    result = outcome.result
+    print(
+        f"{result.status}: {result.summary['steps']} steps to t={result.summary['end_time']:g} s"
+        f" in {result.summary['wall_time_s']:.3g} s",
+        file=out,
+    )
+    print(f"results: {outcome.results_csv}", file=out)
+    print(f"summary: {outcome.summary_json}", file=out)
+    if result.status != "completed":
+        print(f"error: run {result.status}: {result.reason}", file=sys.stderr)
+        return EXIT_ERROR
+    return EXIT_OK
+
+
+async def _describe(target: str, connect_timeout: float, *, out: TextIO) -> int:
+    participant: Participant
+    if target.startswith("grpc://") or not target.endswith(".fmu"):
+        participant = RemoteParticipant(target, connect_timeout=connect_timeout)
+    else:
+        participant = FmuParticipant(Path(target))
+    try:
+        description = await participant.describe()
+    finally:
+        await participant.close()
+    print(format_description(description), file=out)
+    return EXIT_OK
+
+
+def format_description(description: Description) -> str:
+    """The channels as an aligned table."""
+    header = ("CHANNEL", "CAUSALITY", "TYPE", "UNIT", "START", "DESCRIPTION")
+    rows = [
+        (
+            c.name,
+            str(c.causality),
+            f"{c.type}({c.message_type})" if c.message_type else str(c.type),
+            c.unit or "-",
+            "-" if c.start is None else repr(c.start),
+            c.description,
+        )
+        for c in description.channels
+    ]
+    widths = [max(len(r[i]) for r in [header, *rows]) for i in range(len(header))]
+    lines = [
+        f"{description.name}  ({description.implementation or 'unknown implementation'})",
+        f"capabilities: streaming={description.capabilities.streaming}, "
+        f"variable_step_size={description.capabilities.variable_step_size}"
+        + (
+            f", fixed_step_size={description.capabilities.fixed_step_size:g}"
+            if description.capabilities.fixed_step_size
+            else ""
+        ),
+        "",
+    ]
+    for row in [header, *rows]:
+        lines.append("  ".join(v.ljust(w) for v, w in zip(row, widths, strict=True)).rstrip())
+    return "\n".join(lines)

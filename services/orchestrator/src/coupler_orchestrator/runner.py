@@ -1,0 +1,80 @@
+"""One scenario run end to end: load, describe and check, plan, run, record, clean up."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import structlog
+from coupler.errors import ValidationError
+
+from coupler_orchestrator import ssp
+from coupler_orchestrator.master import Master, RunResult
+from coupler_orchestrator.observer import Observer
+from coupler_orchestrator.planning import (
+    RunOptions,
+    build_plan,
+    close_all,
+    describe_all,
+)
+from coupler_orchestrator.results import CsvRecorder, SummaryWriter, coupler_version
+
+log = structlog.get_logger("coupler.runner")
+
+
+@dataclass(frozen=True, kw_only=True)
+class RunOutcome:
+    """A finished run and where its results are."""
+
+    result: RunResult
+    results_csv: Path
+    summary_json: Path
+
+
+async def validate_scenario(path: Path, options: RunOptions) -> ssp.Scenario:
+    """Schema and participant checks; ValidationError lists every problem."""
+    scenario = ssp.load_ssp(path)
+    participants, descriptions, problems = await describe_all(scenario, options)
+    try:
+        problems += ssp.check_connections(scenario)
+        if problems:
+            raise ValidationError(problems, subject=path.name)
+        build_plan(scenario, participants, descriptions, options)
+    finally:
+        await close_all(list(participants.values()))
+    return scenario
+
+
+async def run_scenario(
+    path: Path, options: RunOptions, *, out_dir: Path, observers: Sequence[Observer] = ()
+) -> RunOutcome:
+    """Run the scenario at ``path``; results go to ``out_dir``.
+
+    Raises ScenarioError/ValidationError before anything runs; a participant failing during
+    the run ends it as ``failed`` with every completed step recorded.
+    """
+    scenario = ssp.load_ssp(path)
+    for warning in scenario.warnings:
+        log.warning("scenario_warning", detail=warning)
+    participants, descriptions, problems = await describe_all(scenario, options)
+    try:
+        problems += ssp.check_connections(scenario)
+        if problems:
+            raise ValidationError(problems, subject=path.name)
+        plan = build_plan(scenario, participants, descriptions, options)
+        csv_path, summary_path = out_dir / "results.csv", out_dir / "summary.json"
+        summary = SummaryWriter(
+            summary_path,
+            extra={
+                "coupler_version": coupler_version(),
+                "ssp": {"path": str(scenario.source), "sha256": scenario.sha256},
+                "implementations": {n: d.implementation for n, d in descriptions.items()},
+                "warnings": list(scenario.warnings),
+            },
+        )
+        master = Master(plan, [CsvRecorder(csv_path), summary, *observers])
+        result = await master.run()
+    finally:
+        await close_all(list(participants.values()))
+    return RunOutcome(result=result, results_csv=csv_path, summary_json=summary_path)

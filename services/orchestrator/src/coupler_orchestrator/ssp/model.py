@@ -1,0 +1,292 @@
+"""The parsed SSP as a typed, frozen object model; field names follow SSP 1.0.
+
+Only what the loader resolved lives here (flattened components and connections, units,
+parameters, run settings). Run-time state lives elsewhere.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from types import MappingProxyType
+from typing import TypeVar
+
+from coupler.channels import Causality, Value, ValueType
+
+K = TypeVar("K")
+V = TypeVar("V")
+
+FMU_TYPE = "application/x-fmu-sharedlibrary"
+GRPC_TYPE = "application/x-coupler-grpc"
+SUPPORTED_COMPONENT_TYPES = (FMU_TYPE, GRPC_TYPE)
+
+
+def frozen_mapping(items: Mapping[K, V] | None = None) -> Mapping[K, V]:
+    """A read-only copy of ``items``."""
+    return MappingProxyType(dict(items or {}))
+
+
+@dataclass(frozen=True, kw_only=True)
+class BaseUnit:
+    """SI exponents plus factor and offset: value_in_base = factor * value + offset."""
+
+    kg: int = 0
+    m: int = 0
+    s: int = 0
+    A: int = 0
+    K: int = 0
+    mol: int = 0
+    cd: int = 0
+    rad: int = 0
+    factor: float = 1.0
+    offset: float = 0.0
+
+    @property
+    def exponents(self) -> tuple[int, ...]:
+        """The SI exponents, in SSP order (kg, m, s, A, K, mol, cd, rad)."""
+        return (self.kg, self.m, self.s, self.A, self.K, self.mol, self.cd, self.rad)
+
+    def dimension(self) -> str:
+        """The exponents as text, e.g. ``m s-1``; ``1`` when dimensionless."""
+        names = ("kg", "m", "s", "A", "K", "mol", "cd", "rad")
+        parts = [
+            n if e == 1 else f"{n}{e}" for n, e in zip(names, self.exponents, strict=True) if e
+        ]
+        return " ".join(parts) or "1"
+
+
+@dataclass(frozen=True, kw_only=True)
+class Unit:
+    """An ``ssc:Unit`` of the SSD (or of an .ssv/.ssb file)."""
+
+    name: str
+    base_unit: BaseUnit
+    file: str = ""
+    line: int = 0
+
+
+@dataclass(frozen=True, kw_only=True)
+class Enumeration:
+    """An ``ssc:Enumeration``: item names and their integer values."""
+
+    name: str
+    items: Mapping[str, int]
+
+
+@dataclass(frozen=True, kw_only=True)
+class Connector:
+    """A connector of a component, as declared in the SSD."""
+
+    name: str
+    kind: str
+    """SSP kind: input, output, parameter, calculatedParameter or inout."""
+    type: ValueType | None
+    """Connector type; None when the SSD leaves it to the component (FMU variable)."""
+    unit: str | None = None
+    """Unit name (Real connectors), referring to the scenario's units."""
+    enumeration: str | None = None
+    """Enumeration name (Enumeration connectors)."""
+    mime_type: str | None = None
+    """MIME type (Binary connectors)."""
+    line: int = 0
+
+    @property
+    def causality(self) -> Causality | None:
+        """The channel causality; None for inout, which has no Coupler equivalent."""
+        return {
+            "input": Causality.INPUT,
+            "output": Causality.OUTPUT,
+            "parameter": Causality.PARAMETER,
+            "calculatedParameter": Causality.OUTPUT,
+        }.get(self.kind)
+
+
+@dataclass(frozen=True, kw_only=True)
+class ParameterValue:
+    """A resolved parameter value with its type and unit, and where it came from."""
+
+    value: Value
+    type: ValueType
+    unit: str | None = None
+    origin: str = ""
+    """``file line N`` of the ssv:Parameter (or the mapping entry) that set it."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class Component:
+    """A component of the flattened system."""
+
+    name: str
+    """Name relative to the root system, nested names joined with '.' (``Sub.Gain``)."""
+    type: str
+    """MIME type: ``application/x-fmu-sharedlibrary`` or ``application/x-coupler-grpc``."""
+    source: str
+    """For FMUs an absolute path; for gRPC ``grpc://HOST:PORT`` with ``${VAR}`` expanded."""
+    connectors: tuple[Connector, ...]
+    parameters: Mapping[str, ParameterValue] = field(default_factory=lambda: frozen_mapping())
+    """Parameter values by connector/variable name, after all bindings and mappings."""
+    implementation: str = "any"
+    delta_time: float | None = None
+    """Per-component communication step (OpenMCx ``com.avl.model.connect.ssp.component``)."""
+    file: str = ""
+    line: int = 0
+
+    def connector(self, name: str) -> Connector | None:
+        """The connector called ``name``, or None."""
+        return next((c for c in self.connectors if c.name == name), None)
+
+
+@dataclass(frozen=True, kw_only=True)
+class LinearTransformation:
+    """``ssc:LinearTransformation``: target = factor * source + offset."""
+
+    factor: float = 1.0
+    offset: float = 0.0
+
+
+@dataclass(frozen=True, kw_only=True)
+class BooleanMappingTransformation:
+    """``ssc:BooleanMappingTransformation``; unmapped values pass unchanged."""
+
+    mapping: Mapping[bool, bool]
+
+
+@dataclass(frozen=True, kw_only=True)
+class IntegerMappingTransformation:
+    """``ssc:IntegerMappingTransformation``; unmapped values pass unchanged."""
+
+    mapping: Mapping[int, int]
+
+
+@dataclass(frozen=True, kw_only=True)
+class EnumerationMappingTransformation:
+    """``ssc:EnumerationMappingTransformation`` by item name; unmapped names pass unchanged."""
+
+    mapping: Mapping[str, str]
+
+
+Transformation = (
+    LinearTransformation
+    | BooleanMappingTransformation
+    | IntegerMappingTransformation
+    | EnumerationMappingTransformation
+)
+
+
+@dataclass(frozen=True, kw_only=True)
+class Connection:
+    """A connection between two component connectors, resolved through nested systems."""
+
+    start_element: str
+    start_connector: str
+    end_element: str
+    end_connector: str
+    transformation: Transformation | None = None
+    suppress_unit_conversion: bool = False
+    decoupled: bool = False
+    """True when the connection may be cut for ordering (OpenMCx Always, or Coupler's own)."""
+    decouple_type: str | None = None
+    """OpenMCx decoupling: ``never``, ``always`` or ``if_needed``; None when not given."""
+    decouple_priority: int | None = None
+    """OpenMCx ``IfNeeded priority``."""
+    file: str = ""
+    line: int = 0
+
+    @property
+    def start(self) -> str:
+        """``element.connector`` of the start."""
+        return f"{self.start_element}.{self.start_connector}"
+
+    @property
+    def end(self) -> str:
+        """``element.connector`` of the end."""
+        return f"{self.end_element}.{self.end_connector}"
+
+
+@dataclass(frozen=True, kw_only=True)
+class DictionaryEntry:
+    """An ``ssb:DictionaryEntry``."""
+
+    name: str
+    type: ValueType | None
+    unit: str | None = None
+
+
+@dataclass(frozen=True, kw_only=True)
+class SignalDictionary:
+    """A signal dictionary of a system (inline or an .ssb file)."""
+
+    name: str
+    entries: Mapping[str, DictionaryEntry]
+    file: str = ""
+    line: int = 0
+
+
+@dataclass(frozen=True, kw_only=True)
+class Task:
+    """OpenMCx ``com.avl.model.connect.ssp.task`` settings (Task element of DefaultExperiment)."""
+
+    step_type: str
+    """sequential, parallel_single_thread, parallel_one_step_size or parallel_sync_all."""
+    delta_time: float = 0.01
+    end_type: str = "end_time"
+    """end_time or first_component."""
+    sum_time: bool = False
+    input_at_end_time: bool = False
+    relative_eps: float = 1e-10
+    timing_output: bool = False
+
+
+@dataclass(frozen=True, kw_only=True)
+class Backend:
+    """One OpenMCx results backend."""
+
+    type: str
+    store_at_runtime: bool = True
+
+
+@dataclass(frozen=True, kw_only=True)
+class Results:
+    """OpenMCx ``com.avl.model.connect.ssp.results`` settings."""
+
+    output_directory: str | None = None
+    result_level: str = "synchronization"
+    backends: tuple[Backend, ...] = ()
+
+
+@dataclass(frozen=True, kw_only=True)
+class Scenario:
+    """A loaded, flattened SSP."""
+
+    source: Path
+    """The .ssp or .ssd file loaded."""
+    sha256: str
+    """Hex digest of that file."""
+    ssp_version: str
+    name: str
+    components: tuple[Component, ...]
+    connections: tuple[Connection, ...]
+    units: Mapping[str, Unit]
+    enumerations: Mapping[str, Enumeration]
+    signal_dictionaries: Mapping[str, SignalDictionary]
+    """By system path and name, e.g. ``Bus`` or ``Sub.Bus``."""
+    start_time: float | None
+    stop_time: float | None
+    step_size: float | None
+    """OpenMCx task deltaTime, when given."""
+    step_type: str | None
+    task: Task | None
+    results: Results | None
+    warnings: tuple[str, ...]
+    resource_dir: Path
+    """Where component sources and parameter files resolve."""
+
+    def component(self, name: str) -> Component | None:
+        """The component called ``name`` (flattened name), or None."""
+        return next((c for c in self.components if c.name == name), None)
+
+    def connector(self, element: str, connector: str) -> Connector | None:
+        """The connector ``element.connector``, or None."""
+        component = self.component(element)
+        return component.connector(connector) if component else None

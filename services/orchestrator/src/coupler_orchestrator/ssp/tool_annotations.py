@@ -1,0 +1,161 @@
+"""Annotations the loader understands: OpenMCx's (``com.avl.model.connect.ssp.*``) and Coupler's.
+
+OpenMCx names (from its schemas in eclipse/openmcx ``scripts/SSP``):
+
+- DefaultExperiment, ``com.avl.model.connect.ssp.task``: ``<Task stepType deltaTime endType
+  sumTime inputAtEndTime relativeEps timingOutput/>``
+- DefaultExperiment, ``com.avl.model.connect.ssp.results``: ``<Results outputDirectory
+  resultLevel><Backends><Backend type storeAtRuntime/></Backends></Results>``
+- Component/System, ``com.avl.model.connect.ssp.component``: ``<Component deltaTime
+  triggerSequence inputAtEndTime/>``
+- Connection, ``com.avl.model.connect.ssp.connection.decoupling``: ``<Decoupling>`` with one of
+  ``<Never/>``, ``<Always/>``, ``<IfNeeded priority="N"/>``
+
+Coupler's own: Connection, ``org.coupler.connection``: ``<coupler:Connection decoupled="true"/>``.
+Every other annotation is reported as a warning by :func:`unsupported`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+
+from .documents import Element, boolean, child, children, elements, integer, local, number, where
+from .model import Backend, Results, Task
+
+TASK = "com.avl.model.connect.ssp.task"
+RESULTS = "com.avl.model.connect.ssp.results"
+COMPONENT = "com.avl.model.connect.ssp.component"
+DECOUPLING = "com.avl.model.connect.ssp.connection.decoupling"
+COUPLER_CONNECTION = "org.coupler.connection"
+
+#: (owner element local name, annotation type) pairs the loader applies.
+HANDLED = {
+    ("DefaultExperiment", TASK),
+    ("DefaultExperiment", RESULTS),
+    ("Component", COMPONENT),
+    ("Connection", DECOUPLING),
+    ("Connection", COUPLER_CONNECTION),
+}
+
+STEP_TYPES = ("sequential", "parallel_single_thread", "parallel_one_step_size", "parallel_sync_all")
+END_TYPES = ("end_time", "first_component")
+
+
+def annotation(owner: Element, kind: str) -> Element | None:
+    """The content element of ``owner``'s annotation of type ``kind``, or None."""
+    annotations = child(owner, "Annotations")
+    if annotations is None:
+        return None
+    for item in children(annotations, "Annotation"):
+        if item.get("type") == kind:
+            return next(elements(item), None)
+    return None
+
+
+def read_task(experiment: Element, display: str, warnings: list[str]) -> Task | None:
+    """OpenMCx task settings of a DefaultExperiment."""
+    task = annotation(experiment, TASK)
+    if task is None:
+        return None
+    here = where(display, task)
+    step_type = task.get("stepType", "")
+    if step_type not in STEP_TYPES:
+        warnings.append(
+            f"{here}: OpenMCx stepType '{step_type}' is not one of {', '.join(STEP_TYPES)}; "
+            "Coupler's master algorithm setting applies"
+        )
+    end_type = task.get("endType", "end_time")
+    if end_type != "end_time":
+        warnings.append(
+            f"{here}: OpenMCx endType '{end_type}' is not supported (only end_time); "
+            "the run ends at the DefaultExperiment stopTime"
+        )
+    result = Task(
+        step_type=step_type,
+        delta_time=number(task, "deltaTime", display, 0.01) or 0.0,
+        end_type=end_type,
+        sum_time=boolean(task, "sumTime", display, False),
+        input_at_end_time=boolean(task, "inputAtEndTime", display, False),
+        relative_eps=number(task, "relativeEps", display, 1e-10) or 0.0,
+        timing_output=boolean(task, "timingOutput", display, False),
+    )
+    for attr, set_ in (
+        ("sumTime", result.sum_time),
+        ("inputAtEndTime", result.input_at_end_time),
+        ("timingOutput", result.timing_output),
+    ):
+        if set_:
+            warnings.append(
+                f'{here}: OpenMCx task attribute {attr}="true" is not supported; ignored'
+            )
+    return result
+
+
+def read_results(experiment: Element, display: str) -> Results | None:
+    """OpenMCx results settings of a DefaultExperiment."""
+    results = annotation(experiment, RESULTS)
+    if results is None:
+        return None
+    backends = child(results, "Backends")
+    return Results(
+        output_directory=results.get("outputDirectory"),
+        result_level=results.get("resultLevel", "synchronization"),
+        backends=tuple(
+            Backend(
+                type=b.get("type", ""),
+                store_at_runtime=boolean(b, "storeAtRuntime", display, True),
+            )
+            for b in (children(backends, "Backend") if backends is not None else ())
+        ),
+    )
+
+
+def component_delta_time(component: Element, display: str, warnings: list[str]) -> float | None:
+    """Per-component deltaTime (OpenMCx component annotation)."""
+    settings = annotation(component, COMPONENT)
+    if settings is None:
+        return None
+    for attr in ("triggerSequence", "inputAtEndTime"):
+        if settings.get(attr) is not None:
+            warnings.append(
+                f"{where(display, settings)}: OpenMCx component attribute '{attr}' is not "
+                "supported; ignored"
+            )
+    return number(settings, "deltaTime", display, None)
+
+
+def decoupling(connection: Element, display: str) -> tuple[bool, str | None, int | None]:
+    """(decoupled, decouple_type, decouple_priority) of a Connection."""
+    ours = annotation(connection, COUPLER_CONNECTION)
+    if ours is not None and boolean(ours, "decoupled", display, False):
+        return True, "always", None
+    theirs = annotation(connection, DECOUPLING)
+    if theirs is None:
+        return False, None, None
+    for item in elements(theirs):
+        name = local(item)
+        if name == "Never":
+            return False, "never", None
+        if name == "Always":
+            return True, "always", None
+        if name == "IfNeeded":
+            return False, "if_needed", integer(item, "priority", display, None)
+    return False, None, None
+
+
+def unsupported(root: Element, display: str) -> Iterator[str]:
+    """A warning for every annotation in the document the loader does not apply."""
+    for item in root.iter("{*}Annotation"):
+        annotations = item.getparent()
+        owner = annotations.getparent() if annotations is not None else None
+        if owner is None:
+            continue
+        kind = item.get("type", "")
+        if (local(owner), kind) in HANDLED:
+            continue
+        label = owner.get("name") or owner.get("startConnector") or ""
+        name = f" '{label}'" if label else ""
+        yield (
+            f"{where(display, item)}: annotation '{kind}' on <{local(owner)}>{name} "
+            "is not supported; ignored"
+        )

@@ -1,0 +1,299 @@
+"""SSP loading: the reference scenario in data/ and one test per bad input.
+
+Source --position[km]--> Gain.u[m] --y--> Sub.in --> Sub.Scale.x
+Sub.Scale.out --> Sub.out --> Sink.a          (flattened through the nested system)
+Source.{flag,count,mode,temp} --transformations--> Sink.*
+Source.name --> BusIn.label ~ Bus ~ BusOut.label --> Sink.label   (signal dictionary)
+"""
+
+from __future__ import annotations
+
+import shutil
+import zipfile
+from pathlib import Path
+
+import pytest
+from coupler.channels import Causality, ValueType
+from coupler.errors import ScenarioError, ValidationError
+from coupler_orchestrator.ssp import (
+    BooleanMappingTransformation,
+    LinearTransformation,
+    check_connections,
+    converter,
+    load_ssp,
+)
+
+DATA = Path(__file__).parent / "data"
+ENV = {"SCALE_HOST": "scale"}
+
+HEAD = """<?xml version="1.0" encoding="UTF-8"?>
+<ssd:SystemStructureDescription version="{version}" name="T"
+    xmlns:ssd="http://ssp-standard.org/SSP1/SystemStructureDescription"
+    xmlns:ssc="http://ssp-standard.org/SSP1/SystemStructureCommon">
+  <ssd:System name="Root">
+    <ssd:Elements>
+{elements}
+    </ssd:Elements>{connections}
+  </ssd:System>
+  <ssd:Units>
+    <ssc:Unit name="m"><ssc:BaseUnit m="1"/></ssc:Unit>
+    <ssc:Unit name="s"><ssc:BaseUnit s="1"/></ssc:Unit>
+  </ssd:Units>
+</ssd:SystemStructureDescription>
+"""
+
+
+def grpc(name: str, connectors: str, source: str = "grpc://localhost:1") -> str:
+    return (
+        f'      <ssd:Component name="{name}" type="application/x-coupler-grpc" source="{source}">'
+        f"<ssd:Connectors>{connectors}</ssd:Connectors></ssd:Component>"
+    )
+
+
+def real(name: str, kind: str, unit: str = "") -> str:
+    u = f' unit="{unit}"' if unit else ""
+    return f'<ssd:Connector name="{name}" kind="{kind}"><ssc:Real{u}/></ssd:Connector>'
+
+
+def link(a: str, ca: str, b: str, cb: str) -> str:
+    return (
+        f'      <ssd:Connection startElement="{a}" startConnector="{ca}" '
+        f'endElement="{b}" endConnector="{cb}"/>'
+    )
+
+
+def write(tmp_path: Path, elements: str, connections: str = "", version: str = "1.0") -> Path:
+    path = tmp_path / "scenario.ssd"
+    if connections:
+        connections = f"\n    <ssd:Connections>\n{connections}\n    </ssd:Connections>"
+    path.write_text(HEAD.format(version=version, elements=elements, connections=connections))
+    return path
+
+
+@pytest.fixture
+def scenario():  # type: ignore[no-untyped-def]
+    return load_ssp(DATA / "scenario.ssd", env=ENV)
+
+
+def test_reference_scenario_components(scenario) -> None:  # type: ignore[no-untyped-def]
+    assert scenario.ssp_version == "1.0"
+    assert scenario.name == "Reference"
+    assert len(scenario.sha256) == 64
+    assert [c.name for c in scenario.components] == ["Source", "Gain", "Sub.Scale", "Sink"]
+    source = scenario.component("Source")
+    assert source.source == "grpc://127.0.0.1:50051"
+    assert source.delta_time == 0.05
+    assert scenario.component("Sub.Scale").source == "grpc://scale:6000"
+    gain = scenario.component("Gain")
+    assert gain.source == str((DATA / "resources" / "gain.fmu").resolve())
+    assert gain.connector("u").causality is Causality.INPUT
+    position = source.connector("position")
+    assert (position.type, position.unit, position.kind) == (ValueType.REAL, "km", "output")
+    assert source.connector("blob").type is ValueType.BINARY
+    assert source.connector("mode").enumeration == "Modes"
+
+
+def test_parameters_inline_ssv_ssm_prefix_and_units(scenario) -> None:  # type: ignore[no-untyped-def]
+    gain = scenario.component("Gain").parameters
+    assert gain["k"].value == 6.0  # ssv 3.0 mapped to k through a LinearTransformation x2
+    assert gain["label"].value == "gain one"  # inline
+    assert gain["offset"].value == pytest.approx(1500.0)  # 1.5 km -> m
+    assert gain["offset"].unit == "m"
+    assert gain["enabled"].value is True
+    # system binding with prefix "Scale." reaches the nested component; Integer widened to Real
+    factor = scenario.component("Sub.Scale").parameters["factor"]
+    assert (factor.value, factor.type) == (4.0, ValueType.REAL)
+
+
+def test_connections_flattened_and_annotated(scenario) -> None:  # type: ignore[no-untyped-def]
+    pairs = {(c.start, c.end): c for c in scenario.connections}
+    assert ("Gain.y", "Sub.Scale.x") in pairs
+    assert ("Source.name", "Sink.label") in pairs  # through the signal dictionary
+    nested = pairs[("Sub.Scale.out", "Sink.a")]
+    assert (nested.decouple_type, nested.decouple_priority, nested.decoupled) == (
+        "if_needed",
+        3,
+        False,
+    )
+    assert pairs[("Source.blob", "Sink.blob")].decoupled is True
+    assert isinstance(
+        pairs[("Source.flag", "Sink.flag")].transformation, BooleanMappingTransformation
+    )
+    assert pairs[("Source.temp", "Sink.temp")].transformation == LinearTransformation(
+        factor=2.0, offset=1.0
+    )
+    assert check_connections(scenario) == []
+
+
+def test_experiment_openmcx_task_results_and_warnings(scenario) -> None:  # type: ignore[no-untyped-def]
+    assert (scenario.start_time, scenario.stop_time) == (0.0, 10.0)
+    assert (scenario.step_size, scenario.step_type) == (0.01, "sequential")
+    assert scenario.results.output_directory == "out"
+    assert scenario.results.backends[0].type == "csv"
+    assert scenario.signal_dictionaries["Bus"].entries["speed"].unit == "m/s"
+    text = "\n".join(scenario.warnings)
+    assert "inter_extrapolation" in text and "not supported" in text
+    assert "root system connector 'ext_in'" in text
+
+
+def test_converters(scenario) -> None:  # type: ignore[no-untyped-def]
+    by = {(c.start, c.end): c for c in scenario.connections}
+    assert converter(scenario, by[("Source.position", "Gain.u")])(1.5) == pytest.approx(1500.0)
+    # degC -> K, then LinearTransformation 2x+1
+    assert converter(scenario, by[("Source.temp", "Sink.temp")])(20.0) == pytest.approx(587.3)
+    assert converter(scenario, by[("Source.flag", "Sink.flag")])(True) is False
+    assert converter(scenario, by[("Source.count", "Sink.count")])(2) == 20
+    assert converter(scenario, by[("Source.count", "Sink.count")])(3) == 3
+    assert converter(scenario, by[("Source.mode", "Sink.mode")])(1) == 5  # Go -> Green
+    identity = converter(scenario, by[("Source.name", "Sink.label")])
+    assert identity("x") == "x"
+
+
+def test_ssp_archive(tmp_path: Path) -> None:
+    archive = tmp_path / "scenario.ssp"
+    with zipfile.ZipFile(archive, "w") as zf:
+        zf.write(DATA / "scenario.ssd", "SystemStructure.ssd")
+        for name in ("params.ssv", "mapping.ssm", "signals.ssb", "resources/gain.fmu"):
+            zf.write(DATA / name, name)
+    work = tmp_path / "work"
+    scenario = load_ssp(archive, env=ENV, workdir=work)
+    assert scenario.resource_dir == work.resolve()
+    assert scenario.component("Gain").source == str(work.resolve() / "resources" / "gain.fmu")
+    assert scenario.source == archive.resolve()
+
+
+def test_ssp2_loads_with_structural_checks(tmp_path: Path) -> None:
+    path = write(
+        tmp_path,
+        grpc("A", real("y", "output")) + grpc("B", real("u", "input")),
+        link("A", "y", "B", "u"),
+        version="2.0",
+    )
+    scenario = load_ssp(path)
+    assert scenario.ssp_version == "2.0"
+    assert any("no XML schema for SSP version '2.0'" in w for w in scenario.warnings)
+
+
+def test_env_expansion_and_undefined_variable(tmp_path: Path) -> None:
+    path = write(tmp_path, grpc("A", real("y", "output"), "grpc://${HOST}:${PORT:-9}"))
+    assert load_ssp(path, env={"HOST": "h"}).component("A").source == "grpc://h:9"
+    with pytest.raises(ValidationError) as info:
+        load_ssp(path, env={})
+    assert "scenario.ssd line 7: component 'A': environment variable 'HOST'" in str(info.value)
+
+
+def test_malformed_xml(tmp_path: Path) -> None:
+    path = tmp_path / "bad.ssd"
+    path.write_text('<?xml version="1.0"?>\n<a>\n  <b>\n</a>\n')
+    with pytest.raises(ScenarioError, match=r"bad\.ssd line 4: malformed XML"):
+        load_ssp(path)
+
+
+def test_doctype_refused(tmp_path: Path) -> None:
+    path = tmp_path / "x.ssd"
+    path.write_text('<?xml version="1.0"?>\n<!DOCTYPE a [<!ENTITY e "boom">]>\n<a>&e;</a>\n')
+    with pytest.raises(ScenarioError, match="DOCTYPE declaration is not allowed"):
+        load_ssp(path)
+
+
+def test_schema_violation(tmp_path: Path) -> None:
+    path = write(tmp_path, '      <ssd:Component name="A" source="x.fmu" bogus="1"/>')
+    with pytest.raises(ValidationError) as info:
+        load_ssp(path)
+    assert "scenario.ssd line 7: schema violation" in str(info.value)
+    assert "bogus" in str(info.value)
+
+
+def test_unknown_component_type(tmp_path: Path) -> None:
+    path = write(tmp_path, '      <ssd:Component name="A" type="application/x-other" source="x"/>')
+    with pytest.raises(ValidationError) as info:
+        load_ssp(path)
+    message = str(info.value)
+    assert "component 'A' has type 'application/x-other'" in message
+    assert "application/x-fmu-sharedlibrary or application/x-coupler-grpc" in message
+
+
+def test_missing_fmu(tmp_path: Path) -> None:
+    path = write(tmp_path, '      <ssd:Component name="A" source="resources/missing.fmu"/>')
+    with pytest.raises(ValidationError, match=r"FMU file 'resources/missing\.fmu' does not exist"):
+        load_ssp(path)
+
+
+def test_unknown_connector(tmp_path: Path) -> None:
+    path = write(
+        tmp_path,
+        grpc("Integrator", real("y", "output")) + grpc("Gain", real("real_in2", "input")),
+        link("Integrator", "y", "Gain", "real_in"),
+    )
+    with pytest.raises(ValidationError) as info:
+        load_ssp(path)
+    assert (
+        "scenario.ssd line 10: connection Integrator.y -> Gain.real_in: connector "
+        "'Gain.real_in' does not exist in component 'Gain' (connectors: real_in2)"
+    ) in str(info.value)
+
+
+def test_base_unit_mismatch(tmp_path: Path) -> None:
+    path = write(
+        tmp_path,
+        grpc("A", real("y", "output", "m")) + grpc("B", real("u", "input", "s")),
+        link("A", "y", "B", "u"),
+    )
+    scenario = load_ssp(path)
+    with pytest.raises(ScenarioError) as info:
+        converter(scenario, scenario.connections[0])
+    message = str(info.value)
+    assert "'A.y' [m] -> 'B.u' [s]" in message and "different base units" in message
+
+
+def test_check_connections_problems(tmp_path: Path) -> None:
+    path = write(
+        tmp_path,
+        grpc(
+            "A",
+            real("y", "output")
+            + '<ssd:Connector name="s" kind="output"><ssc:String/></ssd:Connector>',
+        )
+        + grpc("B", real("u", "input") + real("v", "output")),
+        "\n".join([link("A", "y", "B", "u"), link("A", "s", "B", "u"), link("B", "v", "A", "y")]),
+    )
+    problems = "\n".join(check_connections(load_ssp(path)))
+    assert "expects Real, but 'A.s' is String" in problems
+    assert "input 'B.u' is driven by 2 connections" in problems
+    assert "'A.y' is output and cannot be driven" in problems
+
+
+def _zip(path: Path, entries: dict[str, bytes]) -> Path:
+    with zipfile.ZipFile(path, "w", zipfile.ZIP_DEFLATED) as zf:
+        for name, data in entries.items():
+            zf.writestr(name, data)
+    return path
+
+
+def test_zip_slip_refused(tmp_path: Path) -> None:
+    ssd = (DATA / "scenario.ssd").read_bytes()
+    archive = _zip(tmp_path / "evil.ssp", {"SystemStructure.ssd": ssd, "../escape.txt": b"x"})
+    with pytest.raises(ScenarioError, match=r"entry '\.\./escape\.txt'.*zip-slip"):
+        load_ssp(archive, workdir=tmp_path / "work")
+    assert not (tmp_path / "escape.txt").exists()
+
+
+def test_zip_bomb_refused(tmp_path: Path) -> None:
+    archive = _zip(tmp_path / "bomb.ssp", {"SystemStructure.ssd": b"0" * 2_000_000})
+    with pytest.raises(ScenarioError, match="zip bomb"):
+        load_ssp(archive, max_archive_bytes=1_000_000)
+
+
+def test_temporary_workdir_removed_on_failure(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setenv("TMPDIR", str(tmp_path / "tmp"))
+    (tmp_path / "tmp").mkdir()
+    import tempfile
+
+    monkeypatch.setattr(tempfile, "tempdir", None)
+    archive = _zip(tmp_path / "bomb.ssp", {"SystemStructure.ssd": b"0" * 2_000_000})
+    with pytest.raises(ScenarioError):
+        load_ssp(archive, max_archive_bytes=1_000_000)
+    assert list((tmp_path / "tmp").iterdir()) == []
+    shutil.rmtree(tmp_path / "tmp")
