@@ -8,6 +8,8 @@
  *   - model_calculate(d, t, initializing)   outputs from parameters, inputs, state and time;
  *   - model_start(d)      called when initialization mode ends (state := its start value);
  *   - model_step(d, t, h) advance the state over [t, t+h] (the internal solver step is h).
+ * Optionally (MODEL_USES_RESOURCES, see resources.h) it loads files from the FMU's resources/
+ * folder at instantiation: model_load_resources(d, dir, msg, size), model_free_resources(d).
  * The wrapper (fmi1_cosim.c, fmi2_cosim.c, fmi3_cosim.c) implements the FMI API over that,
  * with the helpers of vars.h. A model folder's C file includes the model, then the wrapper.
  */

@@ -3,6 +3,9 @@
  * are not supported: those functions log an error and return fmi2Error. */
 #include "fmi2Functions.h"
 #include "vars.h"
+#ifdef MODEL_USES_RESOURCES
+#include "resources.h"
+#endif
 
 #ifndef INSTANTIATION_TOKEN
 #error "INSTANTIATION_TOKEN (the modelDescription guid) must be defined by the build"
@@ -15,7 +18,7 @@ typedef struct {
     char *name;
     fmi2CallbackFunctions cb;
     bool logging;
-    char msg[256];
+    char msg[1024];
 } Instance;
 
 static void logmsg(Instance *inst, fmi2Status status, const char *message) {
@@ -87,6 +90,21 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
         return NULL;
     }
     model_defaults(&inst->d);
+#ifdef MODEL_USES_RESOURCES
+    {
+        char dir[4096];
+        if (!core_resource_dir(fmuResourceLocation, dir, sizeof dir, inst->msg, sizeof inst->msg) ||
+            !model_load_resources(&inst->d, dir, inst->msg, sizeof inst->msg)) {
+            functions->logger(functions->componentEnvironment, instanceName, fmi2Error,
+                              "logStatusError", "%s", inst->msg);
+            model_free_resources(&inst->d);
+            core_free_data(&inst->d);
+            free(inst->name);
+            free(inst);
+            return NULL;
+        }
+    }
+#endif
     inst->mode = MODE_INSTANTIATED;
     return inst;
 }
@@ -94,6 +112,9 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
 void fmi2FreeInstance(fmi2Component c) {
     Instance *inst = (Instance *)c;
     if (inst == NULL) return;
+#ifdef MODEL_USES_RESOURCES
+    model_free_resources(&inst->d);
+#endif
     core_free_data(&inst->d);
     free(inst->name);
     free(inst);

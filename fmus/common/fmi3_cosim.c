@@ -3,6 +3,9 @@
  * clocks, FMU state and derivatives are stubs that log an error and return fmi3Error. */
 #include "fmi3Functions.h"
 #include "vars.h"
+#ifdef MODEL_USES_RESOURCES
+#include "resources.h"
+#endif
 
 #ifndef INSTANTIATION_TOKEN
 #error "INSTANTIATION_TOKEN (the modelDescription instantiationToken) must be defined by the build"
@@ -16,7 +19,7 @@ typedef struct {
     fmi3InstanceEnvironment env;
     fmi3LogMessageCallback log;
     bool logging;
-    char msg[256];
+    char msg[1024];
 } Instance;
 
 static void logmsg(Instance *inst, fmi3Status status, const char *message) {
@@ -93,6 +96,20 @@ fmi3Instance fmi3InstantiateCoSimulation(
         return NULL;
     }
     model_defaults(&inst->d);
+#ifdef MODEL_USES_RESOURCES
+    {
+        char dir[4096];
+        if (!core_resource_dir(resourcePath, dir, sizeof dir, inst->msg, sizeof inst->msg) ||
+            !model_load_resources(&inst->d, dir, inst->msg, sizeof inst->msg)) {
+            if (logMessage) logMessage(instanceEnvironment, fmi3Error, "logStatusError", inst->msg);
+            model_free_resources(&inst->d);
+            core_free_data(&inst->d);
+            free(inst->name);
+            free(inst);
+            return NULL;
+        }
+    }
+#endif
     inst->mode = MODE_INSTANTIATED;
     return inst;
 }
@@ -136,6 +153,9 @@ fmi3Instance fmi3InstantiateScheduledExecution(
 void fmi3FreeInstance(fmi3Instance instance) {
     Instance *inst = (Instance *)instance;
     if (inst == NULL) return;
+#ifdef MODEL_USES_RESOURCES
+    model_free_resources(&inst->d);
+#endif
     core_free_data(&inst->d);
     free(inst->name);
     free(inst);
