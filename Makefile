@@ -56,11 +56,11 @@ test: setup browser
 
 # The railway scenario end to end on local processes (no Docker). ARGS=--exit to not wait.
 demo: setup
-	$(UV) run --frozen python scripts/fleet.py scenarios/railway/fleet.toml $(ARGS)
+	$(UV) run --frozen coupler fleet scenarios/railway/fleet.toml $(ARGS)
 
 # The smallest scenario: two FMUs and the example gRPC participant.
 demo-example: setup
-	$(UV) run --frozen python scripts/fleet.py examples/ramp-gain/fleet.toml $(ARGS)
+	$(UV) run --frozen coupler fleet examples/ramp-gain/fleet.toml $(ARGS)
 
 bench: setup
 	$(UV) run --frozen python benchmarks/step_overhead.py

@@ -86,13 +86,12 @@ class RemoteParticipant(Participant):
         await self.close()
 
     async def open(self) -> None:
-        if self._channel is not None:
+        if self._codec is not None:
             return
-        self._channel = grpc.aio.insecure_channel(self.target)
-        self._stub = pb_grpc.GRPCComponentServiceStub(self._channel)
+        self._ensure_channel()
         await self.wait_until_serving()
         response = await self._call(
-            "Describe", self._stub.Describe(pb.DescribeRequest(), timeout=self.call_timeout)
+            "Describe", self._stubbed().Describe(pb.DescribeRequest(), timeout=self.call_timeout)
         )
         self._codec = values.Codec(values.description_from_pb(response))
 
@@ -125,6 +124,35 @@ class RemoteParticipant(Participant):
                 )
             await asyncio.sleep(delay)
             delay = min(delay * 2, 0.5)
+
+    async def wait_until_serving_once(self) -> None:
+        """One health check; ParticipantUnavailable unless SERVING."""
+        self._ensure_channel()
+        assert self._channel is not None
+        try:
+            reply = await health_pb2_grpc.HealthStub(self._channel).Check(
+                health_pb2.HealthCheckRequest(service=""), timeout=self.connect_timeout
+            )
+        except grpc.aio.AioRpcError as exc:
+            raise _translate(
+                exc.code(),
+                exc.details(),
+                participant=self.name,
+                call="health",
+                address=self.address,
+            ) from exc
+        if reply.status != health_pb2.HealthCheckResponse.SERVING:
+            raise ParticipantUnavailable(
+                f"health is {health_pb2.HealthCheckResponse.ServingStatus.Name(reply.status)}",
+                participant=self.name,
+                call="health",
+                status="UNAVAILABLE",
+            )
+
+    def _ensure_channel(self) -> None:
+        if self._channel is None:
+            self._channel = grpc.aio.insecure_channel(self.target)
+            self._stub = pb_grpc.GRPCComponentServiceStub(self._channel)
 
     @property
     def codec(self) -> values.Codec:
@@ -190,6 +218,7 @@ class RemoteParticipant(Participant):
             await self._channel.close()
         self._channel = None
         self._stub = None
+        self._codec = None
 
     def _stubbed(self) -> pb_grpc.GRPCComponentServiceStub:
         if self._stub is None:

@@ -15,7 +15,7 @@ from coupler.errors import CouplerError, ValidationError
 from coupler.fmu import FmuParticipant
 from coupler.logs import configure_logging
 from coupler.participant import Participant
-
+from coupler_orchestrator.fleet import Fleet, FleetSpec
 from coupler_orchestrator.plan import Algorithm
 from coupler_orchestrator.planning import RunOptions
 from coupler_orchestrator.progress import ProgressBar
@@ -41,6 +41,19 @@ def parser() -> argparse.ArgumentParser:
     validate = commands.add_parser("validate", help="check a scenario and its participants")
     validate.add_argument("ssp", type=Path, help=".ssp archive or .ssd file")
     _run_options(validate)
+
+    fleet = commands.add_parser(
+        "fleet", help="start a scenario's services as local processes, run it, keep them up"
+    )
+    fleet.add_argument(
+        "fleet", type=Path, help="fleet file (TOML), e.g. scenarios/railway/fleet.toml"
+    )
+    fleet.add_argument("--exit", action="store_true", help="stop the services when the run ends")
+    fleet.add_argument("--out", type=Path, help="results directory (default from the fleet file)")
+    fleet.add_argument(
+        "--realtime-factor", type=float, help="override the fleet file's pacing; 0 = unpaced"
+    )
+    fleet.add_argument("--health-timeout", type=float, default=60.0, help="[s] per service")
 
     describe = commands.add_parser("describe", help="print a participant's channels")
     describe.add_argument("target", help="grpc://HOST:PORT or an .fmu file")
@@ -81,7 +94,7 @@ def options_of(args: argparse.Namespace) -> RunOptions:
         stop_time=args.stop_time,
         step_size=args.step,
         algorithm=Algorithm(args.algorithm),
-        realtime_factor=getattr(args, "realtime_factor", None),
+        realtime_factor=getattr(args, "realtime_factor", None) or None,
         parameters=parameters,
         run_id=args.run_id,
         connect_timeout=args.connect_timeout,
@@ -108,6 +121,8 @@ def main(argv: Sequence[str] | None = None, *, stdout: TextIO | None = None) -> 
 async def _dispatch(args: argparse.Namespace, out: TextIO) -> int:
     if args.command == "describe":
         return await _describe(args.target, args.timeout, out=out)
+    if args.command == "fleet":
+        return await _fleet(args, out)
     options = options_of(args)
     if args.command == "validate":
         scenario = await validate_scenario(args.ssp, options)
@@ -119,6 +134,10 @@ async def _dispatch(args: argparse.Namespace, out: TextIO) -> int:
             file=out,
         )
         return EXIT_OK
+    return await _run(args, options, out)
+
+
+async def _run(args: argparse.Namespace, options: RunOptions, out: TextIO) -> int:
     observers = [] if args.no_progress or not sys.stderr.isatty() else [ProgressBar()]
     outcome = await run_scenario(args.ssp, options, out_dir=args.out, observers=observers)
     result = outcome.result
@@ -133,6 +152,24 @@ async def _dispatch(args: argparse.Namespace, out: TextIO) -> int:
         print(f"error: run {result.status}: {result.reason}", file=sys.stderr)
         return EXIT_ERROR
     return EXIT_OK
+
+
+async def _fleet(args: argparse.Namespace, out: TextIO) -> int:
+    spec = FleetSpec.load(args.fleet)
+    run_argv = ["run", str(spec.ssp), "--out", str(args.out or spec.out), *spec.run_args]
+    if args.realtime_factor is not None:
+        run_argv += ["--realtime-factor", str(args.realtime_factor)]
+    run_args = parser().parse_args(run_argv)
+    async with Fleet(spec, health_timeout=args.health_timeout) as fleet:
+        print(f"fleet: {len(spec.services)} services healthy (logs in {fleet.logs})", file=out)
+        code = await _run(run_args, options_of(run_args), out)
+        for name, url in spec.urls.items():
+            print(f"{name}: {url}", file=out)
+        out.flush()
+        if code == EXIT_OK and not args.exit:
+            print("services stay up; Ctrl-C stops them", file=out, flush=True)
+            await asyncio.Event().wait()
+    return code
 
 
 async def _describe(target: str, connect_timeout: float, *, out: TextIO) -> int:
