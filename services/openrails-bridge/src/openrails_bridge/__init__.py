@@ -1,1 +1,1 @@
-"""openrails_bridge."""
+"""openrails_bridge: a Coupler participant over OpenRails' web API (lockstep or stock)."""

@@ -1,2 +1,77 @@
-def main() -> None:
-    raise SystemExit("not yet")
+"""``python -m openrails_bridge``: serve OpenRails as a Coupler participant.
+
+Options override the ``OPENRAILS_BRIDGE_*`` environment variables (see ``config.py``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+from importlib import resources
+from pathlib import Path
+
+from coupler.adapter import AdapterConfig, AdapterParticipant
+from coupler.channels import Causality
+from coupler.logs import configure_logging
+from coupler.server import ParticipantServer, serve
+
+from .adapter import OpenRailsAdapter
+from .config import BridgeSettings
+
+
+def _parse(argv: list[str] | None) -> BridgeSettings:
+    parser = argparse.ArgumentParser(prog="openrails-bridge", description=__doc__)
+    parser.add_argument(
+        "--openrails-url", dest="openrails_url", help="default http://127.0.0.1:2150"
+    )
+    parser.add_argument("--mode", choices=["lockstep", "stock"])
+    parser.add_argument("--sim-step", type=float, dest="sim_step_s", help="lockstep step [s]")
+    parser.add_argument("--speedup", type=float, help="stock: simulated s per wall-clock s")
+    parser.add_argument("--request-timeout", type=float, dest="request_timeout_s")
+    parser.add_argument("--ready-timeout", type=float, dest="ready_timeout_s")
+    parser.add_argument("--channels", type=Path, help="channel mapping TOML")
+    parser.add_argument("--locomotive", help="lockstep LocomotiveName (default PLAYER)")
+    parser.add_argument("--host", help="gRPC bind address (default 127.0.0.1)")
+    parser.add_argument("--port", type=int, help="gRPC port, 0 = any free one (default 50061)")
+    parser.add_argument("--log-level", dest="log_level")
+    given = {k: v for k, v in vars(parser.parse_args(argv)).items() if v is not None}
+    return BridgeSettings(**given)
+
+
+def load_channels(settings: BridgeSettings) -> AdapterConfig:
+    """The channel mapping (the packaged one unless configured), with the lockstep step."""
+    if settings.channels is not None:
+        config = AdapterConfig.load(settings.channels)
+    else:
+        with resources.as_file(resources.files(__package__) / "channels.toml") as path:
+            config = AdapterConfig.load(path)
+    if settings.mode == "lockstep":
+        config = config.model_copy(update={"fixed_step_size": settings.sim_step_s})
+    return config
+
+
+def build(settings: BridgeSettings) -> AdapterParticipant:
+    """The bridge participant: the adapter and its channel mapping."""
+    config = load_channels(settings)
+    inputs = {c.field: c.name for c in config.channel if c.causality is Causality.INPUT}
+    adapter = OpenRailsAdapter(settings, name=config.name, channel_names=inputs)
+    return AdapterParticipant(adapter, config, implementation="openrails-bridge")
+
+
+def main(argv: list[str] | None = None) -> None:
+    settings = _parse(argv)
+    configure_logging(settings.log_level, json=settings.log_json)
+    participant = build(settings)
+
+    def announce(server: ParticipantServer) -> None:
+        print(
+            f"openrails-bridge serving at {server.address} "
+            f"(OpenRails {settings.openrails_url}, {settings.mode})",
+            flush=True,
+        )
+
+    asyncio.run(serve(participant, host=settings.host, port=settings.port, on_started=announce))
+
+
+if __name__ == "__main__":
+    main()

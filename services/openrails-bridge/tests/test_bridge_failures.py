@@ -1,0 +1,134 @@
+"""OpenRails down, failing or hanging: UNAVAILABLE naming the URL, within the request timeout.
+
+    RemoteParticipant --gRPC--> bridge --HTTP--> closed port / openrails_mock (stopped)
+                                             \\-> tiny OpenRails: 503 or a POST that never answers
+
+The tiny server exists for what the mock cannot do: answer 503 and hang.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import time
+from collections.abc import AsyncIterator
+
+import pytest
+from aiohttp import web
+
+from coupler.channels import RunSetup
+from coupler.errors import ParticipantError, ParticipantUnavailable
+from coupler.server import ParticipantServer
+from openrails_bridge.__main__ import build
+from openrails_bridge.config import BridgeSettings
+
+from .conftest import Bridge, Mock, serve_app
+
+RANGES = [
+    {"TypeName": name, "MinValue": lo, "MaxValue": hi, "RangeFraction": 0.0}
+    for name, lo, hi in [
+        ("THROTTLE", 0.0, 1.0),
+        ("TRAIN_BRAKE", 0.0, 1.0),
+        ("DYNAMIC_BRAKE", 0.0, 1.0),
+        ("DIRECTION", -1.0, 1.0),
+    ]
+]
+
+
+def tiny_openrails(post: str, release: asyncio.Event) -> web.Application:
+    """READY, the GETs the bridge reads, and a POST /API/CABCONTROLS that fails as told."""
+
+    async def ready(request: web.Request) -> web.Response:
+        return web.Response(status=200)
+
+    async def cabcontrols(request: web.Request) -> web.Response:
+        return web.json_response(RANGES)
+
+    async def map_(request: web.Request) -> web.Response:
+        return web.json_response({"LatLon": {"Lat": 50.5, "Lon": 13.0}, "DirectionDeg": 90.0})
+
+    async def display(request: web.Request) -> web.Response:
+        return web.json_response([{"FirstCol": "Speed", "LastCol": "0.0 km/h"}])
+
+    async def step(request: web.Request) -> web.Response:
+        if post == "hang":
+            await release.wait()
+        return web.Response(status=503, text="Service Unavailable: simulator paused")
+
+    app = web.Application()
+    app.router.add_get("/API/READY", ready)
+    app.router.add_get("/API/CABCONTROLS", cabcontrols)
+    app.router.add_post("/API/CABCONTROLS", step)
+    app.router.add_get("/API/MAP", map_)
+    app.router.add_get("/API/TRAINDRIVINGDISPLAY", display)
+    return app
+
+
+@pytest.fixture
+async def release() -> AsyncIterator[asyncio.Event]:
+    event = asyncio.Event()
+    yield event
+    event.set()
+
+
+async def test_openrails_down_at_step(mock: Mock, bridge: Bridge) -> None:
+    """The mock goes away between two steps: the next DoStep is UNAVAILABLE naming the URL."""
+    cm = mock()
+    url = await cm.__aenter__()
+    try:
+        async with bridge(url) as remote:
+            await remote.initialize(RunSetup(run_id="t", start_time=0.0, step_size=0.2))
+            await remote.do_step(0.0, 0.2, {"throttle": 1.0})
+            await cm.__aexit__(None, None, None)
+            cm = None
+            started = time.monotonic()
+            with pytest.raises(ParticipantUnavailable) as caught:
+                await remote.do_step(0.2, 0.2, {})
+    finally:
+        if cm is not None:
+            await cm.__aexit__(None, None, None)
+    assert time.monotonic() - started < 3.0
+    assert caught.value.status == "UNAVAILABLE"
+    assert f"OpenRails at {url}/API/CABCONTROLS" in str(caught.value)
+
+
+async def test_openrails_not_running_at_start(closed_port: int) -> None:
+    url = f"http://127.0.0.1:{closed_port}"
+    server = ParticipantServer(
+        build(BridgeSettings(openrails_url=url, ready_timeout_s=0.5, request_timeout_s=0.2))
+    )
+    started = time.monotonic()
+    try:
+        with pytest.raises(ParticipantUnavailable) as caught:
+            await server.start()
+    finally:
+        await server.stop(grace=0.1)
+    assert time.monotonic() - started < 3.0
+    assert f"OpenRails at {url}/API/READY not ready within 0.5 s" in str(caught.value)
+    assert "ClientConnectorError" in str(caught.value)
+
+
+async def test_error_answer_is_unavailable(release: asyncio.Event, bridge: Bridge) -> None:
+    async with serve_app(tiny_openrails("503", release)) as url, bridge(url) as remote:
+        await remote.initialize(RunSetup(run_id="t", start_time=0.0, step_size=0.2))
+        with pytest.raises(ParticipantUnavailable) as caught:
+            await remote.do_step(0.0, 0.2, {"throttle": 0.5})
+    message = str(caught.value)
+    assert f"OpenRails at {url}/API/CABCONTROLS answered 503" in message
+    assert "simulator paused" in message
+
+
+async def test_hanging_openrails_times_out(release: asyncio.Event, bridge: Bridge) -> None:
+    """POST /API/CABCONTROLS never answers: DoStep fails after the 0.5 s request timeout."""
+    async with serve_app(tiny_openrails("hang", release)) as url:
+        async with bridge(url, request_timeout_s=0.5) as remote:
+            await remote.initialize(RunSetup(run_id="t", start_time=0.0, step_size=0.2))
+            started = time.monotonic()
+            with pytest.raises(ParticipantError) as caught:
+                await remote.do_step(0.0, 0.2, {"throttle": 0.5})
+            elapsed = time.monotonic() - started
+        release.set()
+    assert 0.4 <= elapsed < 2.0
+    assert caught.value.status == "UNAVAILABLE"
+    assert f"OpenRails at {url}/API/CABCONTROLS did not answer POST within 0.5 s" in str(
+        caught.value
+    )

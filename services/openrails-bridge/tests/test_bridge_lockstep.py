@@ -1,0 +1,145 @@
+"""The bridge against the real OpenRails mock in lockstep mode.
+
+    RemoteParticipant --gRPC--> bridge --POST /API/CABCONTROLS x h/0.2--> openrails_mock
+
+Each test starts its own mock and bridge on free ports.
+"""
+
+from __future__ import annotations
+
+import time
+
+import pytest
+
+from coupler.channels import Causality, RunSetup
+from coupler.errors import ParticipantError
+from coupler.values import decode_message
+
+from .conftest import Bridge, Mock
+
+
+async def test_describe_lists_channels_and_fixed_step(mock: Mock, bridge: Bridge) -> None:
+    async with mock() as url, bridge(url) as remote:
+        description = await remote.describe()
+    assert [c.name for c in description.of(Causality.OUTPUT)] == [
+        "distance",
+        "speed",
+        "acceleration",
+        "latitude",
+        "longitude",
+        "heading",
+        "track_node",
+        "track_offset",
+        "direction_state",
+        "train_state",
+    ]
+    assert [c.name for c in description.of(Causality.INPUT)] == [
+        "throttle",
+        "brake",
+        "dynamic_brake",
+        "direction",
+    ]
+    assert description.channel("train_state").message_type == "coupler.v1.TrainState"
+    assert description.capabilities.fixed_step_size == pytest.approx(0.2)
+
+
+async def test_throttle_moves_the_train(mock: Mock, bridge: Bridge) -> None:
+    async with mock() as url, bridge(url) as remote:
+        first = await remote.initialize(
+            RunSetup(run_id="t", start_time=0.0, step_size=1.0, inputs={"throttle": 1.0})
+        )
+        assert first["speed"] == 0.0
+        assert first["latitude"] != 0.0 and first["longitude"] != 0.0
+        trace = [first]
+        for k in range(10):
+            trace.append(await remote.do_step(float(k), 1.0, {}))
+        await remote.terminate()
+
+    last = trace[-1]
+    assert last["speed"] > 1.0
+    assert last["acceleration"] > 0.0
+    distances = [o["distance"] for o in trace[1:]]
+    assert distances == sorted(distances) and distances[-1] > distances[0] > 0.0
+    assert last["track_node"] >= 1 and last["track_offset"] > 0.0
+    assert last["direction_state"] == 1
+    assert (last["latitude"], last["longitude"]) != (first["latitude"], first["longitude"])
+    state = decode_message("coupler.v1.TrainState", last["train_state"])
+    assert state["time_s"] == pytest.approx(10.0)
+    assert state["speed_mps"] == pytest.approx(last["speed"])
+    assert state["distance_m"] == pytest.approx(last["distance"])
+    assert state["position"]["latitude_deg"] == pytest.approx(last["latitude"])
+    assert state["track_node"] == last["track_node"]
+    assert state["direction"] == 1
+
+
+async def test_each_step_posts_h_over_sim_step_times(mock: Mock, bridge: Bridge) -> None:
+    """One 1 s step and five 0.2 s steps advance the same mock identically."""
+    async with mock() as url_a, mock() as url_b, bridge(url_a) as a, bridge(url_b) as b:
+        await a.initialize(RunSetup(run_id="a", start_time=0.0, step_size=1.0))
+        await b.initialize(RunSetup(run_id="b", start_time=0.0, step_size=0.2))
+        big = await a.do_step(0.0, 1.0, {"throttle": 0.8})
+        small = {}
+        for k in range(5):
+            small = await b.do_step(k * 0.2, 0.2, {"throttle": 0.8})
+    assert big["speed"] > 0.0
+    assert big["speed"] == pytest.approx(small["speed"])
+    assert big["distance"] == pytest.approx(small["distance"])
+
+
+async def test_brake_stops_the_train(mock: Mock, bridge: Bridge) -> None:
+    async with mock() as url, bridge(url) as remote:
+        await remote.initialize(
+            RunSetup(run_id="t", start_time=0.0, step_size=2.0, inputs={"throttle": 1.0})
+        )
+        for k in range(5):
+            moving = await remote.do_step(2.0 * k, 2.0, {})
+        t = 10.0
+        for _ in range(20):
+            stopped = await remote.do_step(t, 2.0, {"throttle": 0.0, "brake": 1.0})
+            t += 2.0
+    assert moving["speed"] > 1.0
+    assert stopped["speed"] == pytest.approx(0.0, abs=1e-6)
+    assert stopped["distance"] > moving["distance"]
+
+
+async def test_step_not_a_multiple_is_invalid_argument(mock: Mock, bridge: Bridge) -> None:
+    async with mock() as url, bridge(url) as remote:
+        with pytest.raises(ParticipantError) as caught:
+            await remote.initialize(RunSetup(run_id="t", start_time=0.0, step_size=0.3))
+    assert caught.value.status == "INVALID_ARGUMENT"
+    assert "0.3 s" in str(caught.value) and "0.2 s" in str(caught.value)
+
+
+async def test_control_out_of_range_is_invalid_argument(mock: Mock, bridge: Bridge) -> None:
+    async with mock() as url, bridge(url) as remote:
+        await remote.initialize(RunSetup(run_id="t", start_time=0.0, step_size=0.2))
+        with pytest.raises(ParticipantError) as caught:
+            await remote.do_step(0.0, 0.2, {"throttle": 1.5})
+    assert caught.value.status == "INVALID_ARGUMENT"
+    assert "'throttle'" in str(caught.value) and "[0, 1]" in str(caught.value)
+
+
+async def test_connect_waits_for_ready(mock: Mock, bridge: Bridge) -> None:
+    """READY answers 425 for 1 s: the bridge starts serving only after it turned 200."""
+    started = time.monotonic()
+    async with mock(loading_delay_s=1.0) as url, bridge(url) as remote:
+        waited = time.monotonic() - started
+        outputs = await remote.initialize(RunSetup(run_id="t", start_time=0.0, step_size=0.2))
+        outputs = await remote.do_step(0.0, 0.2, {"throttle": 1.0})
+    assert 0.9 <= waited < 4.0
+    assert outputs["speed"] > 0.0
+
+
+async def test_second_run_after_terminate(mock: Mock, bridge: Bridge) -> None:
+    async with mock() as url, bridge(url) as remote:
+        await remote.initialize(
+            RunSetup(run_id="1", start_time=0.0, step_size=1.0, inputs={"throttle": 1.0})
+        )
+        first = await remote.do_step(0.0, 1.0, {})
+        await remote.terminate()
+        again = await remote.initialize(RunSetup(run_id="2", start_time=0.0, step_size=1.0))
+        second = await remote.do_step(0.0, 1.0, {})
+    # the train is where the first run left it; OpenRails has no reset
+    assert again["distance"] == pytest.approx(first["distance"])
+    assert again["track_offset"] == pytest.approx(first["track_offset"])
+    assert second["distance"] > first["distance"]

@@ -1,0 +1,189 @@
+"""The railway scenario end to end, every service a real local process on loopback.
+
+    Driver (FMU, in-process) == throttle, brake ==> OpenRails bridge ==HTTP==> OpenRails mock
+    OpenRails bridge == distance, speed ==> Driver
+    OpenRails bridge == distance ==> TrackBalises (FMU host) == readings ==> Map server
+    OpenRails bridge == lat/lon, speed, TrainState ==> Map server
+
+The train runs from Annaberg-Buchholz to Schwarzenberg; every balise of the railML file must be
+reported once, in order, at its distance, and the map server must have received every reading.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import socket
+from collections.abc import AsyncIterator
+from pathlib import Path
+from typing import Any
+
+import aiohttp
+import pytest
+
+from coupler_orchestrator.fleet import Fleet, FleetSpec, ServiceSpec
+from coupler_orchestrator.planning import RunOptions
+from coupler_orchestrator.runner import RunOutcome, run_scenario
+from coupler_railway import load_infrastructure
+
+ROOT = Path(__file__).resolve().parents[2]
+SCENARIO = ROOT / "scenarios" / "railway"
+RAILML = SCENARIO / "data" / "annaberg-schwarzenberg.railml"
+FMUS = ROOT / "build" / "fmus"
+ANTENNA_OFFSET = 39.7  # parameters.ssv: TrackBalises.antenna_offset
+STOP_DISTANCE = 25908.3  # parameters.ssv: Driver.stop_distance
+STEP = 1.0
+
+pytestmark = pytest.mark.timeout(300)
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+@pytest.fixture(scope="module")
+def ports() -> dict[str, int]:
+    return {name: free_port() for name in ("mock", "bridge", "balise", "map_grpc", "map_http")}
+
+
+@pytest.fixture
+async def fleet(ports: dict[str, int], monkeypatch: pytest.MonkeyPatch) -> AsyncIterator[Fleet]:
+    for fmu in ("Driver2.fmu", "TrackBalises.fmu"):
+        if not (FMUS / fmu).exists():
+            pytest.fail(f"{FMUS / fmu} is missing: run 'make setup' (make test does)")
+    monkeypatch.setenv("BRIDGE_PORT", str(ports["bridge"]))
+    monkeypatch.setenv("BALISE_PORT", str(ports["balise"]))
+    monkeypatch.setenv("MAP_PORT", str(ports["map_grpc"]))
+    monkeypatch.setenv("COUPLER_FMU_DIR", str(FMUS))
+    p = {k: str(v) for k, v in ports.items()}
+    spec = FleetSpec(
+        root=ROOT,
+        ssp=SCENARIO / "SystemStructure.ssd",
+        out=ROOT / "results",
+        services=(
+            ServiceSpec(
+                name="e2e-openrails-mock",
+                command=(
+                    "python",
+                    "-m",
+                    "openrails_mock",
+                    "--port",
+                    p["mock"],
+                    "--mode",
+                    "lockstep",
+                    "--railml",
+                    str(RAILML),
+                ),
+                health=f"http://127.0.0.1:{p['mock']}/API/READY",
+            ),
+            ServiceSpec(
+                name="e2e-openrails-bridge",
+                command=(
+                    "python",
+                    "-m",
+                    "openrails_bridge",
+                    "--port",
+                    p["bridge"],
+                    "--openrails-url",
+                    f"http://127.0.0.1:{p['mock']}",
+                ),
+                health=f"grpc://127.0.0.1:{p['bridge']}",
+            ),
+            ServiceSpec(
+                name="e2e-balise-fmu",
+                command=(
+                    "python",
+                    "-m",
+                    "balise_fmu",
+                    "--port",
+                    p["balise"],
+                    "--name",
+                    "TrackBalises",
+                    "--fmu",
+                    str(FMUS / "TrackBalises.fmu"),
+                ),
+                health=f"grpc://127.0.0.1:{p['balise']}",
+            ),
+            ServiceSpec(
+                name="e2e-mapserver",
+                command=(
+                    "python",
+                    "-m",
+                    "mapserver",
+                    "--grpc-port",
+                    p["map_grpc"],
+                    "--http-port",
+                    p["map_http"],
+                    "--railml",
+                    str(RAILML),
+                ),
+                health=f"grpc://127.0.0.1:{p['map_grpc']}",
+            ),
+        ),
+    )
+    async with Fleet(spec, health_timeout=60) as running:
+        yield running
+
+
+def read_rows(path: Path) -> list[dict[str, str]]:
+    with path.open(newline="") as file:
+        return list(csv.DictReader(file))
+
+
+def readings_of(rows: list[dict[str, str]]) -> list[tuple[float, int, int, float]]:
+    """(time, balise id, group id, distance) of every balise crossing, in order."""
+    found = []
+    for row in rows:
+        for item in filter(None, row["TrackBalises.passed_in_step"].split(";")):
+            balise_id, group_id, distance = item.split(":")
+            found.append((float(row["time"]), int(balise_id), int(group_id), float(distance)))
+    return found
+
+
+async def test_train_passes_every_balise_in_order(
+    fleet: Fleet, ports: dict[str, int], tmp_path: Path
+) -> None:
+    outcome: RunOutcome = await run_scenario(
+        SCENARIO / "SystemStructure.ssd", RunOptions(run_id="e2e"), out_dir=tmp_path
+    )
+    summary: dict[str, Any] = json.loads(outcome.summary_json.read_text())
+    assert summary["status"] == "completed", summary["reason"]
+    assert summary["steps"] == 1800
+    assert set(summary["participants"]) == {"Driver", "OpenRails", "TrackBalises", "Map"}
+    assert summary["ssp"]["sha256"]
+
+    rows = read_rows(outcome.results_csv)
+    assert len(rows) == 1801
+    assert {c["name"] for c in summary["columns"]} == set(rows[0]) - {"time"}
+
+    # the train stands at the stop point at Schwarzenberg
+    final = rows[-1]
+    assert float(final["OpenRails.speed"]) == pytest.approx(0.0, abs=0.05)
+    assert float(final["OpenRails.distance"]) == pytest.approx(STOP_DISTANCE, abs=5.0)
+
+    # every balise, in order, exactly once, with its id, group and distance
+    infrastructure = load_infrastructure(RAILML)
+    expected = [(b.code, b.group, b.distance_m) for b in infrastructure.balises]
+    readings = readings_of(rows)
+    assert [(i, g) for _, i, g, _ in readings] == [(i, g) for i, g, _ in expected]
+    for (_, _, _, reported), (_, _, distance) in zip(readings, expected, strict=True):
+        assert reported == pytest.approx(distance, abs=1e-6)
+    assert int(final["TrackBalises.balises_passed"]) == len(expected)
+
+    # Jacobi: TrackBalises steps [t - h, t] on the position of t - h, so a reading at t is a
+    # balise the antenna crossed between t - 2h and t - h: at most two steps of travel behind
+    antenna = {float(r["time"]): float(r["OpenRails.distance"]) + ANTENNA_OFFSET for r in rows}
+    speed = {float(r["time"]): float(r["OpenRails.speed"]) for r in rows}
+    for time, _, _, distance in readings:
+        assert antenna[time - 2 * STEP] < distance <= antenna[time - STEP]
+        fastest = max(speed[time - 2 * STEP], speed[time - STEP], speed[time])
+        assert 0.0 <= antenna[time] - distance <= 2 * STEP * fastest + 0.5
+
+    # the map server received every reading
+    url = f"http://127.0.0.1:{ports['map_http']}/api/state"
+    async with aiohttp.ClientSession() as session, session.get(url) as response:
+        state = await response.json()
+    shown = [(r["balise_id"], r["group_id"]) for r in state["readings"]]
+    assert shown == [(i, g) for i, g, _ in expected]
