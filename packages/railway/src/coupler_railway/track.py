@@ -10,6 +10,7 @@ spline arc lengths to well below a millimetre.
 
 from __future__ import annotations
 
+import bisect
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -91,8 +92,8 @@ class TrackModel:
     _inverse: CubicHermiteSpline = field(repr=False)
     _grid_s: FloatArray = field(repr=False)
     _grid_xy: FloatArray = field(repr=False)
-    _gradient_s: FloatArray = field(repr=False)
-    _gradient_permille: FloatArray = field(repr=False)
+    _gradient_starts: tuple[float, ...] = field(repr=False)
+    _gradient_values: tuple[float, ...] = field(repr=False)
 
     @classmethod
     def build(
@@ -166,9 +167,16 @@ class TrackModel:
             _inverse=inverse,
             _grid_s=grid_s,
             _grid_xy=grid_xy,
-            _gradient_s=np.array([c[0] for c in changes], dtype=np.float64),
-            _gradient_permille=np.array([c[1] for c in changes], dtype=np.float64),
+            _gradient_starts=tuple(float(c[0]) for c in changes),
+            _gradient_values=tuple(float(c[1]) for c in changes),
         )
+
+    def _scalar(self, distance: float) -> float:
+        """``distance`` clipped to the track; ValueError outside it (the scalar fast path)."""
+        d = float(distance)
+        if not -_EDGE_M <= d <= self.length + _EDGE_M:  # also catches NaN
+            raise ValueError(f"distance {d!r} m is outside the track [0, {self.length!r}] m")
+        return min(max(d, 0.0), self.length)
 
     def _checked(self, distance: npt.ArrayLike) -> FloatArray:
         d = np.asarray(distance, dtype=np.float64)
@@ -191,7 +199,7 @@ class TrackModel:
 
     def position(self, distance: float) -> TrackPoint:
         """The point ``distance`` metres along the track."""
-        d = float(self._checked(distance))
+        d = self._scalar(distance)
         u = self._inverse(d)
         x, y = (float(v) for v in self._spline(u))
         dx, dy = (float(v) for v in self._derivative(u))
@@ -222,13 +230,12 @@ class TrackModel:
 
     def locate(self, distance: float) -> tuple[int, float]:
         """``(section index, offset within that section [m])`` of ``distance``."""
-        d = float(self._checked(distance))
+        d = self._scalar(distance)
         starts = [s.start_distance for s in self.sections]
-        index = max(int(np.searchsorted(starts, d, side="right")) - 1, 0)
+        index = max(bisect.bisect_right(starts, d) - 1, 0)
         return index, d - starts[index]
 
     def gradient(self, distance: float) -> float:
         """Gradient at ``distance`` in per mille (positive uphill); 0 before any change."""
-        d = float(self._checked(distance))
-        index = int(np.searchsorted(self._gradient_s, d, side="right")) - 1
-        return float(self._gradient_permille[index]) if index >= 0 else 0.0
+        index = bisect.bisect_right(self._gradient_starts, self._scalar(distance)) - 1
+        return self._gradient_values[index] if index >= 0 else 0.0

@@ -1,0 +1,4 @@
+/* TrackBalises, FMI 3.0 co-simulation: the model in ../model/trackbalises.h behind the FMI 3.0
+ * wrapper shared with the example FMUs (fmus/common). */
+#include "../model/trackbalises.h"
+#include "../../../../fmus/common/fmi3_cosim.c"
