@@ -113,7 +113,7 @@ async def test_missing_state_field_names_channel_and_fix(tmp_path: Path) -> None
     path.write_text(MAPPING.replace("state.steps", "state.count"))
     participant = AdapterParticipant(CartAdapter(), AdapterConfig.load(path))
     with pytest.raises(
-        ParticipantError, match="field 'state.count' has no 'count'.*channel 'steps'"
+        ParticipantError, match=r"field 'state\.count' has no 'count'.*channel 'steps'"
     ):
         await participant.initialize(RunSetup(run_id="a", start_time=0, step_size=1))
 

@@ -11,11 +11,12 @@ from pathlib import Path
 import fmpy
 import numpy as np
 import pytest
-from coupler.fmubuild import FmuBuildError, build_all, build_fmu, find_model_folders, main
 from fmpy.fmi1 import FMICallException
 from fmpy.fmi2 import FMU2Slave
 from fmpy.fmi3 import FMU3Slave
 from fmpy.validation import validate_fmu
+
+from coupler.fmubuild import FmuBuildError, build_all, build_fmu, find_model_folders, main
 
 FMUS = Path(__file__).resolve().parents[3] / "fmus"
 EXAMPLES = [folder.name for folder in find_model_folders(FMUS)]

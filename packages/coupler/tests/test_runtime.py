@@ -91,7 +91,9 @@ async def test_second_concurrent_run_is_refused(gain_server: ParticipantServer) 
         RemoteParticipant(gain_server.address) as second,
     ):
         await first.initialize(setup())
-        with pytest.raises(ParticipantError, match="already in run 't'.*one run at a time") as info:
+        with pytest.raises(
+            ParticipantError, match=r"already in run 't'.*one run at a time"
+        ) as info:
             await second.initialize(setup())
         assert info.value.status == "FAILED_PRECONDITION"
         await first.terminate()
@@ -158,8 +160,10 @@ class SlowToOpen(GainParticipant):
     def __init__(self) -> None:
         super().__init__()
         self.release = asyncio.Event()
+        self.opening = asyncio.Event()
 
     async def open(self) -> None:
+        self.opening.set()
         await self.release.wait()
 
 
@@ -173,8 +177,7 @@ async def test_health_follows_the_participant() -> None:
     participant = SlowToOpen()
     server = ParticipantServer(participant)
     starting = asyncio.create_task(server.start())
-    while not server.port:
-        await asyncio.sleep(0.01)
+    await participant.opening.wait()  # bound and serving health, participant not open yet
     assert await health_of(server.address) == health_pb2.HealthCheckResponse.NOT_SERVING
     participant.release.set()
     await starting

@@ -60,7 +60,7 @@ def test_binary_size_limit() -> None:
 
 def test_codec_rejects_unknown_and_wrong_causality() -> None:
     codec = values.Codec(Description(name="P", channels=(REAL, INT, BIN)))
-    with pytest.raises(ChannelValueError, match="has no channel 'sped'.*speed"):
+    with pytest.raises(ChannelValueError, match=r"has no channel 'sped'.*speed"):
         codec.encode({"sped": 1.0})
     with pytest.raises(ChannelValueError, match="has no input channel 'speed'"):
         codec.encode({"speed": 1.0}, (Causality.INPUT,))
@@ -98,5 +98,7 @@ def test_nested_message_round_trips() -> None:
 
 
 def test_unknown_message_type_is_named() -> None:
-    with pytest.raises(ChannelValueError, match="unknown protobuf message type 'coupler.v1.Nope'"):
+    with pytest.raises(
+        ChannelValueError, match=r"unknown protobuf message type 'coupler\.v1\.Nope'"
+    ):
         values.encode_message("coupler.v1.Nope", {})

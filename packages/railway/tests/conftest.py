@@ -5,6 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
+
 from coupler_railway import Infrastructure, load_infrastructure
 
 DATA = Path(__file__).parent / "data"

@@ -7,6 +7,7 @@ import math
 from pathlib import Path
 
 import pytest
+
 from coupler_railway import Infrastructure, to_geojson, write_fmu_resources
 
 

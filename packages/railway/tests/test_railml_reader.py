@@ -6,6 +6,7 @@ import math
 from pathlib import Path
 
 import pytest
+
 from coupler_railway import Infrastructure, LocalFrame, RailMLError, load_infrastructure
 
 ARC = 250.0 * math.pi

@@ -6,6 +6,7 @@ import math
 
 import numpy as np
 import pytest
+
 from coupler_railway import Infrastructure, LocalFrame, SectionGeometry, TrackModel
 
 ARC = 250.0 * math.pi  # quarter circle of radius 500 m

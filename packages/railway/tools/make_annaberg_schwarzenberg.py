@@ -14,9 +14,10 @@ import math
 from pathlib import Path
 
 import numpy as np
+from lxml import etree
+
 from coupler_railway.frame import LocalFrame
 from coupler_railway.track import SectionGeometry, TrackModel
-from lxml import etree
 
 NS = "http://www.railml.org/schemas/2013"
 OUT = (

@@ -11,8 +11,9 @@ import math
 from pathlib import Path
 
 import numpy as np
-from coupler_railway.frame import LocalFrame
 from lxml import etree
+
+from coupler_railway.frame import LocalFrame
 
 NS = "http://www.railml.org/schemas/2013"
 FRAME = LocalFrame(50.0, 12.0)

@@ -9,6 +9,7 @@ from contextlib import AbstractAsyncContextManager, asynccontextmanager
 import aiohttp
 import pytest
 from aiohttp import web
+
 from openrails_mock.api import create_app
 from openrails_mock.config import MockConfig
 from openrails_mock.route import Route

@@ -9,6 +9,7 @@ from __future__ import annotations
 from typing import Any
 
 import pytest
+
 from openrails_mock.config import MockConfig
 from openrails_mock.route import StraightRoute
 

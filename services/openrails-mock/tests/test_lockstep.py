@@ -12,6 +12,7 @@ import math
 from typing import Any
 
 import aiohttp
+
 from openrails_mock.config import ConsistOverrides, MockConfig
 from openrails_mock.route import StraightRoute
 

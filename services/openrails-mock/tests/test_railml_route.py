@@ -9,6 +9,7 @@ import math
 from pathlib import Path
 
 import pytest
+
 from coupler.errors import ScenarioError
 from coupler_railway import load_infrastructure
 from openrails_mock.config import MockConfig

@@ -11,6 +11,7 @@ import math
 import sys
 
 import aiohttp
+
 from openrails_mock.config import MockConfig
 from openrails_mock.physics import DB_CLASS_642
 from openrails_mock.route import StraightRoute

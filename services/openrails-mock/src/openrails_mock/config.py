@@ -10,9 +10,10 @@ import dataclasses
 from pathlib import Path
 from typing import Literal
 
-from coupler.errors import ScenarioError
 from pydantic import BaseModel, ConfigDict, Field
 from pydantic_settings import BaseSettings, SettingsConfigDict
+
+from coupler.errors import ScenarioError
 
 from .physics import PRESETS, Consist
 
