@@ -10,6 +10,7 @@ from __future__ import annotations
 import asyncio
 import shutil
 import tempfile
+import threading
 from collections.abc import Callable, Iterable, Mapping
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
@@ -60,6 +61,10 @@ _CAUSALITIES = {
     "structuralParameter": Causality.PARAMETER,
 }
 _STATUS = ["OK", "Warning", "Discard", "Error", "Fatal", "Pending"]
+
+#: FMPy's FMU constructor changes the process's working directory to the binary's folder and
+#: back; FMUs loaded concurrently (Jacobi initializes everyone at once) must take turns.
+_LOAD_LOCK = threading.Lock()
 
 
 @dataclass(frozen=True)
@@ -192,7 +197,8 @@ class FmuParticipant(Participant):
         start, stop = setup.start_time, setup.stop_time
 
         def init() -> Values:
-            self._slave = fmpy.instantiate_fmu(self._unzipdir, md, fmi_type="CoSimulation")
+            with _LOAD_LOCK:
+                self._slave = fmpy.instantiate_fmu(self._unzipdir, md, fmi_type="CoSimulation")
             if version == "2.0":
                 self._fmi(
                     "fmi2SetupExperiment",

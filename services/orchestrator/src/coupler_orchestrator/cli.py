@@ -34,7 +34,11 @@ def parser() -> argparse.ArgumentParser:
     run = commands.add_parser("run", help="run a scenario and record results")
     run.add_argument("ssp", type=Path, help=".ssp archive or .ssd file")
     _run_options(run)
-    run.add_argument("--out", type=Path, default=Path("results"), help="results directory")
+    run.add_argument(
+        "--out",
+        type=Path,
+        help="results directory (default: the SSD's OpenMCx outputDirectory, else ./results)",
+    )
     run.add_argument("--realtime-factor", type=float, help="pace at X times real time")
     run.add_argument("--no-progress", action="store_true", help="no progress bar")
 

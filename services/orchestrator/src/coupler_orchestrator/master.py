@@ -17,10 +17,10 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import structlog
+
 from coupler.channels import RunSetup, Value
 from coupler.errors import CouplerError, ScenarioError
 from coupler.participant import Values
-
 from coupler_orchestrator.observer import Column, Observer, RunInfo
 from coupler_orchestrator.plan import Algorithm, Converter, Link, Member, Plan
 
@@ -64,14 +64,21 @@ def gauss_seidel_order(members: Sequence[Member], links: Sequence[Link]) -> tupl
 
 
 def _find_cycle(graph: Mapping[str, set[str]]) -> list[str]:
-    start = min(graph)
-    path, seen = [start], {start}
+    """A loop among members that topological sorting left over, closed (first == last).
+
+    Every leftover member has a leftover predecessor (else it would have been ordered), but
+    not necessarily a leftover successor (it may merely follow a loop), so walk backwards.
+    """
+    predecessors = {n: sorted(p for p in graph if n in graph[p]) for n in graph}
+    node = min(graph)
+    path, seen = [node], {node}
     while True:
-        nxt = min(t for t in graph[path[-1]] if t in graph)
-        if nxt in seen:
-            return [*path[path.index(nxt) :], nxt]
-        path.append(nxt)
-        seen.add(nxt)
+        node = predecessors[node][0]
+        if node in seen:
+            loop = path[path.index(node) :][::-1]
+            return [*loop, loop[0]]
+        path.append(node)
+        seen.add(node)
 
 
 @dataclass
@@ -151,11 +158,12 @@ class Master:
                 observer.started(info)
             self._record(grid.start)
             pending: dict[int, list[tuple[str, Values]]] = defaultdict(list)
+            held: dict[str, Values] = {}
             for k in range(grid.steps):
                 if plan.algorithm is Algorithm.JACOBI:
                     await self._jacobi_step(k, pending)
                 else:
-                    await self._gauss_seidel_step(k)
+                    await self._gauss_seidel_step(k, held)
                 self.completed_steps = k + 1
                 self._record(grid.time(k + 1))
                 if plan.realtime_factor:
@@ -233,10 +241,14 @@ class Master:
         for name, outputs in pending.pop(k + 1, []):
             self._store(name, outputs)
 
-    async def _gauss_seidel_step(self, k: int) -> None:
+    async def _gauss_seidel_step(self, k: int, pending: dict[str, Values]) -> None:
+        """Members in order; outputs of t_{k+m} are stored in the slot of the base step that
+        ends at t_{k+m}, so successors see them then and no row shows a value from later."""
         for m in self.members:
             if k % m.multiple == 0:
-                self._store(m.name, await self._step(m, k))
+                pending[m.name] = await self._step(m, k)
+            if (k + 1) % m.multiple == 0 and m.name in pending:
+                self._store(m.name, pending.pop(m.name))
 
     def _store(self, name: str, outputs: Values) -> None:
         for channel, value in outputs.items():

@@ -18,8 +18,8 @@ from coupler.client import RemoteParticipant
 from coupler.errors import CouplerError, ScenarioError, ValidationError
 from coupler.fmu import FmuParticipant
 from coupler.participant import Participant
-
 from coupler_orchestrator import ssp
+from coupler_orchestrator.master import gauss_seidel_order
 from coupler_orchestrator.plan import Algorithm, Converter, Link, Member, Plan, TimeGrid
 
 #: Connected types that are compatible without a transformation: (output, input).
@@ -150,16 +150,17 @@ def _check_connector(
     if connector.causality is not None and connector.causality is not channel.causality:
         problems.append(
             f"{where} is {connector.kind} in the SSD but the participant declares it "
-            f"{channel.causality}"
+            f"{channel.causality}; change the connector's kind to {channel.causality}"
         )
     if connector.type is not None and connector.type is not channel.type:
         problems.append(
-            f"{where} expects {connector.type}, but the participant declares {channel.type}"
+            f"{where} expects {connector.type}, but the participant declares {channel.type}; "
+            f"declare the connector <ssc:{channel.type}/>"
         )
     if connector.unit and channel.unit and connector.unit != channel.unit:
         problems.append(
             f"{where} has unit '{connector.unit}' in the SSD but the participant declares "
-            f"'{channel.unit}'"
+            f"'{channel.unit}'; declare the participant's unit (connections convert units)"
         )
     return problems
 
@@ -280,6 +281,11 @@ def build_plan(
             )
         except ScenarioError as exc:
             problems.append(str(exc))
+    if options.algorithm is Algorithm.GAUSS_SEIDEL and len(members) == len(scenario.components):
+        try:
+            gauss_seidel_order(members, links)
+        except ScenarioError as exc:
+            problems.append(str(exc))
     if problems or grid is None:
         raise ValidationError(problems, subject=scenario.source.name)
     return Plan(
@@ -352,6 +358,13 @@ def _member(
             raise ScenarioError(
                 f"{_where(component)}: component '{component.name}' deltaTime "
                 f"{component.delta_time:g} s is not a whole multiple of the step {grid.step:g} s"
+            )
+        if grid.steps % multiple:
+            raise ScenarioError(
+                f"{_where(component)}: component '{component.name}' deltaTime "
+                f"{component.delta_time:g} s does not divide the run {grid.start:g} .. "
+                f"{grid.stop:g} s ({grid.steps} steps of {grid.step:g} s); choose a stop time "
+                f"the component reaches by whole steps of {component.delta_time:g} s"
             )
     return Member(
         name=component.name,

@@ -8,7 +8,6 @@ from collections.abc import Mapping, Sequence
 from typing import IO, Any
 
 from coupler.channels import Value
-
 from coupler_orchestrator.observer import Observer, RunInfo
 
 

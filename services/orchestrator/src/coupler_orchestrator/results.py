@@ -17,7 +17,6 @@ from pathlib import Path
 from typing import IO, Any
 
 from coupler.channels import Value
-
 from coupler_orchestrator.observer import Observer, RunInfo
 
 

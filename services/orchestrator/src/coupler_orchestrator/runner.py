@@ -7,14 +7,15 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import structlog
-from coupler.errors import ValidationError
 
+from coupler.errors import ValidationError
 from coupler_orchestrator import ssp
 from coupler_orchestrator.master import Master, RunResult
 from coupler_orchestrator.observer import Observer
 from coupler_orchestrator.planning import (
     RunOptions,
     build_plan,
+    check_participants,
     close_all,
     describe_all,
 )
@@ -38,6 +39,7 @@ async def validate_scenario(path: Path, options: RunOptions) -> ssp.Scenario:
     participants, descriptions, problems = await describe_all(scenario, options)
     try:
         problems += ssp.check_connections(scenario)
+        problems += check_participants(scenario, descriptions)
         if problems:
             raise ValidationError(problems, subject=path.name)
         build_plan(scenario, participants, descriptions, options)
@@ -47,9 +49,14 @@ async def validate_scenario(path: Path, options: RunOptions) -> ssp.Scenario:
 
 
 async def run_scenario(
-    path: Path, options: RunOptions, *, out_dir: Path, observers: Sequence[Observer] = ()
+    path: Path,
+    options: RunOptions,
+    *,
+    out_dir: Path | None = None,
+    observers: Sequence[Observer] = (),
 ) -> RunOutcome:
-    """Run the scenario at ``path``; results go to ``out_dir``.
+    """Run the scenario at ``path``; results go to ``out_dir`` (default: the OpenMCx results
+    annotation's outputDirectory, else ``results``).
 
     Raises ScenarioError/ValidationError before anything runs; a participant failing during
     the run ends it as ``failed`` with every completed step recorded.
@@ -57,9 +64,13 @@ async def run_scenario(
     scenario = ssp.load_ssp(path)
     for warning in scenario.warnings:
         log.warning("scenario_warning", detail=warning)
+    if out_dir is None:
+        configured = scenario.results.output_directory if scenario.results else None
+        out_dir = Path(configured) if configured else Path("results")
     participants, descriptions, problems = await describe_all(scenario, options)
     try:
         problems += ssp.check_connections(scenario)
+        problems += check_participants(scenario, descriptions)
         if problems:
             raise ValidationError(problems, subject=path.name)
         plan = build_plan(scenario, participants, descriptions, options)

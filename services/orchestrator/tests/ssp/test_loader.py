@@ -13,6 +13,7 @@ import zipfile
 from pathlib import Path
 
 import pytest
+
 from coupler.channels import Causality, ValueType
 from coupler.errors import ScenarioError, ValidationError
 from coupler_orchestrator.ssp import (

@@ -13,8 +13,9 @@ from collections.abc import Iterator
 from copy import deepcopy
 from pathlib import Path
 
-from coupler.errors import ScenarioError, ValidationError
 from lxml import etree
+
+from coupler.errors import ScenarioError, ValidationError
 
 Element = etree._Element
 

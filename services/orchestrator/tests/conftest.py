@@ -1,0 +1,178 @@
+"""Fixtures of the orchestrator's run-time tests: real FMUs and real gRPC participants.
+
+FMUs are built once per session from the project's C sources (fmus/) with gcc and FMPy's FMI
+headers. gRPC participants are real ParticipantServers on port 0, each on an event loop of its
+own thread, so that tests can call the ``coupler`` CLI (which runs its own loop) in-process.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import csv
+import io
+import json
+import threading
+from collections.abc import Iterator, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from coupler.channels import Causality, Channel, Description, RunSetup, Value, ValueType
+from coupler.examples.gain import GainParticipant
+from coupler.fmubuild import build_all
+from coupler.logs import configure_logging
+from coupler.participant import Participant, Values
+from coupler.server import ParticipantServer
+from coupler_orchestrator.cli import main
+
+REPO = Path(__file__).resolve().parents[3]
+DATA = Path(__file__).parent / "data"
+
+
+@pytest.fixture(scope="session")
+def built_fmus(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+    """``{"Source2": path, "Feedthrough3": path, ...}`` built from fmus/ for this session.
+
+    Into a private folder: other sessions may be building the same FMUs at the same time.
+    """
+    out = tmp_path_factory.mktemp("fmus")
+    return {path.stem: path for path in build_all(REPO / "fmus", out)}
+
+
+@pytest.fixture
+def fmus(built_fmus: dict[str, Path], monkeypatch: pytest.MonkeyPatch) -> dict[str, Path]:
+    """The built FMUs; ``${COUPLER_FMUS}`` in the SSDs of data/ names their folder."""
+    monkeypatch.setenv("COUPLER_FMUS", str(next(iter(built_fmus.values())).parent))
+    return built_fmus
+
+
+@dataclass(frozen=True)
+class Outcome:
+    """What one ``coupler`` command did."""
+
+    code: int
+    out: str
+    err: str
+
+
+class Coupler:
+    """Runs the ``coupler`` CLI in-process and reads what a run recorded."""
+
+    def __init__(self, capsys: pytest.CaptureFixture[str]) -> None:
+        self.capsys = capsys
+
+    def __call__(self, *argv: str | Path) -> Outcome:
+        self.capsys.readouterr()
+        stdout = io.StringIO()
+        code = main([str(a) for a in argv], stdout=stdout)
+        return Outcome(code, stdout.getvalue(), self.capsys.readouterr().err)
+
+    @staticmethod
+    def results(out_dir: Path) -> list[dict[str, str]]:
+        """results.csv as one dict per row (header -> cell text)."""
+        with (out_dir / "results.csv").open(newline="") as file:
+            return list(csv.DictReader(file))
+
+    @staticmethod
+    def column(out_dir: Path, name: str) -> list[float]:
+        """One column of results.csv as floats."""
+        return [float(row[name]) for row in Coupler.results(out_dir)]
+
+    @staticmethod
+    def summary(out_dir: Path) -> dict[str, Any]:
+        return json.loads((out_dir / "summary.json").read_text())  # type: ignore[no-any-return]
+
+
+@pytest.fixture
+def coupler(capsys: pytest.CaptureFixture[str]) -> Coupler:
+    """``coupler(*argv) -> Outcome`` plus readers of results.csv and summary.json."""
+    return Coupler(capsys)
+
+
+@contextlib.contextmanager
+def serving(participant: Participant) -> Iterator[ParticipantServer]:
+    """``participant`` served on 127.0.0.1, port 0, by a loop in a background thread."""
+    loop = asyncio.new_event_loop()
+    thread = threading.Thread(target=loop.run_forever, name="participant-server", daemon=True)
+    thread.start()
+    server = ParticipantServer(participant, host="127.0.0.1", port=0)
+    try:
+        asyncio.run_coroutine_threadsafe(server.start(), loop).result(10)
+        yield server
+    finally:
+        asyncio.run_coroutine_threadsafe(server.stop(0.1), loop).result(10)
+        loop.call_soon_threadsafe(loop.stop)
+        thread.join(10)
+        loop.close()
+
+
+class FailingGain(GainParticipant):
+    """The example gain participant, failing every DoStep that starts at t >= ``fail_at``."""
+
+    def __init__(self, name: str = "Gain", *, fail_at: float = 1.0) -> None:
+        super().__init__(name)
+        self.fail_at = fail_at
+
+    async def do_step(self, time: float, step: float, inputs: Mapping[str, object]) -> Values:
+        if time >= self.fail_at:
+            raise RuntimeError(f"gain overheated at t={time:g}")
+        return await super().do_step(time, step, inputs)  # type: ignore[arg-type]
+
+
+class Stepper(Participant):
+    """Enumerations over gRPC: ``phase`` = steps done mod 2; ``shown`` = ``aspect`` as received.
+
+    ``aspect`` has no start value: it must be connected or bound in the SSD.
+    """
+
+    CHANNELS = (
+        Channel(name="aspect", causality=Causality.INPUT, type=ValueType.ENUMERATION),
+        Channel(name="phase", causality=Causality.OUTPUT, type=ValueType.ENUMERATION),
+        Channel(name="shown", causality=Causality.OUTPUT, type=ValueType.ENUMERATION),
+    )
+
+    def __init__(self) -> None:
+        self._steps = 0
+        self._aspect: Value = 0
+
+    async def describe(self) -> Description:
+        return Description(name="Stepper", channels=self.CHANNELS, implementation="tests.Stepper")
+
+    async def initialize(self, setup: RunSetup) -> Values:
+        self._steps, self._aspect = 0, setup.inputs.get("aspect", 0)
+        return self._outputs()
+
+    async def do_step(self, time: float, step: float, inputs: Mapping[str, Value]) -> Values:
+        self._steps += 1
+        self._aspect = inputs.get("aspect", self._aspect)
+        return self._outputs()
+
+    async def terminate(self, reason: str = "") -> None:
+        self._steps = 0
+
+    def _outputs(self) -> Values:
+        return {"phase": self._steps % 2, "shown": self._aspect}
+
+
+@pytest.fixture
+def gain_server(monkeypatch: pytest.MonkeyPatch) -> Iterator[ParticipantServer]:
+    """The example gain participant; its port is in ``$GAIN_PORT``."""
+    with serving(GainParticipant()) as server:
+        monkeypatch.setenv("GAIN_PORT", str(server.port))
+        yield server
+
+
+@pytest.fixture
+def failing_gain_server(monkeypatch: pytest.MonkeyPatch) -> Iterator[ParticipantServer]:
+    """A gain participant that fails at t >= 1.0; its port is in ``$GAIN_PORT``.
+
+    Its own log of the failure is silenced: structlog would write it to a stream captured by
+    an earlier test.
+    """
+    configure_logging("CRITICAL")
+    with serving(FailingGain()) as server:
+        monkeypatch.setenv("GAIN_PORT", str(server.port))
+        yield server

@@ -1,0 +1,309 @@
+"""Bad input: each refused with a message naming the culprit and the fix, and exit code 1.
+
+Also: a participant failing mid-run keeps every completed step, and ``validate`` lists every
+problem at once.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import socket
+import subprocess
+import sys
+import zipfile
+from pathlib import Path
+
+import pytest
+
+from coupler.server import ParticipantServer
+
+from .conftest import DATA, Coupler, Stepper, serving
+
+pytestmark = pytest.mark.usefixtures("fmus")
+
+HEAD = """<?xml version="1.0" encoding="UTF-8"?>
+<ssd:SystemStructureDescription version="1.0" name="Bad"
+    xmlns:ssd="http://ssp-standard.org/SSP1/SystemStructureDescription"
+    xmlns:ssc="http://ssp-standard.org/SSP1/SystemStructureCommon">
+  <ssd:System name="Bad">
+    <ssd:Elements>
+{elements}
+    </ssd:Elements>{connections}
+  </ssd:System>
+  <ssd:DefaultExperiment startTime="0" stopTime="1"/>
+</ssd:SystemStructureDescription>
+"""
+
+
+def ssd(tmp_path: Path, elements: str, connections: str = "", name: str = "bad.ssd") -> Path:
+    path = tmp_path / name
+    if connections:
+        connections = f"\n    <ssd:Connections>\n{connections}\n    </ssd:Connections>"
+    path.write_text(HEAD.format(elements=elements, connections=connections))
+    return path
+
+
+def fmu(name: str, model: str, connectors: str = "", annotations: str = "") -> str:
+    if connectors:
+        connectors = f"<ssd:Connectors>{connectors}</ssd:Connectors>"
+    return (
+        f'      <ssd:Component name="{name}" source="${{COUPLER_FMUS}}/{model}.fmu">'
+        f"{connectors}{annotations}</ssd:Component>"
+    )
+
+
+def connector(name: str, kind: str, type_: str = "Real") -> str:
+    return f'<ssd:Connector name="{name}" kind="{kind}"><ssc:{type_}/></ssd:Connector>'
+
+
+def link(a: str, ca: str, b: str, cb: str, inner: str = "") -> str:
+    return (
+        f'      <ssd:Connection startElement="{a}" startConnector="{ca}" '
+        f'endElement="{b}" endConnector="{cb}">{inner}</ssd:Connection>'
+    )
+
+
+def assert_refused(coupler: Coupler, path: Path, *fragments: str, command: str = "validate") -> str:
+    extra = ["--out", str(path.parent / "out")] if command == "run" else []
+    outcome = coupler(command, path, "--step", "0.5", *extra)
+    assert outcome.code == 1, outcome
+    assert outcome.err.startswith("error: "), outcome.err
+    assert "Traceback" not in outcome.err
+    for fragment in fragments:
+        assert fragment in outcome.err, (fragment, outcome.err)
+    return outcome.err
+
+
+@pytest.mark.parametrize("command", ["validate", "run"])
+def test_malformed_xml(coupler: Coupler, tmp_path: Path, command: str) -> None:
+    path = tmp_path / "broken.ssd"
+    path.write_text('<?xml version="1.0"?>\n<ssd:SystemStructureDescription>\n  <b>\n</a>\n')
+    assert_refused(coupler, path, "broken.ssd line", "malformed XML", command=command)
+
+
+def test_schema_violation(coupler: Coupler, tmp_path: Path) -> None:
+    path = ssd(
+        tmp_path, fmu("Source", "Source2").replace("<ssd:Component ", '<ssd:Component bogus="1" ')
+    )
+    assert_refused(coupler, path, "bad.ssd line 7: schema violation", "bogus")
+
+
+def test_unknown_component_type(coupler: Coupler, tmp_path: Path) -> None:
+    path = ssd(tmp_path, '      <ssd:Component name="A" type="application/x-other" source="x"/>')
+    assert_refused(
+        coupler,
+        path,
+        "bad.ssd line 7: component 'A' has type 'application/x-other', which is not supported",
+        "use application/x-fmu-sharedlibrary or application/x-coupler-grpc",
+    )
+
+
+def test_zip_slip_entry(coupler: Coupler, tmp_path: Path) -> None:
+    archive = tmp_path / "evil.ssp"
+    with zipfile.ZipFile(archive, "w") as zf:
+        zf.writestr("SystemStructure.ssd", (DATA / "chain.ssd").read_text())
+        zf.writestr("../../escape.txt", "x")
+    assert_refused(
+        coupler, archive, "evil.ssp: entry '../../escape.txt'", "zip-slip", "relative paths only"
+    )
+    assert not (tmp_path.parent / "escape.txt").exists()
+
+
+def test_missing_fmu(coupler: Coupler, tmp_path: Path) -> None:
+    path = ssd(tmp_path, '      <ssd:Component name="A" source="resources/Missing.fmu"/>')
+    assert_refused(
+        coupler,
+        path,
+        "bad.ssd line 7: component 'A': FMU file 'resources/Missing.fmu' does not exist",
+        "add the FMU",
+    )
+
+
+def test_connector_missing_on_the_participant(coupler: Coupler, tmp_path: Path) -> None:
+    path = ssd(tmp_path, fmu("Source", "Source2", connector("speed", "output")))
+    assert_refused(
+        coupler,
+        path,
+        "bad.ssd line 7: connector 'Source.speed' does not exist on participant 'Source'",
+        "its channels: slope, offset, amplitude, freq, ramp, sine, counter",
+        "rename the connector or the channel",
+    )
+
+
+def test_type_mismatch_with_the_participant(coupler: Coupler, tmp_path: Path) -> None:
+    path = ssd(tmp_path, fmu("Source", "Source2", connector("ramp", "output", "Integer")))
+    assert_refused(
+        coupler,
+        path,
+        "connector 'Source.ramp' expects Integer, but the participant declares Real",
+    )
+
+
+def test_type_mismatch_between_connectors(coupler: Coupler, tmp_path: Path) -> None:
+    path = ssd(
+        tmp_path,
+        fmu("Source", "Source2", connector("ramp", "output"))
+        + fmu("Feed", "Feedthrough3", connector("int_in", "input", "Integer")),
+        link("Source", "ramp", "Feed", "int_in"),
+    )
+    assert_refused(
+        coupler,
+        path,
+        "bad.ssd line 10: connection Source.ramp -> Feed.int_in: connector 'Feed.int_in' "
+        "expects Integer, but 'Source.ramp' is Real; connect matching types",
+    )
+
+
+def test_unconnected_input_without_start_value(
+    coupler: Coupler, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    with serving(Stepper()) as server:
+        monkeypatch.setenv("STEPPER_PORT", str(server.port))
+        path = ssd(
+            tmp_path,
+            '      <ssd:Component name="S" type="application/x-coupler-grpc" '
+            'source="grpc://127.0.0.1:${STEPPER_PORT}"/>',
+        )
+        assert_refused(
+            coupler,
+            path,
+            "bad.ssd line 7: input 'S.aspect' is neither connected nor has a start value",
+            "connect it or bind a value to it",
+        )
+
+
+LOOP = [
+    fmu("Feed", "Feedthrough3", connector("real_in", "input") + connector("real_out", "output"))
+    + fmu("Feed2", "Feedthrough2", connector("real_in", "input") + connector("real_out", "output"))
+    + fmu("Analyzer", "Integrator2", connector("u", "input")),
+    [link("Feed", "real_out", "Feed2", "real_in"), link("Feed2", "real_out", "Analyzer", "u")],
+]
+
+
+@pytest.mark.parametrize("command", ["validate", "run"])
+def test_loop_without_decoupling(coupler: Coupler, tmp_path: Path, command: str) -> None:
+    """Gauss-Seidel cannot order an algebraic loop that no connection breaks.
+
+    Feed --real_out--> Feed2 --real_out--> Feed.real_in
+                       Feed2 --real_out--> Analyzer.u
+    """
+    elements, links = LOOP
+    path = ssd(
+        tmp_path, elements, "\n".join([*links, link("Feed2", "real_out", "Feed", "real_in")])
+    )
+    outcome = (
+        coupler(command, path, "--algorithm", "gauss-seidel", "--out", tmp_path / "o")
+        if (command == "run")
+        else coupler(command, path, "--algorithm", "gauss-seidel", "--step", "0.5")
+    )
+    assert outcome.code == 1, outcome
+    assert "Gauss-Seidel cannot order the loop Feed -> Feed2 -> Feed" in outcome.err
+    assert "mark one connection of it decoupled" in outcome.err
+    # the same loop runs under Jacobi, and under Gauss-Seidel once a connection is decoupled
+    assert coupler("validate", path, "--step", "0.5").code == 0
+    decoupled = (
+        '<ssd:Annotations><ssc:Annotation type="org.coupler.connection">'
+        '<c:Connection xmlns:c="org.coupler.connection" decoupled="true"/>'
+        "</ssc:Annotation></ssd:Annotations>"
+    )
+    path = ssd(
+        tmp_path,
+        elements,
+        "\n".join([*links, link("Feed2", "real_out", "Feed", "real_in", decoupled)]),
+        name="decoupled.ssd",
+    )
+    assert coupler("validate", path, "--algorithm", "gauss-seidel", "--step", "0.5").code == 0
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def test_unreachable_participant(coupler: Coupler, tmp_path: Path) -> None:
+    port = _free_port()
+    path = ssd(
+        tmp_path,
+        f'      <ssd:Component name="Gain" type="application/x-coupler-grpc" '
+        f'source="grpc://127.0.0.1:{port}"/>',
+    )
+    outcome = coupler("run", path, "--step", "0.5", "--connect-timeout", "0.3", "--out", tmp_path)
+    assert outcome.code == 1
+    assert (
+        f"bad.ssd line 7: component 'Gain': Gain.connect [UNAVAILABLE]: not SERVING at "
+        f"grpc://127.0.0.1:{port} within 0.3 s" in outcome.err
+    )
+    assert "is the participant running and listening on that address?" in outcome.err
+
+
+def test_validate_lists_every_problem(coupler: Coupler, tmp_path: Path) -> None:
+    path = ssd(
+        tmp_path,
+        fmu(
+            "Source",
+            "Source2",
+            connector("speed", "output") + connector("ramp", "output", "Boolean"),
+        )
+        + fmu("Feed", "Feedthrough3", connector("int_in", "input", "Integer"))
+        + '      <ssd:Component name="Far" type="application/x-coupler-grpc" '
+        'source="grpc://127.0.0.1:1"/>',
+        link("Source", "ramp", "Feed", "int_in"),
+    )
+    outcome = coupler("validate", path, "--connect-timeout", "0.2", "--step", "0.5")
+    assert outcome.code == 1
+    problems = [line for line in outcome.err.splitlines() if line.startswith("  - ")]
+    assert len(problems) == 5, outcome.err
+    assert "bad.ssd: 5 problem(s)" in outcome.err
+    for fragment in (
+        "bad.ssd line 7: connector 'Source.speed' does not exist on participant 'Source'",
+        "bad.ssd line 7: connector 'Source.ramp' expects Boolean, but the participant declares "
+        "Real; declare the connector <ssc:Real/>",
+        "bad.ssd line 10: connection Source.ramp -> Feed.int_in: connector 'Feed.int_in' expects "
+        "Integer, but 'Source.ramp' is Boolean",
+        "bad.ssd line 10: connector 'Feed.int_in' expects Integer, but 'Source.ramp' is Real; "
+        "connect compatible channels or add a transformation",
+        "component 'Far': Far.connect [UNAVAILABLE]",
+    ):
+        assert fragment in outcome.err, fragment
+
+
+def test_failed_run_keeps_completed_steps(
+    tmp_path: Path, failing_gain_server: ParticipantServer
+) -> None:
+    """The gain participant raises in every DoStep from t = 1.0 on.
+
+        Source (FMI 2) --ramp--> Gain (gRPC, fails at t >= 1.0) --> Feed (FMI 3) --> Feed2
+
+    h = 0.5: steps 0 -> 0.5 and 0.5 -> 1.0 complete, the step from 1.0 fails.
+    """
+    out = tmp_path / "out"
+    result = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "coupler_orchestrator",
+            "run",
+            str(DATA / "mixed.ssd"),
+            "--out",
+            str(out),
+        ],
+        capture_output=True,
+        text=True,
+        env=os.environ.copy(),
+        timeout=60,
+        check=False,
+    )
+    assert result.returncode == 1, result.stderr
+    assert "Traceback" not in result.stderr
+    assert (
+        "error: run failed: Gain.DoStep [INTERNAL]: RuntimeError: gain overheated at t=1"
+        in result.stderr
+    )
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["status"] == "failed"
+    assert summary["reason"].startswith("Gain.DoStep [INTERNAL]: RuntimeError: gain overheated")
+    assert (summary["steps"], summary["end_time"], summary["steps_planned"]) == (2, 1.0, 3)
+    rows = (out / "results.csv").read_text().splitlines()
+    assert [row.split(",")[0] for row in rows] == ["time", "0.0", "0.5", "1.0"]

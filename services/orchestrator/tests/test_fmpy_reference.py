@@ -1,0 +1,88 @@
+"""One FMU alone under ``coupler run`` equals ``fmpy.simulate_fmu`` to the last bit.
+
+    FMU (alone, parameters and input start values bound in the SSD)
+
+FMPy's co-simulation loop steps from t_n to start + (n+1) * interval; Coupler's master from
+t_k = start + k*h to t_{k+1}: the same doubles, so every recorded value must be identical.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import fmpy
+import pytest
+
+from .conftest import Coupler
+
+SSD = """<?xml version="1.0" encoding="UTF-8"?>
+<ssd:SystemStructureDescription version="1.0" name="Alone"
+    xmlns:ssd="http://ssp-standard.org/SSP1/SystemStructureDescription"
+    xmlns:ssc="http://ssp-standard.org/SSP1/SystemStructureCommon"
+    xmlns:ssv="http://ssp-standard.org/SSP1/SystemStructureParameterValues">
+  <ssd:System name="Alone">
+    <ssd:Elements>
+      <ssd:Component name="{name}" source="{source}">
+        <ssd:ParameterBindings>
+          <ssd:ParameterBinding>
+            <ssd:ParameterValues>
+              <ssv:ParameterSet version="1.0" name="p">
+                <ssv:Parameters>
+{parameters}
+                </ssv:Parameters>
+              </ssv:ParameterSet>
+            </ssd:ParameterValues>
+          </ssd:ParameterBinding>
+        </ssd:ParameterBindings>
+      </ssd:Component>
+    </ssd:Elements>
+  </ssd:System>
+  <ssd:DefaultExperiment startTime="{start}" stopTime="{stop}"/>
+</ssd:SystemStructureDescription>
+"""
+
+CASES = {
+    "Source2": {"slope": 0.7, "offset": 0.1, "amplitude": 1.5, "freq": 0.3},
+    "Source3": {"slope": -1.3, "offset": 2.0, "amplitude": 0.25, "freq": 1.7},
+    "Integrator2": {"x0": 1.25, "u": 0.3},
+    "Integrator3": {"x0": -0.5, "u": 0.7},
+}
+
+
+@pytest.mark.parametrize("fmu", sorted(CASES))
+def test_fmu_alone_equals_fmpy(
+    fmu: str, fmus: dict[str, Path], coupler: Coupler, tmp_path: Path
+) -> None:
+    start, stop, step = 0.2, 3.2, 0.1
+    values = CASES[fmu]
+    parameters = "\n".join(
+        f'<ssv:Parameter name="{n}"><ssv:Real value="{v!r}"/></ssv:Parameter>'
+        for n, v in values.items()
+    )
+    ssd = tmp_path / "alone.ssd"
+    ssd.write_text(
+        SSD.format(name=fmu, source=fmus[fmu], parameters=parameters, start=start, stop=stop)
+    )
+    out = tmp_path / "out"
+    outcome = coupler("run", ssd, "--out", out, "--step", step)
+    assert outcome.code == 0, outcome.err
+
+    reference = fmpy.simulate_fmu(
+        str(fmus[fmu]),
+        start_time=start,
+        stop_time=stop,
+        output_interval=step,
+        start_values=values,
+        fmi_type="CoSimulation",
+    )
+    rows = coupler.results(out)
+    assert len(rows) == len(reference) == 31
+    outputs = [name for name in rows[0] if name != "time"]
+    assert outputs, "the FMU has outputs"
+    for row, expected in zip(rows, reference, strict=True):
+        assert float(row["time"]) == float(expected["time"])
+        for column in outputs:
+            assert float(row[column]) == float(expected[column.split(".", 1)[1]]), (
+                column,
+                row["time"],
+            )
