@@ -72,8 +72,8 @@ def _run_options(command: argparse.ArgumentParser) -> None:
     command.add_argument(
         "--algorithm",
         choices=[a.value for a in Algorithm],
-        default=Algorithm.JACOBI.value,
-        help="master algorithm (default jacobi)",
+        help="master algorithm (default: the SSD's OpenMCx stepType, sequential = "
+        "gauss-seidel, else jacobi)",
     )
     command.add_argument(
         "--param",
@@ -97,7 +97,7 @@ def options_of(args: argparse.Namespace) -> RunOptions:
         start_time=args.start_time,
         stop_time=args.stop_time,
         step_size=args.step,
-        algorithm=Algorithm(args.algorithm),
+        algorithm=Algorithm(args.algorithm) if args.algorithm else None,
         realtime_factor=getattr(args, "realtime_factor", None) or None,
         parameters=parameters,
         run_id=args.run_id,

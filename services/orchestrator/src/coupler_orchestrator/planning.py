@@ -40,8 +40,8 @@ class RunOptions:
     """Overrides DefaultExperiment stopTime [s]."""
     step_size: float | None = None
     """Base communication step [s]; default the OpenMCx task deltaTime."""
-    algorithm: Algorithm = Algorithm.JACOBI
-    """Master algorithm."""
+    algorithm: Algorithm | None = None
+    """Master algorithm; default from the OpenMCx task stepType, else Jacobi."""
     realtime_factor: float | None = None
     """Pace the run; None runs as fast as possible."""
     parameters: Mapping[str, str] = field(default_factory=dict)
@@ -228,6 +228,14 @@ def _coerce(channel: Channel, value: Value) -> Value:
     return value
 
 
+def algorithm_of(scenario: ssp.Scenario) -> Algorithm:
+    """The scenario's own choice: OpenMCx stepType ``sequential`` is Gauss-Seidel, the
+    ``parallel_*`` types are Jacobi; Jacobi when the SSD says nothing."""
+    if scenario.step_type == "sequential":
+        return Algorithm.GAUSS_SEIDEL
+    return Algorithm.JACOBI
+
+
 def grid_of(scenario: ssp.Scenario, options: RunOptions) -> TimeGrid:
     start = options.start_time if options.start_time is not None else scenario.start_time or 0.0
     stop = options.stop_time if options.stop_time is not None else scenario.stop_time
@@ -281,7 +289,8 @@ def build_plan(
             )
         except ScenarioError as exc:
             problems.append(str(exc))
-    if options.algorithm is Algorithm.GAUSS_SEIDEL and len(members) == len(scenario.components):
+    algorithm = options.algorithm or algorithm_of(scenario)
+    if algorithm is Algorithm.GAUSS_SEIDEL and len(members) == len(scenario.components):
         try:
             gauss_seidel_order(members, links)
         except ScenarioError as exc:
@@ -292,7 +301,7 @@ def build_plan(
         members=tuple(members),
         links=tuple(links),
         grid=grid,
-        algorithm=options.algorithm,
+        algorithm=algorithm,
         run_id=options.run_id,
         realtime_factor=options.realtime_factor,
     )
