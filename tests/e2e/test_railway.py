@@ -11,6 +11,7 @@ reported once, in order, at its distance, and the map server must have received 
 
 from __future__ import annotations
 
+import asyncio
 import csv
 import json
 import socket
@@ -33,6 +34,19 @@ FMUS = ROOT / "build" / "fmus"
 ANTENNA_OFFSET = 39.7  # parameters.ssv: TrackBalises.antenna_offset
 STOP_DISTANCE = 25908.3  # parameters.ssv: Driver.stop_distance
 STEP = 1.0
+CHROMIUM = Path("/usr/bin/chromium")
+HAVE_CHROMIUM = CHROMIUM.exists()  # Debian's chromium: .ci/run installs it, else no browser part
+ARTIFACT = ROOT / "test-artifacts" / "railway-map.png"
+BROWSER_ARGS = [
+    "--headless=new",
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+    "--no-first-run",
+    "--disable-quic",
+]
 
 pytestmark = pytest.mark.timeout(300)
 
@@ -145,9 +159,14 @@ def readings_of(rows: list[dict[str, str]]) -> list[tuple[float, int, int, float
 async def test_train_passes_every_balise_in_order(
     fleet: Fleet, ports: dict[str, int], tmp_path: Path
 ) -> None:
-    outcome: RunOutcome = await run_scenario(
-        SCENARIO / "SystemStructure.ssd", RunOptions(run_id="e2e"), out_dir=tmp_path
+    run = asyncio.ensure_future(
+        run_scenario(SCENARIO / "SystemStructure.ssd", RunOptions(run_id="e2e"), out_dir=tmp_path)
     )
+    try:
+        if HAVE_CHROMIUM:
+            await watch_in_chromium(f"http://127.0.0.1:{ports['map_http']}/", run)
+    finally:
+        outcome: RunOutcome = await run
     summary: dict[str, Any] = json.loads(outcome.summary_json.read_text())
     assert summary["status"] == "completed", summary["reason"]
     assert summary["steps"] == 1800
@@ -187,3 +206,30 @@ async def test_train_passes_every_balise_in_order(
         state = await response.json()
     shown = [(r["balise_id"], r["group_id"]) for r in state["readings"]]
     assert shown == [(i, g) for i, g, _ in expected]
+
+
+async def watch_in_chromium(url: str, run: asyncio.Future[RunOutcome]) -> None:
+    """Debian's Chromium on the map during the run: the train moves, rows appear in order."""
+    from playwright.async_api import async_playwright
+
+    async with async_playwright() as playwright:
+        browser = await playwright.chromium.launch(executable_path=str(CHROMIUM), args=BROWSER_ARGS)
+        try:
+            page = await browser.new_page(viewport={"width": 1280, "height": 760})
+            await page.goto(url)
+            await page.wait_for_function("window.coupler && window.coupler.ready")
+            await page.wait_for_function("window.coupler.readingIds().length >= 3", timeout=120_000)
+            early = await page.evaluate("window.coupler.trainLatLng()")
+            await asyncio.wait_for(asyncio.shield(run), timeout=280)
+            expected = [b.code for b in load_infrastructure(RAILML).balises]
+            await page.wait_for_function(
+                f"window.coupler.readingIds().length >= {len(expected)}", timeout=30_000
+            )
+            late = await page.evaluate("window.coupler.trainLatLng()")
+            shown = await page.evaluate("window.coupler.readingIds()")
+            ARTIFACT.parent.mkdir(exist_ok=True)
+            await page.screenshot(path=str(ARTIFACT))
+        finally:
+            await browser.close()
+    assert (early["lat"], early["lng"]) != (late["lat"], late["lng"])
+    assert [int(i) for i in shown] == expected
