@@ -4,14 +4,21 @@
 
 FMPy's co-simulation loop steps from t_n to start + (n+1) * interval; Coupler's master from
 t_k = start + k*h to t_{k+1}: the same doubles, so every recorded value must be identical.
+Integrator1, Integrator2 and Integrator3 are one model behind the FMI 1.0, 2.0 and 3.0 wrappers.
+The FMI 1.0 binary's failures must also reach Coupler as errors through FMPy's binding.
 """
 
 from __future__ import annotations
 
+import zipfile
 from pathlib import Path
 
 import fmpy
 import pytest
+
+from coupler.channels import Causality, RunSetup
+from coupler.errors import ParticipantError
+from coupler.fmu import FmuParticipant
 
 from .conftest import Coupler
 
@@ -44,6 +51,7 @@ SSD = """<?xml version="1.0" encoding="UTF-8"?>
 CASES = {
     "Source2": {"slope": 0.7, "offset": 0.1, "amplitude": 1.5, "freq": 0.3},
     "Source3": {"slope": -1.3, "offset": 2.0, "amplitude": 0.25, "freq": 1.7},
+    "Integrator1": {"x0": 0.75, "u": -0.4},
     "Integrator2": {"x0": 1.25, "u": 0.3},
     "Integrator3": {"x0": -0.5, "u": 0.7},
 }
@@ -86,3 +94,56 @@ def test_fmu_alone_equals_fmpy(
                 column,
                 row["time"],
             )
+
+
+async def test_fmi1_parameter_is_a_parameter_channel(fmus: dict[str, Path]) -> None:
+    """FMI 1.0 has no causality="parameter": x0 is causality="internal" variability="parameter"."""
+    participant = FmuParticipant(fmus["Integrator1"])
+    try:
+        description = await participant.describe()
+    finally:
+        await participant.close()
+    causalities = {c.name: c.causality for c in description.channels}
+    assert causalities == {
+        "x0": Causality.PARAMETER,
+        "u": Causality.INPUT,
+        "x": Causality.OUTPUT,
+    }
+    assert description.implementation.startswith("FMI 1.0 FMU Integrator")
+
+
+async def test_fmi1_failing_step_is_a_participant_error(fmus: dict[str, Path]) -> None:
+    """fmiDoStep's fmiError is an error, not a crash (FMPy 0.3.32 reads it as a char pointer)."""
+    participant = FmuParticipant(fmus["Integrator1"])
+    setup = RunSetup(run_id="fmi1", start_time=0.0, step_size=0.5, parameters={"x0": 2.0})
+    try:
+        assert await participant.initialize(setup) == {"x": 2.0}
+        assert await participant.do_step(0.0, 0.5, {"u": 1.5}) == {"x": 2.75}
+        with pytest.raises(ParticipantError) as caught:
+            await participant.do_step(0.5, 0.0, {})
+        assert (caught.value.call, caught.value.status) == ("fmiDoStep", "fmiError")
+    finally:
+        await participant.close()
+
+
+async def test_fmi1_guid_mismatch_is_a_participant_error(
+    fmus: dict[str, Path], tmp_path: Path
+) -> None:
+    """The binary checks the guid; FMPy does not notice fmiInstantiateSlave returning NULL."""
+    tampered = tmp_path / "Integrator1.fmu"
+    with (
+        zipfile.ZipFile(fmus["Integrator1"]) as source,
+        zipfile.ZipFile(tampered, "w") as target,
+    ):
+        for item in source.infolist():
+            data = source.read(item)
+            if item.filename == "modelDescription.xml":
+                data = data.replace(b'guid="{', b'guid="{0', 1)
+            target.writestr(item, data)
+    participant = FmuParticipant(tampered)
+    try:
+        with pytest.raises(ParticipantError) as caught:
+            await participant.initialize(RunSetup(run_id="fmi1", start_time=0.0, step_size=0.5))
+        assert caught.value.call == "fmiInstantiateSlave"
+    finally:
+        await participant.close()

@@ -8,6 +8,7 @@ one place FMPy's errors are translated).
 from __future__ import annotations
 
 import asyncio
+import ctypes
 import shutil
 import tempfile
 import threading
@@ -61,6 +62,21 @@ _CAUSALITIES = {
     "structuralParameter": Causality.PARAMETER,
 }
 _STATUS = ["OK", "Warning", "Discard", "Error", "Fatal", "Pending"]
+
+#: FMPy 0.3.32 declares these FMI 1.0 co-simulation functions as returning fmiString, not
+#: fmiStatus: any status but fmiOK would be read as a char pointer (a crash, never an error).
+_FMI1_STATUS_FUNCTIONS = (
+    "fmi1InitializeSlave",
+    "fmi1DoStep",
+    "fmi1CancelStep",
+    "fmi1SetRealInputDerivatives",
+    "fmi1GetRealOutputDerivatives",
+    "fmi1GetStatus",
+    "fmi1GetRealStatus",
+    "fmi1GetIntegerStatus",
+    "fmi1GetBooleanStatus",
+    "fmi1GetStringStatus",
+)
 
 #: FMPy's FMU constructor changes the process's working directory to the binary's folder and
 #: back; FMUs loaded concurrently (Jacobi initializes everyone at once) must take turns.
@@ -198,7 +214,10 @@ class FmuParticipant(Participant):
 
         def init() -> Values:
             with _LOAD_LOCK:
-                self._slave = fmpy.instantiate_fmu(self._unzipdir, md, fmi_type="CoSimulation")
+                slave = fmpy.instantiate_fmu(self._unzipdir, md, fmi_type="CoSimulation")
+            if version == "1.0":
+                self._check_fmi1_slave(slave)
+            self._slave = slave
             if version == "2.0":
                 self._fmi(
                     "fmi2SetupExperiment",
@@ -312,6 +331,20 @@ class FmuParticipant(Participant):
             raise ParticipantError(
                 f"{type(exc).__name__}: {exc}", participant=self.name, call=call
             ) from exc
+
+    def _check_fmi1_slave(self, slave: Any) -> None:
+        """FMPy neither checks fmiInstantiateSlave's result nor, in 0.3.32, fmiDoStep's status."""
+        if not slave.component:
+            slave.freeLibrary()
+            raise ParticipantError(
+                "fmiInstantiateSlave returned NULL (see the FMU's log messages for why)",
+                participant=self.name,
+                call="fmiInstantiateSlave",
+            )
+        for name in _FMI1_STATUS_FUNCTIONS:
+            function = slave._functions.get(name)
+            if function is not None:
+                function.restype = ctypes.c_int
 
     def _require_instance(self, call: str) -> None:
         if self._slave is None:

@@ -4,10 +4,11 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import signal
 import sys
-from collections.abc import Sequence
+from collections.abc import Coroutine, Sequence
 from pathlib import Path
-from typing import TextIO
+from typing import Any, TextIO
 
 from coupler.channels import Description
 from coupler.client import RemoteParticipant
@@ -110,8 +111,8 @@ def main(argv: Sequence[str] | None = None, *, stdout: TextIO | None = None) -> 
     args = parser().parse_args(argv)
     configure_logging(args.log_level)
     try:
-        return asyncio.run(_dispatch(args, out))
-    except KeyboardInterrupt:
+        return asyncio.run(_interruptible(_dispatch(args, out)))
+    except (KeyboardInterrupt, _Interrupted):
         print("interrupted; results so far are kept", file=sys.stderr)
         return EXIT_INTERRUPTED
     except ValidationError as exc:
@@ -120,6 +121,36 @@ def main(argv: Sequence[str] | None = None, *, stdout: TextIO | None = None) -> 
     except CouplerError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_ERROR
+
+
+class _Interrupted(Exception):
+    """SIGINT or SIGTERM ended the command."""
+
+
+async def _interruptible(command: Coroutine[Any, Any, int]) -> int:
+    """Run ``command``; the first SIGINT/SIGTERM cancels it, so the run ends as ``aborted`` with
+    its summary written and every service stopped; further signals during that clean-up (a
+    terminal and ``uv run`` may both deliver Ctrl-C) are ignored."""
+    loop = asyncio.get_running_loop()
+    task = asyncio.ensure_future(command)
+    interrupted = asyncio.Event()
+
+    def interrupt() -> None:
+        if not interrupted.is_set():
+            interrupted.set()
+            task.cancel()
+
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        loop.add_signal_handler(sig, interrupt)
+    try:
+        return await task
+    except asyncio.CancelledError:
+        if interrupted.is_set():
+            raise _Interrupted from None
+        raise
+    finally:
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            loop.remove_signal_handler(sig)
 
 
 async def _dispatch(args: argparse.Namespace, out: TextIO) -> int:

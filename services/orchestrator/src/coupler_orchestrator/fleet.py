@@ -35,8 +35,8 @@ from types import TracebackType
 import aiohttp
 import structlog
 
-from coupler.client import RemoteParticipant
 from coupler.errors import CouplerError, ScenarioError
+from coupler.health import probe
 
 log = structlog.get_logger("coupler.fleet")
 
@@ -167,14 +167,11 @@ class Fleet:
 
     async def _healthy(self, url: str) -> bool:
         if url.startswith("grpc://"):
-            remote = RemoteParticipant(url, connect_timeout=0.5)
             try:
-                await remote.wait_until_serving_once()
+                await probe(url, connect_timeout=0.5)
                 return True
             except CouplerError:
                 return False
-            finally:
-                await remote.close()
         timeout = aiohttp.ClientTimeout(total=1.0)
         with contextlib.suppress(aiohttp.ClientError, TimeoutError):
             async with aiohttp.ClientSession(timeout=timeout) as session, session.get(url) as reply:
