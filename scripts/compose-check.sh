@@ -245,5 +245,10 @@ print(f"compose-check: the same balise sequence ({len(local_seq) - 1} readings, 
       f"ids {local_seq[1][1]} .. {local_seq[-1][1]})"
       + ("; identical at every step" if same_times else "; passage times differ"))
 EOF
+if cmp -s "$OUT/local/results.csv" "$OUT/container/results.csv"; then
+  say "results.csv of the two runs are byte-identical (every channel, every step)"
+else
+  say "results.csv of the two runs differ outside the balise columns (see $OUT)"
+fi
 stage done
 say "PASSED"
