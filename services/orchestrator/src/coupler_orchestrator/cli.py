@@ -197,10 +197,10 @@ async def _fleet(args: argparse.Namespace, out: TextIO) -> int:
     run_args = parser().parse_args(run_argv)
     async with Fleet(spec, health_timeout=args.health_timeout) as fleet:
         print(f"fleet: {len(spec.services)} services healthy (logs in {fleet.logs})", file=out)
-        code = await _run(run_args, options_of(run_args), out)
         for name, url in spec.urls.items():
             print(f"{name}: {url}", file=out)
         out.flush()
+        code = await _run(run_args, options_of(run_args), out)
         if code == EXIT_OK and not args.exit:
             print("services stay up; Ctrl-C stops them", file=out, flush=True)
             await asyncio.Event().wait()
