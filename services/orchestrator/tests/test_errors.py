@@ -12,10 +12,13 @@ import socket
 import subprocess
 import sys
 import zipfile
+from dataclasses import replace
 from pathlib import Path
 
 import pytest
 
+from coupler.channels import Capabilities, Description
+from coupler.examples.gain import GainParticipant
 from coupler.server import ParticipantServer
 
 from .conftest import DATA, Coupler, Stepper, serving
@@ -307,3 +310,27 @@ def test_failed_run_keeps_completed_steps(
     assert (summary["steps"], summary["end_time"], summary["steps_planned"]) == (2, 1.0, 3)
     rows = (out / "results.csv").read_text().splitlines()
     assert [row.split(",")[0] for row in rows] == ["time", "0.0", "0.5", "1.0"]
+
+
+class FixedStepGain(GainParticipant):
+    """The example gain participant, declaring a fixed simulator step of 0.2 s."""
+
+    async def describe(self) -> Description:
+        described = await super().describe()
+        return replace(described, capabilities=Capabilities(fixed_step_size=0.2))
+
+
+def test_step_not_a_multiple_of_participant_fixed_step(coupler: Coupler, tmp_path: Path) -> None:
+    with serving(FixedStepGain()) as server:
+        path = ssd(
+            tmp_path,
+            f'      <ssd:Component name="Gain" type="application/x-coupler-grpc" '
+            f'source="grpc://127.0.0.1:{server.port}"/>',
+        )
+        outcome = coupler("validate", path, "--step", "0.3", "--stop-time", "0.6")
+        assert outcome.code == 1
+        assert (
+            "bad.ssd line 7: participant 'Gain' steps in whole multiples of 0.2 s, but its "
+            "communication step is 0.3 s; choose --step (or its deltaTime) as a multiple of 0.2 s"
+        ) in outcome.err
+        assert coupler("validate", path, "--step", "0.4", "--stop-time", "0.8").code == 0

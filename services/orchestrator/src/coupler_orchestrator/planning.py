@@ -375,6 +375,15 @@ def _member(
                 f"{grid.stop:g} s ({grid.steps} steps of {grid.step:g} s); choose a stop time "
                 f"the component reaches by whole steps of {component.delta_time:g} s"
             )
+    fixed = description.capabilities.fixed_step_size
+    if fixed and grid is not None:
+        step = grid.step * multiple
+        if abs(step / fixed - round(step / fixed)) > 1e-9 * max(1.0, step / fixed) or step < fixed:
+            raise ScenarioError(
+                f"{_where(component)}: participant '{component.name}' steps in whole multiples "
+                f"of {fixed:g} s, but its communication step is {step:g} s; choose --step "
+                f"(or its deltaTime) as a multiple of {fixed:g} s"
+            )
     return Member(
         name=component.name,
         participant=participant,
