@@ -258,9 +258,12 @@ def build_plan(
     participants: Mapping[str, Participant],
     descriptions: Mapping[str, Description],
     options: RunOptions,
+    *,
+    problems: Sequence[str] = (),
 ) -> Plan:
-    """The plan, or ValidationError listing every problem."""
-    problems = check_participants(scenario, descriptions)
+    """The plan, or ValidationError listing every problem, ``problems`` found earlier first
+    (participants that could not be described are left out of the checks that need them)."""
+    problems = [*problems, *check_participants(scenario, descriptions)]
     overrides, override_problems = parse_overrides(options.parameters, descriptions)
     problems += override_problems
     grid: TimeGrid | None = None
@@ -276,7 +279,9 @@ def build_plan(
             problems.append(str(exc))
     members: list[Member] = []
     for component in scenario.components:
-        description = descriptions[component.name]
+        description = descriptions.get(component.name)
+        if description is None:
+            continue
         try:
             members.append(
                 _member(

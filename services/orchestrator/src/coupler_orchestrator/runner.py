@@ -8,17 +8,13 @@ from pathlib import Path
 
 import structlog
 
-from coupler.errors import ValidationError
+from coupler.channels import Description
+from coupler.participant import Participant
 from coupler_orchestrator import ssp
 from coupler_orchestrator.master import Master, RunResult
 from coupler_orchestrator.observer import Observer
-from coupler_orchestrator.planning import (
-    RunOptions,
-    build_plan,
-    check_participants,
-    close_all,
-    describe_all,
-)
+from coupler_orchestrator.plan import Plan
+from coupler_orchestrator.planning import RunOptions, build_plan, close_all, describe_all
 from coupler_orchestrator.results import CsvRecorder, SummaryWriter, coupler_version
 
 log = structlog.get_logger("coupler.runner")
@@ -33,18 +29,31 @@ class RunOutcome:
     summary_json: Path
 
 
+async def plan_scenario(
+    scenario: ssp.Scenario, options: RunOptions
+) -> tuple[Plan, dict[str, Participant], dict[str, Description]]:
+    """Describe every participant, check everything, plan; ValidationError lists every
+    problem. The participants are open on return: the caller closes them."""
+    participants, descriptions, problems = await describe_all(scenario, options)
+    try:
+        plan = build_plan(
+            scenario,
+            participants,
+            descriptions,
+            options,
+            problems=[*problems, *ssp.check_connections(scenario)],
+        )
+    except BaseException:
+        await close_all(list(participants.values()))
+        raise
+    return plan, participants, descriptions
+
+
 async def validate_scenario(path: Path, options: RunOptions) -> ssp.Scenario:
     """Schema and participant checks; ValidationError lists every problem."""
     scenario = ssp.load_ssp(path)
-    participants, descriptions, problems = await describe_all(scenario, options)
-    try:
-        problems += ssp.check_connections(scenario)
-        problems += check_participants(scenario, descriptions)
-        if problems:
-            raise ValidationError(problems, subject=path.name)
-        build_plan(scenario, participants, descriptions, options)
-    finally:
-        await close_all(list(participants.values()))
+    _, participants, _ = await plan_scenario(scenario, options)
+    await close_all(list(participants.values()))
     return scenario
 
 
@@ -67,13 +76,8 @@ async def run_scenario(
     if out_dir is None:
         configured = scenario.results.output_directory if scenario.results else None
         out_dir = Path(configured) if configured else Path("results")
-    participants, descriptions, problems = await describe_all(scenario, options)
+    plan, participants, descriptions = await plan_scenario(scenario, options)
     try:
-        problems += ssp.check_connections(scenario)
-        problems += check_participants(scenario, descriptions)
-        if problems:
-            raise ValidationError(problems, subject=path.name)
-        plan = build_plan(scenario, participants, descriptions, options)
         csv_path, summary_path = out_dir / "results.csv", out_dir / "summary.json"
         summary = SummaryWriter(
             summary_path,
