@@ -135,6 +135,8 @@ def test_experiment_openmcx_task_results_and_warnings(scenario) -> None:  # type
     text = "\n".join(scenario.warnings)
     assert "inter_extrapolation" in text and "not supported" in text
     assert "root system connector 'ext_in'" in text
+    assert "OpenMCx resultLevel 'coupling' is not supported" in text
+    assert "results backend 'csv'" not in text  # csv is what Coupler writes
 
 
 def test_converters(scenario) -> None:  # type: ignore[no-untyped-def]

@@ -215,7 +215,7 @@ class _Loader:
             start = number(experiment, "startTime", self.display, None)
             stop = number(experiment, "stopTime", self.display, None)
             task = notes.read_task(experiment, self.display, self.warnings)
-            results = notes.read_results(experiment, self.display)
+            results = notes.read_results(experiment, self.display, self.warnings)
         if self.problems:
             raise ValidationError(self.problems, subject=self.display)
         return Scenario(

@@ -91,12 +91,25 @@ def read_task(experiment: Element, display: str, warnings: list[str]) -> Task | 
     return result
 
 
-def read_results(experiment: Element, display: str) -> Results | None:
-    """OpenMCx results settings of a DefaultExperiment."""
+def read_results(experiment: Element, display: str, warnings: list[str]) -> Results | None:
+    """OpenMCx results settings of a DefaultExperiment; what Coupler does not apply is warned."""
     results = annotation(experiment, RESULTS)
     if results is None:
         return None
     backends = child(results, "Backends")
+    here = f"{display} line {results.sourceline}"
+    level = results.get("resultLevel", "synchronization")
+    if level != "synchronization":
+        warnings.append(
+            f"{here}: OpenMCx resultLevel '{level}' is not supported; Coupler records every "
+            f"communication point (synchronization)"
+        )
+    for backend in children(backends, "Backend") if backends is not None else ():
+        if backend.get("type", "").lower() != "csv":
+            warnings.append(
+                f"{here}: OpenMCx results backend '{backend.get('type', '')}' is not supported; "
+                f"Coupler writes results.csv and summary.json"
+            )
     return Results(
         output_directory=results.get("outputDirectory"),
         result_level=results.get("resultLevel", "synchronization"),
