@@ -316,25 +316,18 @@ def _link(
     scenario: ssp.Scenario, connection: ssp.Connection, descriptions: Mapping[str, Description]
 ) -> Link:
     convert: Converter | None = ssp.converter(scenario, connection)
+    if convert is ssp.identity:
+        convert = None
     start = _channel(descriptions, connection.start_element, connection.start_connector)
     end = _channel(descriptions, connection.end_element, connection.end_connector)
-    if (
-        start is not None
-        and end is not None
-        and (start.type, end.type)
-        == (
-            ValueType.INTEGER,
-            ValueType.REAL,
-        )
-    ):
+    if start and end and (start.type, end.type) == (ValueType.INTEGER, ValueType.REAL):
+        # the SSD may leave types to the participants: widen what they declare Integer
         inner = convert
 
         def widen(value: Value) -> Value:
             return inner(float(value)) if inner else float(value)
 
         convert = widen
-    if convert is not None and getattr(convert, "__name__", "") == "_identity":
-        convert = None
     return Link(
         source=connection.start_element,
         output=connection.start_connector,

@@ -8,7 +8,7 @@ converter(s, connection)  -> Callable[[Value], Value]  unit conversion + transfo
 from __future__ import annotations
 
 from .checks import check_connections
-from .conversion import converter
+from .conversion import converter, identity
 from .loader import load_ssp
 from .model import (
     FMU_TYPE,
@@ -56,5 +56,6 @@ __all__ = [
     "Unit",
     "check_connections",
     "converter",
+    "identity",
     "load_ssp",
 ]

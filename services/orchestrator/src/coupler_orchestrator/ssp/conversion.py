@@ -12,7 +12,8 @@ from .transformations import transformation_function
 from .units import unit_converter
 
 
-def _identity(value: Value) -> Value:
+def identity(value: Value) -> Value:
+    """The converter of a connection with nothing to convert."""
     return value
 
 
@@ -51,7 +52,7 @@ def converter(scenario: Scenario, connection: Connection) -> Callable[[Value], V
             )
         )
     if not steps:
-        return _identity
+        return identity
     if len(steps) == 1:
         return steps[0]
 
