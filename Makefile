@@ -33,9 +33,14 @@ proto-check: proto
 fmus: sync
 	$(UV) run --frozen python -m coupler.fmubuild fmus $(FMU_DIR)
 
-# The TrackBalises FMU: C source + track samples and balise table from the railML file.
-track-fmu: sync
-	$(UV) run --frozen python -m balise_fmu.build --railml $(RAILML) --out $(FMU_DIR)/TrackBalises.fmu
+# The TrackBalises FMU: C source + track samples and balise table from the railML file;
+# rebuilt only when the railML file, the model or the FMI wrappers change.
+TRACK_FMU_INPUTS := $(RAILML) $(wildcard services/balise-fmu/fmu/*/* fmus/common/*) \
+                    $(wildcard packages/railway/src/coupler_railway/*.py)
+track-fmu: sync $(FMU_DIR)/TrackBalises.fmu
+
+$(FMU_DIR)/TrackBalises.fmu: $(TRACK_FMU_INPUTS)
+	$(UV) run --frozen python -m balise_fmu.build --railml $(RAILML) --out $@
 
 # Leaflet from npm into the map server's static files (no CDN at run time).
 assets:
