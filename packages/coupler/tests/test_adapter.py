@@ -27,7 +27,7 @@ type = "Real"
 unit = "km/h"
 field = "force"
 scale = 3.6
-start = 0.0
+start = 3.6
 
 [[channel]]
 name = "speed_kmh"
@@ -94,6 +94,7 @@ async def test_adapter_participant_maps_channels_to_fields(tmp_path: Path) -> No
         async with RemoteParticipant(server.address) as remote:
             description = await remote.describe()
             assert [c.name for c in description.channels] == ["push", "speed_kmh", "steps", "mass"]
+            assert description.channels[0].start == 3.6  # in channel units: no scale applied
             await remote.initialize(
                 RunSetup(run_id="a", start_time=0, step_size=1, parameters={"mass": 4.0})
             )

@@ -44,6 +44,7 @@ from coupler.channels import (
 )
 from coupler.errors import ParticipantError, ScenarioError
 from coupler.participant import Participant, Values
+from coupler.values import coerce
 
 
 class Adapter(ABC):
@@ -173,7 +174,7 @@ class AdapterParticipant(Participant):
                     causality=c.causality,
                     type=c.type,
                     unit=c.unit,
-                    start=_typed(c, c.start) if c.start is not None else None,
+                    start=coerce(c.type, c.start) if c.start is not None else None,
                     description=c.description,
                     message_type=c.message_type,
                 )
@@ -240,13 +241,6 @@ class AdapterParticipant(Participant):
 
 
 def _typed(c: ChannelMap, raw: Any) -> Value:
-    """The field value converted to the channel's type (scale/offset for Real)."""
-    if c.type is ValueType.REAL:
-        return float(raw) * c.scale + c.offset
-    if c.type in (ValueType.INTEGER, ValueType.ENUMERATION):
-        return int(raw)
-    if c.type is ValueType.BOOLEAN:
-        return bool(raw)
-    if c.type is ValueType.STRING:
-        return str(raw)
-    return bytes(raw)
+    """A state field as the channel's value (scale and offset for Real)."""
+    value = coerce(c.type, raw)
+    return float(value) * c.scale + c.offset if c.type is ValueType.REAL else value

@@ -34,6 +34,7 @@ from coupler.channels import (
 )
 from coupler.errors import ParticipantError, ScenarioError
 from coupler.participant import Participant, Values
+from coupler.values import coerce
 
 T = TypeVar("T")
 
@@ -295,7 +296,7 @@ class FmuParticipant(Participant):
             )
         version = self.model_description.fmiVersion
         for group in self._input_groups(tuple(values)):
-            converted = [_to_fmi(group.fmi_type, values[n]) for n in group.names]
+            converted = [coerce(_VALUE_TYPES[group.fmi_type], values[n]) for n in group.names]
             accessor = _accessor(version, group.fmi_type)
             setter = getattr(self._slave, f"set{accessor}")
             self._fmi(
@@ -310,7 +311,7 @@ class FmuParticipant(Participant):
             getter = getattr(self._slave, f"get{accessor}")
             raw = self._fmi(f"{_prefix(version)}Get{accessor}", partial(getter, list(group.refs)))
             for name, value in zip(group.names, raw, strict=True):
-                outputs[name] = _from_fmi(group.fmi_type, value)
+                outputs[name] = coerce(_VALUE_TYPES[group.fmi_type], value)
         return outputs
 
     def _fmi(self, call: str, function: Callable[[], T]) -> T:
@@ -373,27 +374,3 @@ class FmuParticipant(Participant):
 
 def _prefix(version: str) -> str:
     return {"1.0": "fmi", "2.0": "fmi2"}.get(version, "fmi3")
-
-
-def _to_fmi(fmi_type: str, value: Value) -> Any:
-    kind = _VALUE_TYPES[fmi_type]
-    if kind is ValueType.REAL:
-        return float(value)
-    if kind in (ValueType.INTEGER, ValueType.ENUMERATION):
-        return int(value)
-    if kind is ValueType.BOOLEAN:
-        return bool(value)
-    return value
-
-
-def _from_fmi(fmi_type: str, value: Any) -> Value:
-    kind = _VALUE_TYPES[fmi_type]
-    if kind is ValueType.REAL:
-        return float(value)
-    if kind in (ValueType.INTEGER, ValueType.ENUMERATION):
-        return int(value)
-    if kind is ValueType.BOOLEAN:
-        return bool(value)
-    if kind is ValueType.STRING:
-        return value.decode("utf-8") if isinstance(value, bytes) else str(value or "")
-    return bytes(value)

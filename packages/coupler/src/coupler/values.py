@@ -112,6 +112,19 @@ def check(channel: Channel, value: object, policy: ValuePolicy = ValuePolicy()) 
     return bytes(value)
 
 
+def coerce(kind: ValueType, raw: Any) -> Value:
+    """``raw`` (a simulator's or FMU's own representation) as the Python value of ``kind``."""
+    if kind is ValueType.REAL:
+        return float(raw)
+    if kind in (ValueType.INTEGER, ValueType.ENUMERATION):
+        return int(raw)
+    if kind is ValueType.BOOLEAN:
+        return bool(raw)
+    if kind is ValueType.STRING:
+        return raw.decode("utf-8") if isinstance(raw, bytes) else str(raw or "")
+    return bytes(raw)
+
+
 def _mismatch(channel: Channel, value: object) -> ChannelValueError:
     return ChannelValueError(
         f"channel '{channel.name}' expects {channel.type}, got {_type_name(value)} {value!r:.60}",
