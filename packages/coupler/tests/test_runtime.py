@@ -6,40 +6,32 @@ RemoteParticipant --gRPC--> ParticipantServer(GainParticipant)
 from __future__ import annotations
 
 import asyncio
-from collections.abc import Mapping
+from collections.abc import Awaitable, Callable, Mapping
+from typing import TypeVar
 
 import grpc
 import pytest
 from grpc_health.v1 import health_pb2, health_pb2_grpc
 
-from coupler import values
 from coupler.channels import Description, RunSetup, Value
 from coupler.client import RemoteParticipant, parse_address
 from coupler.errors import ParticipantError, ParticipantUnavailable, ScenarioError
 from coupler.examples.gain import GainParticipant
+from coupler.participant import EndRun, Values
 from coupler.server import ParticipantServer
 from coupler.v1 import component_pb2 as pb
 from coupler.v1 import component_pb2_grpc as pb_grpc
 
-TRAIN = {
-    "time_s": 0.0,
-    "position": {"latitude_deg": 50.5766, "longitude_deg": 13.0104, "altitude_m": 540.0},
-    "heading_deg": 270.0,
-    "distance_m": 100.0,
-    "speed_mps": 10.0,
-    "acceleration_mps2": 0.5,
-    "track_node": 2,
-    "track_offset_m": 40.0,
-    "direction": 1,
-}
+T = TypeVar("T")
 
 
-def setup(**parameters: Value) -> RunSetup:
-    return RunSetup(run_id="t", start_time=0.0, step_size=0.5, parameters=parameters)
+def setup(run_id: str = "t", lease: float = 0.0, **parameters: Value) -> RunSetup:
+    return RunSetup(
+        run_id=run_id, start_time=0.0, step_size=0.5, parameters=parameters, lease=lease
+    )
 
 
 async def test_every_value_type_round_trips(gain_server: ParticipantServer) -> None:
-    train = values.encode_message("coupler.v1.TrainState", TRAIN)
     async with RemoteParticipant(gain_server.address, streaming=False) as remote:
         initial = await remote.initialize(setup(gain=3.0, x0=1.0, offset=5))
         assert initial == {
@@ -48,17 +40,16 @@ async def test_every_value_type_round_trips(gain_server: ParticipantServer) -> N
             "count": 5,
             "inverted": True,
             "echo": "",
-            "train_out": b"",
+            "blob_out": b"",
         }
-        inputs = {"u": 2.0, "n": -7, "flag": True, "label": "Zwönitz ✓", "train": train}
+        inputs = {"u": 2.0, "n": -7, "flag": True, "label": "Zwönitz ✓", "blob": b"\x00\x01\xff"}
         out = await remote.do_step(0.0, 0.5, inputs)
         assert out["y"] == 6.0
         assert out["x"] == 2.0
         assert out["count"] == -2
         assert out["inverted"] is False
         assert out["echo"] == "Zwönitz ✓"
-        state = values.decode_message("coupler.v1.TrainState", bytes(out["train_out"]))
-        assert state == {**TRAIN, "speed_mps": 30.0, "time_s": 0.5}
+        assert out["blob_out"] == b"\xff\x01\x00"
         await remote.terminate()
 
 
@@ -92,10 +83,11 @@ async def test_second_concurrent_run_is_refused(gain_server: ParticipantServer) 
     ):
         await first.initialize(setup())
         with pytest.raises(
-            ParticipantError, match=r"already in run 't'.*one run at a time"
+            ParticipantError, match=r"is in another run .*one run at a time"
         ) as info:
-            await second.initialize(setup())
+            await second.initialize(setup("other"))
         assert info.value.status == "FAILED_PRECONDITION"
+        assert "'t'" not in str(info.value)  # the active run's id is its capability
         await first.terminate()
         await second.initialize(setup())  # free again after Terminate
         await second.terminate()
@@ -106,7 +98,7 @@ async def test_second_concurrent_run_is_refused(gain_server: ParticipantServer) 
     [
         (
             pb.VariableBinding(channel="nope", real=1.0),
-            "has no channel 'nope' (input channels: flag",
+            "has no channel 'nope' (input channels: blob, flag",
         ),
         (pb.VariableBinding(channel="u", text="fast"), "channel 'u' expects Real, got String"),
         (pb.VariableBinding(channel="n", real=1.5), "channel 'n' expects Integer, got Real"),
@@ -121,10 +113,12 @@ async def test_wrong_channel_or_type_is_invalid_argument(
         stub = pb_grpc.GRPCComponentServiceStub(channel)
         await stub.Initialize(pb.InitializeRequest(run_id="raw", step_size=0.5))
         with pytest.raises(grpc.aio.AioRpcError) as info:
-            await stub.DoStep(pb.DoStepRequest(current_time=0, step_size=0.5, inputs=[binding]))
+            await stub.DoStep(
+                pb.DoStepRequest(run_id="raw", current_time=0, step_size=0.5, inputs=[binding])
+            )
         assert info.value.code() is grpc.StatusCode.INVALID_ARGUMENT
         assert message in (info.value.details() or "")
-        await stub.Terminate(pb.TerminateRequest())
+        await stub.Terminate(pb.TerminateRequest(run_id="raw"))
 
 
 class Faulty(GainParticipant):
@@ -142,15 +136,24 @@ async def test_participant_exception_is_internal_and_server_keeps_serving() -> N
     server = ParticipantServer(Faulty())
     await server.start()
     try:
-        async with RemoteParticipant(server.address) as remote:
+        async with RemoteParticipant(server.address, streaming=False) as remote:
             await remote.initialize(setup())
             with pytest.raises(
                 ParticipantError, match="ZeroDivisionError: the model divided"
             ) as info:
                 await remote.do_step(0.0, 0.5, {"label": "explode"})
             assert info.value.status == "INTERNAL"
-        async with RemoteParticipant(server.address, streaming=False) as remote:
-            assert (await remote.do_step(0.5, 0.5, {"u": 1.0}))["x"] == 0.5
+            assert (await remote.do_step(0.5, 0.5, {"u": 1.0}))["x"] == 0.5  # same run goes on
+            await remote.terminate()
+        async with RemoteParticipant(server.address) as remote:  # streaming
+            await remote.initialize(setup())
+            with pytest.raises(ParticipantError, match="ZeroDivisionError") as info:
+                await remote.do_step(0.0, 0.5, {"label": "explode"})
+            assert info.value.status == "INTERNAL"
+        # the failed stream ended its run: the participant serves the next one
+        async with RemoteParticipant(server.address) as remote:
+            await eventually(lambda: remote.initialize(setup("next")))
+            assert (await remote.do_step(0.0, 0.5, {"u": 1.0}))["x"] == 0.5
             await remote.terminate()
     finally:
         await server.stop(grace=0.1)
@@ -213,3 +216,98 @@ async def test_describe_over_the_wire_equals_local(gain_server: ParticipantServe
     async with RemoteParticipant(gain_server.address) as remote:
         remote_description: Description = await remote.describe()
     assert remote_description == await GainParticipant().describe()
+
+
+async def eventually(attempt: Callable[[], Awaitable[T]], within: float = 5.0) -> T:
+    """``attempt()``'s result once it stops raising ParticipantError, or its last error."""
+    loop = asyncio.get_running_loop()
+    deadline = loop.time() + within
+    while True:
+        try:
+            return await attempt()
+        except ParticipantError:
+            if loop.time() > deadline:
+                raise
+            await asyncio.sleep(0.05)
+
+
+async def raw_stub(address: str) -> tuple[grpc.aio.Channel, pb_grpc.GRPCComponentServiceStub]:
+    channel = grpc.aio.insecure_channel(parse_address(address))
+    return channel, pb_grpc.GRPCComponentServiceStub(channel)
+
+
+async def test_calls_of_another_run_are_refused(gain_server: ParticipantServer) -> None:
+    """A second client cannot step or end a run it did not start (run leases).
+
+    orchestrator --Initialize(run A), DoStep(A)--> Gain <--DoStep(B), Terminate(B)-- intruder
+    """
+    async with RemoteParticipant(gain_server.address, streaming=False) as owner:
+        await owner.initialize(setup("A"))
+        channel, intruder = await raw_stub(gain_server.address)
+        async with channel:
+            bad = pb.VariableBinding(channel="u", real=5e9)
+            for call in (
+                intruder.DoStep(pb.DoStepRequest(run_id="B", step_size=0.5, inputs=[bad])),
+                intruder.DoStep(pb.DoStepRequest(step_size=0.5, inputs=[bad])),
+                intruder.Terminate(pb.TerminateRequest(run_id="B")),
+            ):
+                with pytest.raises(grpc.aio.AioRpcError) as info:
+                    await call
+                assert info.value.code() is grpc.StatusCode.FAILED_PRECONDITION
+                assert "not participant 'Gain's active run" in (info.value.details() or "")
+        out = await owner.do_step(0.0, 0.5, {"u": 1.0})
+        assert (out["y"], out["x"]) == (2.0, 0.5)  # nothing injected
+        await owner.terminate()
+        await owner.terminate()  # Terminate of an ended run is answered OK
+
+
+async def test_a_silent_run_ends_when_its_lease_expires(gain_server: ParticipantServer) -> None:
+    """An orchestrator that dies (no more calls) does not lock the participant."""
+    async with RemoteParticipant(gain_server.address, streaming=False) as dead:
+        await dead.initialize(setup("dead", lease=0.3))
+        async with RemoteParticipant(gain_server.address) as next_one:
+            await eventually(lambda: next_one.initialize(setup("next")))
+            assert (await next_one.do_step(0.0, 0.5, {"u": 2.0}))["y"] == 4.0
+            await next_one.terminate()
+        with pytest.raises(ParticipantError, match="DoStep before Initialize") as info:
+            await dead.do_step(0.0, 0.5, {})
+        assert info.value.status == "FAILED_PRECONDITION"
+
+
+async def test_a_run_ends_with_its_broken_step_stream(gain_server: ParticipantServer) -> None:
+    """The stream that carried a run ends (the orchestrator's process is gone): so does the run,
+    long before its lease."""
+    lost = RemoteParticipant(gain_server.address)
+    await lost.open()
+    await lost.initialize(setup("lost", lease=600))
+    await lost.do_step(0.0, 0.5, {"u": 1.0})
+    await lost.close()  # cancels the stream, no Terminate
+    async with RemoteParticipant(gain_server.address) as next_one:
+        await eventually(lambda: next_one.initialize(setup("next")), within=3.0)
+        await next_one.terminate()
+
+
+class Emptying(GainParticipant):
+    """Asks to end the run once x reaches 1 (a tank running dry)."""
+
+    async def do_step(self, time: float, step: float, inputs: Mapping[str, Value]) -> Values:
+        outputs = await super().do_step(time, step, inputs)
+        if float(outputs["x"]) >= 1.0:
+            raise EndRun(f"tank empty at t={time + step:g}", outputs)
+        return outputs
+
+
+@pytest.mark.parametrize("streaming", [False, True])
+async def test_a_participant_may_end_the_run(streaming: bool) -> None:
+    server = ParticipantServer(Emptying())
+    await server.start()
+    try:
+        async with RemoteParticipant(server.address, streaming=streaming) as remote:
+            await remote.initialize(setup())
+            assert (await remote.do_step(0.0, 0.5, {"u": 1.0}))["x"] == 0.5
+            with pytest.raises(EndRun, match="tank empty at t=1") as info:
+                await remote.do_step(0.5, 0.5, {"u": 1.0})
+            assert info.value.outputs["x"] == 1.0
+            await remote.terminate("participant asked")
+    finally:
+        await server.stop(grace=0.1)

@@ -3,9 +3,10 @@ from __future__ import annotations
 import math
 
 import pytest
+from google.protobuf import source_context_pb2
 
-from coupler import values
-from coupler.channels import Causality, Channel, Description, ValueType
+from coupler import messages, values, wire
+from coupler.channels import Causality, Channel, Description, ValueType, fits_fixed_step
 from coupler.errors import ChannelValueError
 
 REAL = Channel(name="speed", causality=Causality.OUTPUT, type=ValueType.REAL, unit="m/s")
@@ -59,7 +60,7 @@ def test_binary_size_limit() -> None:
 
 
 def test_codec_rejects_unknown_and_wrong_causality() -> None:
-    codec = values.Codec(Description(name="P", channels=(REAL, INT, BIN)))
+    codec = wire.Codec(Description(name="P", channels=(REAL, INT, BIN)))
     with pytest.raises(ChannelValueError, match=r"has no channel 'sped'.*speed"):
         codec.encode({"sped": 1.0})
     with pytest.raises(ChannelValueError, match="has no input channel 'speed'"):
@@ -81,24 +82,66 @@ def test_description_round_trips() -> None:
         ),
         implementation="test",
     )
-    assert values.description_from_pb(values.description_to_pb(description)) == description
+    assert wire.description_from_pb(wire.description_to_pb(description)) == description
 
 
-def test_nested_message_round_trips() -> None:
-    reading = {
-        "time_s": 12.5,
-        "balise_id": 101,
-        "group_id": 10,
-        "position_in_group": 2,
-        "distance_m": 1234.5,
-        "position": {"latitude_deg": 50.57, "longitude_deg": 13.01, "altitude_m": 0.0},
-    }
-    data = values.encode_message("coupler.v1.BaliseReading", reading)
-    assert values.decode_message("coupler.v1.BaliseReading", data) == reading
+def test_registered_message_round_trips_and_reads_as_json() -> None:
+    """The registry knows only what was registered; the core registers no domain message."""
+    name = "google.protobuf.SourceContext"
+    assert not messages.known(name)
+    messages.register(source_context_pb2.SourceContext)
+    data = messages.encode_message(name, {"file_name": "Zwönitz.proto"})
+    assert messages.decode_message(name, data) == {"file_name": "Zwönitz.proto"}
+    assert messages.message_json(name, data) == '{"file_name":"Zwönitz.proto"}'
 
 
 def test_unknown_message_type_is_named() -> None:
     with pytest.raises(
         ChannelValueError, match=r"unknown protobuf message type 'coupler\.v1\.Nope'"
     ):
-        values.encode_message("coupler.v1.Nope", {})
+        messages.encode_message("coupler.v1.Nope", {})
+
+
+@pytest.mark.parametrize(
+    ("kind", "text", "expected"),
+    [
+        (ValueType.REAL, "2.5e3", 2500.0),
+        (ValueType.REAL, "-inf", -math.inf),
+        (ValueType.INTEGER, " 42 ", 42),
+        (ValueType.ENUMERATION, "3", 3),
+        (ValueType.BOOLEAN, "true", True),
+        (ValueType.BOOLEAN, "0", False),
+        (ValueType.BOOLEAN, "False", False),
+        (ValueType.STRING, " as is ", " as is "),
+        (ValueType.BINARY, "00ff", b"\x00\xff"),
+    ],
+)
+def test_parse_reads_attribute_text(kind: ValueType, text: str, expected: object) -> None:
+    assert values.parse(kind, text) == expected
+
+
+@pytest.mark.parametrize(
+    ("kind", "text"),
+    [
+        (ValueType.REAL, "fast"),
+        (ValueType.INTEGER, "1.5"),
+        (ValueType.BOOLEAN, "yes"),
+        (ValueType.BINARY, "xyz"),
+    ],
+)
+def test_parse_refuses_what_is_not_the_type(kind: ValueType, text: str) -> None:
+    with pytest.raises(ValueError):
+        values.parse(kind, text)
+
+
+def test_widen_turns_integers_into_reals_only_for_real_channels() -> None:
+    assert values.widen(ValueType.REAL, 3) == 3.0
+    assert isinstance(values.widen(ValueType.REAL, 3), float)
+    assert values.widen(ValueType.INTEGER, 3) == 3
+    assert values.widen(ValueType.REAL, True) is True
+
+
+def test_fits_fixed_step_means_whole_multiples() -> None:
+    assert fits_fixed_step(0.1, 0.05) and fits_fixed_step(0.3, 0.1) and fits_fixed_step(1.0, 0)
+    assert not fits_fixed_step(0.1, 0.2)
+    assert not fits_fixed_step(0.15, 0.1)

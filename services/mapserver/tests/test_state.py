@@ -7,8 +7,9 @@ from typing import Any
 import pytest
 
 from coupler.channels import RunSetup
-from coupler.values import encode_message
+from coupler.messages import encode_message
 from coupler_railway import Infrastructure
+from coupler_railway.messages import BALISE_READING, TRAIN_STATE
 from mapserver.__main__ import build_state
 from mapserver.config import MapServerSettings
 from mapserver.feed import Feed
@@ -57,11 +58,11 @@ def test_balise_id_changes_are_the_fallback(state: RunState) -> None:
 
 def test_binary_messages(state: RunState) -> None:
     reading = encode_message(
-        "coupler.v1.BaliseReading",
+        BALISE_READING,
         {"time_s": 12.5, "balise_id": 201, "group_id": 20, "distance_m": 600.0},
     )
     train = encode_message(
-        "coupler.v1.TrainState",
+        TRAIN_STATE,
         {"position": {"latitude_deg": 50.001, "longitude_deg": 12.002}, "speed_mps": 7.0},
     )
     state.step(12.0, 1.0, {"balise_reading": reading, "train_state": train})

@@ -13,7 +13,8 @@ import pytest
 
 from coupler.channels import Causality, RunSetup
 from coupler.errors import ParticipantError
-from coupler.values import decode_message
+from coupler.messages import decode_message
+from coupler_railway.messages import TRAIN_STATE
 
 from .conftest import Bridge, Mock
 
@@ -39,7 +40,7 @@ async def test_describe_lists_channels_and_fixed_step(mock: Mock, bridge: Bridge
         "dynamic_brake",
         "direction",
     ]
-    assert description.channel("train_state").message_type == "coupler.v1.TrainState"
+    assert description.channel("train_state").message_type == TRAIN_STATE
     assert description.capabilities.fixed_step_size == pytest.approx(0.2)
 
 
@@ -63,7 +64,7 @@ async def test_throttle_moves_the_train(mock: Mock, bridge: Bridge) -> None:
     assert last["track_node"] >= 1 and last["track_offset"] > 0.0
     assert last["direction_state"] == 1
     assert (last["latitude"], last["longitude"]) != (first["latitude"], first["longitude"])
-    state = decode_message("coupler.v1.TrainState", last["train_state"])
+    state = decode_message(TRAIN_STATE, last["train_state"])
     assert state["time_s"] == pytest.approx(10.0)
     assert state["speed_mps"] == pytest.approx(last["speed"])
     assert state["distance_m"] == pytest.approx(last["distance"])

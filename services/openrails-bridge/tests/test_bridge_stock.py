@@ -12,7 +12,8 @@ import time
 import pytest
 
 from coupler.channels import RunSetup
-from coupler.values import decode_message
+from coupler.messages import decode_message
+from coupler_railway.messages import TRAIN_STATE
 
 from .conftest import Bridge, Mock
 
@@ -43,7 +44,7 @@ async def test_stock_mode_paces_on_the_wall_clock(mock: Mock, bridge: Bridge) ->
     assert (last["latitude"], last["longitude"]) != (first["latitude"], first["longitude"])
     assert last["direction_state"] == 1
     assert last["track_node"] == 0  # stock OpenRails does not publish the track location
-    state = decode_message("coupler.v1.TrainState", last["train_state"])
+    state = decode_message(TRAIN_STATE, last["train_state"])
     assert state["time_s"] == pytest.approx(10.0)
     assert state["speed_mps"] == pytest.approx(last["speed"])
 

@@ -21,11 +21,11 @@ def test_describe_grpc_participant(coupler: Coupler, gain_server: ParticipantSer
     assert lines[1].startswith("capabilities: streaming=True")
     table = {line.split()[0]: line.split() for line in lines[3:]}
     assert list(table) == [
-        "CHANNEL", "gain", "x0", "offset", "u", "n", "flag", "label", "train",
-        "y", "x", "count", "inverted", "echo", "train_out",
+        "CHANNEL", "gain", "x0", "offset", "u", "n", "flag", "label", "blob",
+        "y", "x", "count", "inverted", "echo", "blob_out",
     ]  # fmt: skip
     assert table["u"][:5] == ["u", "input", "Real", "m/s", "0.0"]
-    assert table["train_out"][:3] == ["train_out", "output", "Binary(coupler.v1.TrainState)"]
+    assert table["blob_out"][:3] == ["blob_out", "output", "Binary"]
 
 
 def test_describe_fmu(coupler: Coupler, fmus: dict[str, Path]) -> None:

@@ -61,7 +61,7 @@ class Capabilities:
     variable_step_size: bool = True
     """Accepts any step size."""
     fixed_step_size: float = 0.0
-    """When non-zero, step sizes must be whole multiples of this [s]."""
+    """When non-zero, every step size is a whole multiple of this [s] (``fits_fixed_step``)."""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -102,3 +102,19 @@ class RunSetup:
     """Parameter values by channel name."""
     inputs: Mapping[str, Value] = field(default_factory=dict)
     """Start values of inputs by channel name."""
+    lease: float = 0.0
+    """The run's lease [s]: silence this long ends the run at the participant; 0 = its
+    default. Applied by the participant runtime (``coupler.server``), not by participants."""
+
+
+#: Relative tolerance of "a whole multiple of fixed_step_size" (protocol: component.proto).
+STEP_TOLERANCE = 1e-9
+
+
+def fits_fixed_step(step: float, fixed: float) -> bool:
+    """Whether ``step`` is n * ``fixed`` for a whole n >= 1, within ``STEP_TOLERANCE``."""
+    if not fixed:
+        return True
+    ratio = step / fixed
+    n = round(ratio)
+    return n >= 1 and abs(ratio - n) <= STEP_TOLERANCE * max(1.0, ratio)

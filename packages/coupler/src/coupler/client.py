@@ -16,7 +16,7 @@ from urllib.parse import urlsplit
 import grpc
 from grpc_health.v1 import health_pb2, health_pb2_grpc
 
-from coupler import values
+from coupler import wire
 from coupler.channels import Description, RunSetup, Value
 from coupler.errors import (
     ChannelValueError,
@@ -25,8 +25,7 @@ from coupler.errors import (
     ParticipantUnavailable,
     ScenarioError,
 )
-from coupler.participant import Participant, Values
-from coupler.v1 import component_pb2 as pb
+from coupler.participant import EndRun, Participant, Values
 from coupler.v1 import component_pb2_grpc as pb_grpc
 
 T = TypeVar("T")
@@ -70,8 +69,9 @@ class RemoteParticipant(Participant):
         self.streaming = streaming
         self._channel: grpc.aio.Channel | None = None
         self._stub: pb_grpc.GRPCComponentServiceStub | None = None
-        self._codec: values.Codec | None = None
+        self._codec: wire.Codec | None = None
         self._stream: grpc.aio.StreamStreamCall | None = None
+        self._run_id = ""
 
     async def __aenter__(self) -> RemoteParticipant:
         await self.open()
@@ -91,9 +91,9 @@ class RemoteParticipant(Participant):
         self._ensure_channel()
         await self.wait_until_serving()
         response = await self._call(
-            "Describe", self._stubbed().Describe(pb.DescribeRequest(), timeout=self.call_timeout)
+            "Describe", self._stubbed().Describe(wire.DescribeRequest(), timeout=self.call_timeout)
         )
-        self._codec = values.Codec(values.description_from_pb(response))
+        self._codec = wire.Codec(wire.description_from_pb(response))
 
     async def wait_until_serving(self) -> None:
         """Poll the health service until SERVING; ParticipantUnavailable after the deadline."""
@@ -155,7 +155,7 @@ class RemoteParticipant(Participant):
             self._stub = pb_grpc.GRPCComponentServiceStub(self._channel)
 
     @property
-    def codec(self) -> values.Codec:
+    def codec(self) -> wire.Codec:
         if self._codec is None:
             raise ParticipantError(
                 "not connected; call open() first", participant=self.name, call="describe"
@@ -167,27 +167,34 @@ class RemoteParticipant(Participant):
         return self.codec.description
 
     async def initialize(self, setup: RunSetup) -> Values:
-        request = self._request("Initialize", lambda: values.initialize_to_pb(setup, self.codec))
+        request = self._request("Initialize", lambda: wire.initialize_to_pb(setup, self.codec))
+        self._run_id = setup.run_id  # Terminate names it even when Initialize's answer is bad
         response = await self._call(
             "Initialize", self._stubbed().Initialize(request, timeout=self.call_timeout)
         )
         if self.streaming and self.codec.description.capabilities.streaming:
             self._stream = self._stubbed().StepStream()
-        return self._response("Initialize", lambda: values.outputs_from_pb(response, self.codec))
+        return self._response("Initialize", lambda: wire.outputs_from_pb(response, self.codec))
 
     async def do_step(self, time: float, step: float, inputs: Mapping[str, Value]) -> Values:
-        request = self._request("DoStep", lambda: values.step_to_pb(time, step, inputs, self.codec))
+        request = self._request(
+            "DoStep", lambda: wire.step_to_pb(self._run_id, time, step, inputs, self.codec)
+        )
         if self._stream is not None:
             response = await self._call("DoStep", self._stream_step(self._stream, request))
         else:
             response = await self._call(
                 "DoStep", self._stubbed().DoStep(request, timeout=self.call_timeout)
             )
-        return self._response("DoStep", lambda: values.outputs_from_pb(response, self.codec))
+        outputs = self._response("DoStep", lambda: wire.outputs_from_pb(response, self.codec))
+        reason = wire.termination_requested(response)
+        if reason is not None:
+            raise EndRun(reason, outputs)
+        return outputs
 
     async def _stream_step(
-        self, stream: grpc.aio.StreamStreamCall, request: pb.DoStepRequest
-    ) -> pb.DoStepResponse:
+        self, stream: grpc.aio.StreamStreamCall, request: wire.DoStepRequest
+    ) -> wire.DoStepResponse:
         await stream.write(request)
         response = await asyncio.wait_for(stream.read(), self.call_timeout)
         if response is grpc.aio.EOF:  # the server closed the stream: its status says why
@@ -199,16 +206,23 @@ class RemoteParticipant(Participant):
         return response
 
     async def terminate(self, reason: str = "") -> None:
+        """Terminate the run (named by its id), then close its step stream."""
         stream, self._stream = self._stream, None
-        if stream is not None:
-            await stream.done_writing()
-            # the run ends either way; Terminate below reports what matters
-            with contextlib.suppress(grpc.aio.AioRpcError, TimeoutError):
-                await asyncio.wait_for(stream.code(), self.call_timeout)
-        await self._call(
-            "Terminate",
-            self._stubbed().Terminate(values.terminate_to_pb(reason), timeout=self.call_timeout),
-        )
+        try:
+            await self._call(
+                "Terminate",
+                self._stubbed().Terminate(
+                    wire.terminate_to_pb(self._run_id, reason), timeout=self.call_timeout
+                ),
+            )
+        finally:
+            if stream is not None:
+                # the run has ended either way; the stream's end only confirms it
+                with contextlib.suppress(
+                    grpc.aio.AioRpcError, TimeoutError, asyncio.InvalidStateError
+                ):
+                    await stream.done_writing()
+                    await asyncio.wait_for(stream.code(), self.call_timeout)
 
     async def close(self) -> None:
         if self._stream is not None:

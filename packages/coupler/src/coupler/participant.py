@@ -15,6 +15,20 @@ from coupler.channels import Description, RunSetup, Value
 Values = dict[str, Value]
 
 
+class EndRun(Exception):
+    """Raised by ``do_step``: the participant asks to end the run after this step.
+
+    ``outputs`` are its outputs at the end of the step (the time reached); the orchestrator
+    records them, terminates every participant and reports the run as ``terminated``. The
+    same request travels over gRPC as ``DoStepResponse.terminate``.
+    """
+
+    def __init__(self, reason: str, outputs: Values) -> None:
+        super().__init__(reason)
+        self.reason = reason
+        self.outputs = outputs
+
+
 class Participant(ABC):
     """A co-simulation participant. One run at a time: initialize, do_step..., terminate."""
 
@@ -28,7 +42,10 @@ class Participant(ABC):
 
     @abstractmethod
     async def do_step(self, time: float, step: float, inputs: Mapping[str, Value]) -> Values:
-        """Advance from ``time`` by ``step`` with ``inputs``; return outputs at ``time + step``."""
+        """Advance from ``time`` by ``step`` with ``inputs``; return outputs at ``time + step``.
+
+        Raise ``EndRun`` (with those outputs) to ask for the run to end after this step.
+        """
 
     @abstractmethod
     async def terminate(self, reason: str = "") -> None:

@@ -1,20 +1,28 @@
 """The participant runtime: serves one ``Participant`` over gRPC.
 
-``serve()`` runs a grpc.aio server with the component service, the standard health service
-(NOT_SERVING until the participant is open and described, again on shutdown) and server
-reflection, and stops gracefully on SIGTERM/SIGINT.
+``serve()`` runs a grpc.aio server with the component service and the standard health service
+(NOT_SERVING until the participant is open and described, again on shutdown), and stops
+gracefully on SIGTERM/SIGINT.
 
-Rules every participant gets for free: one run at a time (a second Initialize during a run is
-FAILED_PRECONDITION), DoStep before Initialize is FAILED_PRECONDITION, an unknown channel or a
-wrong type is INVALID_ARGUMENT naming the channel and the expected type, and an exception inside
-the participant is INTERNAL with its message while the server keeps serving.
+Rules every participant gets for free (docs/protocol.md has the table):
+
+- one run at a time: Initialize during a run is FAILED_PRECONDITION (without revealing the
+  active run's id); DoStep before Initialize is FAILED_PRECONDITION;
+- runs are leases: DoStep, StepStream and Terminate must carry the active run's id (another id
+  is FAILED_PRECONDITION); the run ends on Terminate, when its StepStream ends without
+  Terminate, or after ``lease`` seconds without a call -- then the next run may start;
+- an unknown channel or a wrong type is INVALID_ARGUMENT naming the channel and the expected
+  type; an exception inside the participant is INTERNAL with its message while the server
+  keeps serving; a participant that raises ``EndRun`` answers with ``terminate`` set.
 """
 
 from __future__ import annotations
 
 import asyncio
 import signal
+import time
 from collections.abc import AsyncIterator, Awaitable, Callable
+from dataclasses import dataclass, field
 from typing import NoReturn, TypeVar
 
 import grpc
@@ -22,16 +30,29 @@ import structlog
 from grpc_health.v1 import health, health_pb2, health_pb2_grpc
 from grpc_reflection.v1alpha import reflection
 
-from coupler import values
+from coupler import wire
 from coupler.channels import Description
 from coupler.errors import ChannelValueError, ParticipantUnavailable, ScenarioError
-from coupler.participant import Participant
-from coupler.v1 import component_pb2 as pb
+from coupler.participant import EndRun, Participant
 from coupler.v1 import component_pb2_grpc as pb_grpc
 
 log = structlog.get_logger("coupler.server")
-SERVICE_NAME = pb.DESCRIPTOR.services_by_name["GRPCComponentService"].full_name
+SERVICE_NAME = wire.SERVICE_NAME
+DEFAULT_LEASE = 60.0
+"""Lease of a run whose Initialize asks for none [s]."""
 T = TypeVar("T")
+
+
+@dataclass(eq=False)
+class _Run:
+    """The active run: its id, lease and when it was last heard of."""
+
+    id: str
+    lease: float
+    started: float = field(default_factory=time.monotonic)
+    last_call: float = field(default_factory=time.monotonic)
+    busy: int = 0
+    """Steps in progress: a run inside a step is not silent."""
 
 
 class _Servicer(pb_grpc.GRPCComponentServiceServicer):
@@ -39,93 +60,186 @@ class _Servicer(pb_grpc.GRPCComponentServiceServicer):
 
     def __init__(self, participant: Participant) -> None:
         self.participant = participant
-        self._codec: values.Codec | None = None
-        self.run_id: str | None = None
+        self._codec: wire.Codec | None = None
+        self.run: _Run | None = None
         self._lock = asyncio.Lock()
+        self._watchdog: asyncio.Task[None] | None = None
+
+    @property
+    def run_id(self) -> str | None:
+        """The active run's id, or None."""
+        return self.run.id if self.run is not None else None
 
     def ready(self, description: Description) -> None:
         """The participant is open and described: calls are answered from now on."""
-        self._codec = values.Codec(description)
+        self._codec = wire.Codec(description)
 
     @property
-    def codec(self) -> values.Codec:
+    def codec(self) -> wire.Codec:
         if self._codec is None:
             raise _NotReady
         return self._codec
 
+    @property
+    def name(self) -> str:
+        return self.codec.description.name
+
     async def Describe(
-        self, request: pb.DescribeRequest, context: grpc.aio.ServicerContext
-    ) -> pb.DescribeResponse:
-        return values.description_to_pb(self.codec.description)
+        self, request: wire.DescribeRequest, context: grpc.aio.ServicerContext
+    ) -> wire.DescribeResponse:
+        await _guard(context, lambda: self.codec)
+        return wire.description_to_pb(self.codec.description)
 
     async def Initialize(
-        self, request: pb.InitializeRequest, context: grpc.aio.ServicerContext
-    ) -> pb.InitializeResponse:
+        self, request: wire.InitializeRequest, context: grpc.aio.ServicerContext
+    ) -> wire.InitializeResponse:
         async with self._lock:
             await _guard(context, lambda: self.codec)
-            if self.run_id is not None:
+            if self.run is not None:
+                idle = time.monotonic() - self.run.last_call
                 await context.abort(
                     grpc.StatusCode.FAILED_PRECONDITION,
-                    f"participant '{self.codec.description.name}' is already in run "
-                    f"'{self.run_id}'; a participant serves one run at a time "
-                    f"(Terminate that run first)",
+                    f"participant '{self.name}' is in another run (started "
+                    f"{time.monotonic() - self.run.started:.0f} s ago, last call {idle:.0f} s "
+                    f"ago; its lease ends it after {self.run.lease:g} s without calls); a "
+                    f"participant serves one run at a time: Terminate that run or wait",
                 )
-            setup = await _guard(context, lambda: values.initialize_from_pb(request, self.codec))
+            setup = await _guard(context, lambda: wire.initialize_from_pb(request, self.codec))
+            if setup.lease < 0:
+                await _abort(
+                    context,
+                    grpc.StatusCode.INVALID_ARGUMENT,
+                    f"lease_seconds must be >= 0, got {setup.lease:g}",
+                )
             outputs = await _guard(context, lambda: self.participant.initialize(setup))
-            self.run_id = setup.run_id or "unnamed"
-            log.info("run_initialized", run_id=self.run_id, participant=self.codec.description.name)
-            return await _guard(context, lambda: values.initialize_response(outputs, self.codec))
+            self.run = run = _Run(id=setup.run_id, lease=setup.lease or DEFAULT_LEASE)
+            self._watchdog = asyncio.create_task(self._watch(run), name=f"lease-{run.id}")
+            log.info("run_initialized", run_id=run.id, participant=self.name, lease_s=run.lease)
+            return await _guard(context, lambda: wire.initialize_response(outputs, self.codec))
 
     async def DoStep(
-        self, request: pb.DoStepRequest, context: grpc.aio.ServicerContext
-    ) -> pb.DoStepResponse:
+        self, request: wire.DoStepRequest, context: grpc.aio.ServicerContext
+    ) -> wire.DoStepResponse:
         async with self._lock:
             return await self._step(request, context)
 
     async def StepStream(
         self,
-        request_iterator: AsyncIterator[pb.DoStepRequest],
+        request_iterator: AsyncIterator[wire.DoStepRequest],
         context: grpc.aio.ServicerContext,
-    ) -> AsyncIterator[pb.DoStepResponse]:
-        async for request in request_iterator:
-            async with self._lock:
-                response = await self._step(request, context)
-            yield response
+    ) -> AsyncIterator[wire.DoStepResponse]:
+        carried: _Run | None = None
+        try:
+            async for request in request_iterator:
+                async with self._lock:
+                    if self.run is not None and request.run_id == self.run.id:
+                        carried = self.run
+                    response = await self._step(request, context)
+                yield response
+        finally:
+            if carried is not None and carried is self.run:
+                # Ended, broken or cancelled before Terminate: the run goes with its stream.
+                self._end_later(carried, "its step stream ended without Terminate")
 
     async def _step(
-        self, request: pb.DoStepRequest, context: grpc.aio.ServicerContext
-    ) -> pb.DoStepResponse:
+        self, request: wire.DoStepRequest, context: grpc.aio.ServicerContext
+    ) -> wire.DoStepResponse:
         await _guard(context, lambda: self.codec)
-        if self.run_id is None:
-            await context.abort(
+        run = self.run
+        if run is None:
+            await _abort(
+                context,
                 grpc.StatusCode.FAILED_PRECONDITION,
-                f"DoStep before Initialize: participant '{self.codec.description.name}' "
-                f"has no run (call Initialize first)",
+                f"DoStep before Initialize: participant '{self.name}' has no run "
+                f"(call Initialize first; a run also ends when its lease expires)",
             )
-        time, step, inputs = await _guard(context, lambda: values.step_from_pb(request, self.codec))
-        if not step > 0:
-            await context.abort(
-                grpc.StatusCode.INVALID_ARGUMENT, f"step_size must be positive, got {step}"
+        if request.run_id != run.id:
+            await _abort(
+                context,
+                grpc.StatusCode.FAILED_PRECONDITION,
+                f"DoStep for run '{request.run_id}', which is not participant '{self.name}'s "
+                f"active run; only the orchestrator that initialized the run may step it",
             )
-        outputs = await _guard(context, lambda: self.participant.do_step(time, step, inputs))
-        return await _guard(context, lambda: values.step_response(outputs, self.codec))
+        step = await _guard(context, lambda: wire.step_from_pb(request, self.codec))
+        if not step.step > 0:
+            await _abort(
+                context,
+                grpc.StatusCode.INVALID_ARGUMENT,
+                f"step_size must be positive, got {step.step}",
+            )
+        run.busy += 1
+        try:
+            outputs = await _guard(
+                context, lambda: self.participant.do_step(step.time, step.step, step.inputs)
+            )
+        except EndRun as end:
+            last, reason = end.outputs, end.reason
+            log.info("run_end_requested", run_id=run.id, participant=self.name, reason=reason)
+            return await _guard(
+                context, lambda: wire.step_response(last, self.codec, terminate_reason=reason)
+            )
+        finally:
+            run.busy -= 1
+            run.last_call = time.monotonic()
+        return await _guard(context, lambda: wire.step_response(outputs, self.codec))
 
     async def Terminate(
-        self, request: pb.TerminateRequest, context: grpc.aio.ServicerContext
-    ) -> pb.TerminateResponse:
+        self, request: wire.TerminateRequest, context: grpc.aio.ServicerContext
+    ) -> wire.TerminateResponse:
         async with self._lock:
-            await self.end_run(values.terminate_reason(request))
-        return pb.TerminateResponse()
+            run = self.run
+            if run is not None and request.run_id != run.id:
+                await _abort(
+                    context,
+                    grpc.StatusCode.FAILED_PRECONDITION,
+                    f"Terminate for run '{request.run_id}', which is not participant "
+                    f"'{self.name}'s active run; nothing was ended",
+                )
+            await self.end_run(request.reason)
+        return wire.TerminateResponse()
 
     async def end_run(self, reason: str) -> None:
-        """Terminate the current run, if any; idempotent."""
-        if self.run_id is None:
+        """Terminate the active run, if any; idempotent. The caller holds the lock."""
+        run, self.run = self.run, None
+        if run is None:
             return
-        run_id, self.run_id = self.run_id, None
+        watchdog, self._watchdog = self._watchdog, None
+        if watchdog is not None and watchdog is not asyncio.current_task():
+            watchdog.cancel()
         try:
             await self.participant.terminate(reason)
         finally:
-            log.info("run_terminated", run_id=run_id, reason=reason or "requested")
+            log.info("run_terminated", run_id=run.id, reason=reason or "requested")
+
+    async def close_run(self, reason: str) -> None:
+        """End whatever run is active (shutdown)."""
+        async with self._lock:
+            await self.end_run(reason)
+
+    async def _end(self, run: _Run, reason: str) -> None:
+        async with self._lock:
+            if self.run is run:
+                log.warning("run_ended_by_participant", run_id=run.id, why=reason)
+                await self.end_run(reason)
+
+    def _end_later(self, run: _Run, reason: str) -> None:
+        """End ``run`` from a task of its own (safe from a cancelled handler)."""
+        task = asyncio.get_running_loop().create_task(self._end(run, reason))
+        _BACKGROUND.add(task)
+        task.add_done_callback(_BACKGROUND.discard)
+
+    async def _watch(self, run: _Run) -> None:
+        """Ends ``run`` after ``run.lease`` seconds without a call."""
+        while self.run is run:
+            silent = time.monotonic() - run.last_call
+            if run.busy or silent < run.lease:
+                await asyncio.sleep(max(run.lease - silent, 0.05))
+                continue
+            await self._end(run, f"lease expired: no call for {run.lease:g} s")
+            return
+
+
+_BACKGROUND: set[asyncio.Task[None]] = set()
 
 
 class _NotReady(Exception):
@@ -145,7 +259,7 @@ async def _guard(context: grpc.aio.ServicerContext, call: Callable[[], T | Await
         await _abort(context, grpc.StatusCode.INVALID_ARGUMENT, str(exc))
     except ParticipantUnavailable as exc:
         await _abort(context, grpc.StatusCode.UNAVAILABLE, str(exc))
-    except asyncio.CancelledError:
+    except (asyncio.CancelledError, EndRun):
         raise
     except Exception as exc:  # the participant's own failure: report it, keep serving
         log.exception("participant_failed")
@@ -162,10 +276,18 @@ async def _abort(
 class ParticipantServer:
     """A running participant server; ``serve()`` is the usual way to get one."""
 
-    def __init__(self, participant: Participant, *, host: str = "127.0.0.1", port: int = 0):
+    def __init__(
+        self,
+        participant: Participant,
+        *,
+        host: str = "127.0.0.1",
+        port: int = 0,
+        reflection: bool = False,
+    ):
         self.participant = participant
         self.host = host
         self.requested_port = port
+        self.reflection = reflection
         self.port = 0
         self.health = health.aio.HealthServicer()
         self._server: grpc.aio.Server | None = None
@@ -184,9 +306,10 @@ class ParticipantServer:
         self._servicer = _Servicer(self.participant)
         pb_grpc.add_GRPCComponentServiceServicer_to_server(self._servicer, server)
         health_pb2_grpc.add_HealthServicer_to_server(self.health, server)
-        reflection.enable_server_reflection(
-            (SERVICE_NAME, health.SERVICE_NAME, reflection.SERVICE_NAME), server
-        )
+        if self.reflection:
+            reflection.enable_server_reflection(
+                (SERVICE_NAME, health.SERVICE_NAME, reflection.SERVICE_NAME), server
+            )
         self.port = server.add_insecure_port(f"{self.host}:{self.requested_port}")
         await server.start()
         await self.participant.open()
@@ -201,7 +324,7 @@ class ParticipantServer:
         await self._set_health(health_pb2.HealthCheckResponse.NOT_SERVING)
         if self._servicer is not None:
             try:
-                await self._servicer.end_run("participant shutting down")
+                await self._servicer.close_run("participant shutting down")
             except Exception:
                 log.exception("terminate_on_shutdown_failed")
         if self._server is not None:
@@ -223,10 +346,11 @@ async def serve(
     *,
     host: str = "127.0.0.1",
     port: int = 0,
+    reflection: bool = False,
     on_started: Callable[[ParticipantServer], None] | None = None,
 ) -> None:
     """Serve ``participant`` until SIGTERM or SIGINT, then shut down gracefully."""
-    server = ParticipantServer(participant, host=host, port=port)
+    server = ParticipantServer(participant, host=host, port=port, reflection=reflection)
     stop = asyncio.Event()
     loop = asyncio.get_running_loop()
     for sig in (signal.SIGTERM, signal.SIGINT):

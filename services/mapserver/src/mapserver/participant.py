@@ -12,7 +12,8 @@ from collections.abc import Mapping
 from coupler.channels import Capabilities, Causality, Channel, Description, RunSetup, Value
 from coupler.channels import ValueType as T
 from coupler.participant import Participant, Values
-from mapserver.state import BALISE_READING, TRAIN_STATE, RunState
+from coupler_railway.messages import BALISE_READING, TRAIN_STATE
+from mapserver.state import RunState
 
 NAME = "MapServer"
 

@@ -26,13 +26,11 @@ import structlog
 
 from coupler.channels import RunSetup, Value
 from coupler.errors import ChannelValueError
-from coupler.values import decode_message
+from coupler.messages import decode_message
 from coupler_railway import TrackModel
+from coupler_railway.messages import BALISE_READING, TRAIN_STATE
 
 log = structlog.get_logger("mapserver.state")
-
-TRAIN_STATE = "coupler.v1.TrainState"
-BALISE_READING = "coupler.v1.BaliseReading"
 
 
 @dataclass(frozen=True, kw_only=True)

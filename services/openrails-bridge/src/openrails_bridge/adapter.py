@@ -39,13 +39,13 @@ import structlog
 from coupler.adapter import Adapter
 from coupler.channels import RunSetup, Value
 from coupler.errors import ChannelValueError, ParticipantUnavailable, ScenarioError
-from coupler.values import encode_message
+from coupler.messages import encode_message
+from coupler_railway.messages import TRAIN_STATE
 
 from .config import BridgeSettings
 
 log = structlog.get_logger("openrails_bridge")
 
-TRAIN_STATE = "coupler.v1.TrainState"
 STEP_TOLERANCE = 1e-9
 """Relative tolerance of "a whole multiple of the sim step"."""
 RANGE_TOLERANCE = 1e-9

@@ -83,7 +83,13 @@ def _run_options(command: argparse.ArgumentParser) -> None:
         metavar="COMPONENT.NAME=VALUE",
         help="override a parameter (repeatable)",
     )
-    command.add_argument("--run-id", default="run", help="run id sent to participants")
+    command.add_argument("--run-id", help="run id sent to participants (default: a random UUID)")
+    command.add_argument(
+        "--lease",
+        type=float,
+        help="[s] a participant ends the run after this long without a call (default: the "
+        "larger of 60 s and 4 call deadlines)",
+    )
     command.add_argument("--connect-timeout", type=float, default=10.0, help="[s]")
 
 
@@ -101,8 +107,9 @@ def options_of(args: argparse.Namespace) -> RunOptions:
         algorithm=Algorithm(args.algorithm) if args.algorithm else None,
         realtime_factor=getattr(args, "realtime_factor", None) or None,
         parameters=parameters,
-        run_id=args.run_id,
         connect_timeout=args.connect_timeout,
+        lease=args.lease,
+        **({"run_id": args.run_id} if args.run_id else {}),
     )
 
 
@@ -183,6 +190,9 @@ async def _run(args: argparse.Namespace, options: RunOptions, out: TextIO) -> in
     )
     print(f"results: {outcome.results_csv}", file=out)
     print(f"summary: {outcome.summary_json}", file=out)
+    if result.status == "terminated":
+        print(f"terminated early: {result.reason}", file=out)
+        return EXIT_OK
     if result.status != "completed":
         print(f"error: run {result.status}: {result.reason}", file=sys.stderr)
         return EXIT_ERROR

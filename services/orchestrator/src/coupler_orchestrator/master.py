@@ -20,7 +20,7 @@ import structlog
 
 from coupler.channels import RunSetup, Value
 from coupler.errors import CouplerError, ScenarioError
-from coupler.participant import Values
+from coupler.participant import EndRun, Values
 from coupler_orchestrator.observer import Column, Observer, RunInfo
 from coupler_orchestrator.plan import Algorithm, Converter, Link, Member, Plan
 
@@ -130,13 +130,15 @@ class Master:
         self.store: dict[Key, Value] = {}
         self.latency: dict[str, list[float]] = {m.name: [] for m in plan.members}
         self.completed_steps = 0
+        self._ended: str | None = None
+        """Why a participant asked to end the run, once one did."""
 
     async def run(self) -> RunResult:
         """Initialize, step to the end, terminate; never raises for a participant's failure."""
         plan, grid = self.plan, self.plan.grid
         wall_start = wallclock.perf_counter()
         status, reason = "completed", ""
-        initialized: list[Member] = []
+        initialized: list[Member] = []  # every member Initialize was sent to
         log.info(
             "run_started",
             run_id=plan.run_id,
@@ -166,6 +168,10 @@ class Master:
                     await self._gauss_seidel_step(k, held)
                 self.completed_steps = k + 1
                 self._record(grid.time(k + 1))
+                if self._ended is not None:
+                    status, reason = "terminated", self._ended
+                    log.info("run_terminated", run_id=plan.run_id, reason=reason)
+                    break
                 if plan.realtime_factor:
                     await self._pace(wall_start, grid.time(k + 1) - grid.start)
         except CouplerError as exc:
@@ -210,10 +216,10 @@ class Master:
                 stop_time=grid.stop,
                 parameters=m.parameters,
                 inputs=m.start_inputs,
+                lease=self.plan.lease,
             )
-            outputs = await m.participant.initialize(setup)
-            initialized.append(m)
-            return outputs
+            initialized.append(m)  # Terminated on every path, even if its answer is refused
+            return await m.participant.initialize(setup)
 
         results = await asyncio.gather(*(init(m) for m in self.members), return_exceptions=True)
         for m, result in zip(self.members, results, strict=True):
@@ -224,10 +230,15 @@ class Master:
 
     async def _step(self, m: Member, k: int) -> Values:
         grid = self.plan.grid
-        t0, t1 = grid.time(k), grid.time(k + m.multiple)
         inputs = self.feeds[m.name].gather(self.store) if m.name in self.feeds else {}
         started = wallclock.perf_counter()
-        outputs = await m.participant.do_step(t0, t1 - t0, inputs)
+        try:
+            outputs = await m.participant.do_step(grid.time(k), grid.step * m.multiple, inputs)
+        except EndRun as end:
+            outputs = end.outputs
+            if self._ended is None:
+                reached = grid.time(k + m.multiple)
+                self._ended = f"{m.name} asked to end the run at t={reached:g} s: {end.reason}"
         self.latency[m.name].append(wallclock.perf_counter() - started)
         return outputs
 

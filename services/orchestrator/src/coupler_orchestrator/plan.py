@@ -111,7 +111,10 @@ class Plan:
     """The communication points."""
     algorithm: Algorithm = Algorithm.JACOBI
     """Master algorithm."""
-    run_id: str = "run"
-    """Identifies the run in logs, participants and results."""
+    run_id: str
+    """Identifies the run in logs, participants and results; unique per run."""
+    lease: float = 0.0
+    """Lease granted with Initialize [s]: a participant ends the run after this long without
+    a call (0: the participant's default)."""
     realtime_factor: float | None = None
     """Pace simulated time at this multiple of wall time; None runs as fast as possible."""

@@ -9,11 +9,19 @@ compatible types. All problems are reported together in one ValidationError.
 from __future__ import annotations
 
 import asyncio
+import uuid
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from coupler.channels import Causality, Channel, Description, Value, ValueType
+from coupler.channels import (
+    Causality,
+    Channel,
+    Description,
+    Value,
+    ValueType,
+    fits_fixed_step,
+)
 from coupler.client import RemoteParticipant
 from coupler.errors import CouplerError, ScenarioError, ValidationError
 from coupler.fmu import FmuParticipant
@@ -46,8 +54,11 @@ class RunOptions:
     """Pace the run; None runs as fast as possible."""
     parameters: Mapping[str, str] = field(default_factory=dict)
     """``Component.name`` -> value text, overriding the SSD's parameter bindings."""
-    run_id: str = "run"
-    """Identifies the run."""
+    run_id: str = field(default_factory=lambda: uuid.uuid4().hex)
+    """Identifies the run; a random UUID unless given."""
+    lease: float | None = None
+    """Lease of the run at each participant [s]; default: well above the call deadline and the
+    pacing (``lease_of``)."""
     connect_timeout: float = 10.0
     """How long a remote participant may take to report SERVING [s]."""
     call_timeout: float = 30.0
@@ -308,8 +319,20 @@ def build_plan(
         grid=grid,
         algorithm=algorithm,
         run_id=options.run_id,
+        lease=lease_of(options, grid, max((m.multiple for m in members), default=1)),
         realtime_factor=options.realtime_factor,
     )
+
+
+def lease_of(options: RunOptions, grid: TimeGrid, multiple: int) -> float:
+    """The lease: given, else the larger of 60 s and four call deadlines, and at least three
+    paced steps of the slowest member (so pacing never looks like silence)."""
+    if options.lease is not None:
+        return options.lease
+    lease = max(60.0, 4 * options.call_timeout)
+    if options.realtime_factor:
+        lease = max(lease, 3 * grid.step * multiple / options.realtime_factor)
+    return lease
 
 
 def _link(
@@ -376,7 +399,7 @@ def _member(
     fixed = description.capabilities.fixed_step_size
     if fixed and grid is not None:
         step = grid.step * multiple
-        if abs(step / fixed - round(step / fixed)) > 1e-9 * max(1.0, step / fixed) or step < fixed:
+        if not fits_fixed_step(step, fixed):
             raise ScenarioError(
                 f"{_where(component)}: participant '{component.name}' steps in whole multiples "
                 f"of {fixed:g} s, but its communication step is {step:g} s; choose --step "

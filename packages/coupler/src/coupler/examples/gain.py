@@ -7,7 +7,7 @@ Per step from t to t + h, with inputs held over the step (explicit Euler for the
     count    = n + offset               Integer
     inverted = not flag                 Boolean
     echo     = label                    String
-    train_out = train with speed_mps *= gain, time_s = t + h    Binary coupler.v1.TrainState
+    blob_out = blob, its bytes in reverse order                  Binary
 """
 
 from __future__ import annotations
@@ -16,9 +16,7 @@ from collections.abc import Mapping
 
 from coupler.channels import Causality, Channel, Description, RunSetup, Value, ValueType
 from coupler.participant import Participant, Values
-from coupler.values import decode_message, encode_message
 
-TRAIN_STATE = "coupler.v1.TrainState"
 _I, _O, _P = Causality.INPUT, Causality.OUTPUT, Causality.PARAMETER
 _R, _N, _B, _S, _X = (
     ValueType.REAL,
@@ -38,13 +36,13 @@ CHANNELS = (
     Channel(name="n", causality=_I, type=_N, start=0),
     Channel(name="flag", causality=_I, type=_B, start=False),
     Channel(name="label", causality=_I, type=_S, start=""),
-    Channel(name="train", causality=_I, type=_X, start=b"", message_type=TRAIN_STATE),
+    Channel(name="blob", causality=_I, type=_X, start=b"", description="any bytes"),
     Channel(name="y", causality=_O, type=_R, unit="m/s", description="gain * u"),
     Channel(name="x", causality=_O, type=_R, unit="m", description="integral of u"),
     Channel(name="count", causality=_O, type=_N, description="n + offset"),
     Channel(name="inverted", causality=_O, type=_B, description="not flag"),
     Channel(name="echo", causality=_O, type=_S, description="label"),
-    Channel(name="train_out", causality=_O, type=_X, message_type=TRAIN_STATE),
+    Channel(name="blob_out", causality=_O, type=_X, description="blob reversed"),
 )
 
 
@@ -56,7 +54,6 @@ class GainParticipant(Participant):
         self._parameters: dict[str, Value] = {}
         self._inputs: dict[str, Value] = {}
         self._x = 0.0
-        self._time = 0.0
 
     async def describe(self) -> Description:
         return Description(
@@ -76,13 +73,11 @@ class GainParticipant(Participant):
             if c.causality is _I
         }
         self._x = float(self._parameters["x0"])
-        self._time = setup.start_time
         return self._outputs()
 
     async def do_step(self, time: float, step: float, inputs: Mapping[str, Value]) -> Values:
         self._inputs.update(inputs)
         self._x += float(self._inputs["u"]) * step
-        self._time = time + step
         return self._outputs()
 
     async def terminate(self, reason: str = "") -> None:
@@ -90,18 +85,11 @@ class GainParticipant(Participant):
 
     def _outputs(self) -> Values:
         gain = float(self._parameters["gain"])
-        train = self._inputs["train"]
-        train_out = b""
-        if isinstance(train, bytes) and train:
-            state = decode_message(TRAIN_STATE, train)
-            state["speed_mps"] = state["speed_mps"] * gain
-            state["time_s"] = self._time
-            train_out = encode_message(TRAIN_STATE, state)
         return {
             "y": gain * float(self._inputs["u"]),
             "x": self._x,
             "count": int(self._inputs["n"]) + int(self._parameters["offset"]),
             "inverted": not self._inputs["flag"],
             "echo": str(self._inputs["label"]),
-            "train_out": train_out,
+            "blob_out": bytes(self._inputs["blob"])[::-1],
         }

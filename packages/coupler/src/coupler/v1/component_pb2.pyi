@@ -6,6 +6,13 @@ Coupler's one generic participant service.
 Every participant of a co-simulation -- an FMU host, a simulator wrapped by an adapter, a live
 view -- implements GRPCComponentService once. Initialize and DoStep keep the names of the
 published design; Describe, Terminate and StepStream extend it.
+
+Runs are leases. Initialize starts a run with an id chosen by the orchestrator; every later
+call of that run (DoStep, every StepStream request, Terminate) carries the same id, and a call
+carrying another id is refused with FAILED_PRECONDITION. The run ends on Terminate, when the
+StepStream that carried it ends without Terminate, or when no call arrives for `lease_seconds`
+-- whichever comes first. The participant then serves the next Initialize: an orchestrator
+that dies never locks a participant.
 """
 
 from collections import abc as _abc
@@ -165,7 +172,10 @@ class Capabilities(_message.Message):
     variable_step_size: _builtins.bool
     """The participant accepts any step size; false means only `fixed_step_size`."""
     fixed_step_size: _builtins.float
-    """Non-zero: the only step size (or a divisor of it) the participant accepts [s]."""
+    """Non-zero: every step_size the participant receives is a whole multiple of this [s]
+    (n * fixed_step_size with n >= 1, to a relative tolerance of 1e-9). A participant that
+    advances its simulator in fixed ticks (e.g. OpenRails' lockstep step) declares its tick here.
+    """
     def __init__(
         self,
         *,
@@ -237,10 +247,19 @@ class InitializeRequest(_message.Message):
     STOP_TIME_FIELD_NUMBER: _builtins.int
     PARAMETERS_FIELD_NUMBER: _builtins.int
     INPUTS_FIELD_NUMBER: _builtins.int
+    LEASE_SECONDS_FIELD_NUMBER: _builtins.int
     run_id: _builtins.str
+    """Identifies the run; unique per run (the orchestrator uses a random UUID unless told
+    otherwise). Every later call of the run repeats it.
+    """
     start_time: _builtins.float
     step_size: _builtins.float
     stop_time: _builtins.float
+    lease_seconds: _builtins.float
+    """The run's lease [s]: when no call of this run arrives for this long, the participant ends
+    the run itself (logging why) and serves the next one. 0: the participant's default (60 s).
+    The orchestrator sets it well above its per-call deadline and its pacing.
+    """
     @_builtins.property
     def parameters(self) -> _containers.RepeatedCompositeFieldContainer[Global___VariableBinding]: ...
     @_builtins.property
@@ -256,10 +275,11 @@ class InitializeRequest(_message.Message):
         stop_time: _builtins.float | None = ...,
         parameters: _abc.Iterable[Global___VariableBinding] | None = ...,
         inputs: _abc.Iterable[Global___VariableBinding] | None = ...,
+        lease_seconds: _builtins.float = ...,
     ) -> None: ...
     _HasFieldArgType: _TypeAlias = _typing.Literal["_stop_time", b"_stop_time", "stop_time", b"stop_time"]  # noqa: Y015
     def HasField(self, field_name: _HasFieldArgType) -> _builtins.bool: ...
-    _ClearFieldArgType: _TypeAlias = _typing.Literal["_stop_time", b"_stop_time", "inputs", b"inputs", "parameters", b"parameters", "run_id", b"run_id", "start_time", b"start_time", "step_size", b"step_size", "stop_time", b"stop_time"]  # noqa: Y015
+    _ClearFieldArgType: _TypeAlias = _typing.Literal["_stop_time", b"_stop_time", "inputs", b"inputs", "lease_seconds", b"lease_seconds", "parameters", b"parameters", "run_id", b"run_id", "start_time", b"start_time", "step_size", b"step_size", "stop_time", b"stop_time"]  # noqa: Y015
     def ClearField(self, field_name: _ClearFieldArgType) -> None: ...
     _WhichOneofReturnType__stop_time: _TypeAlias = _typing.Literal["stop_time"]  # noqa: Y015
     _WhichOneofArgType__stop_time: _TypeAlias = _typing.Literal["_stop_time", b"_stop_time"]  # noqa: Y015
@@ -296,9 +316,17 @@ class DoStepRequest(_message.Message):
     CURRENT_TIME_FIELD_NUMBER: _builtins.int
     STEP_SIZE_FIELD_NUMBER: _builtins.int
     INPUTS_FIELD_NUMBER: _builtins.int
+    RUN_ID_FIELD_NUMBER: _builtins.int
     current_time: _builtins.float
-    """Communication point at which the step starts [s]."""
+    """Communication point at which the step starts [s]: t_k = t_0 + k * h, computed by
+    multiplication by the orchestrator (never a running sum).
+    """
     step_size: _builtins.float
+    """Exactly the configured communication step of this participant (h * multiple), not the
+    difference of two communication points [s].
+    """
+    run_id: _builtins.str
+    """The run this step belongs to (InitializeRequest.run_id)."""
     @_builtins.property
     def inputs(self) -> _containers.RepeatedCompositeFieldContainer[Global___VariableBinding]:
         """Inputs valid from current_time."""
@@ -309,10 +337,11 @@ class DoStepRequest(_message.Message):
         current_time: _builtins.float = ...,
         step_size: _builtins.float = ...,
         inputs: _abc.Iterable[Global___VariableBinding] | None = ...,
+        run_id: _builtins.str = ...,
     ) -> None: ...
     _HasFieldArgType: _TypeAlias = _Never  # noqa: Y015
     def HasField(self, field_name: _HasFieldArgType) -> _builtins.bool: ...
-    _ClearFieldArgType: _TypeAlias = _typing.Literal["current_time", b"current_time", "inputs", b"inputs", "step_size", b"step_size"]  # noqa: Y015
+    _ClearFieldArgType: _TypeAlias = _typing.Literal["current_time", b"current_time", "inputs", b"inputs", "run_id", b"run_id", "step_size", b"step_size"]  # noqa: Y015
     def ClearField(self, field_name: _ClearFieldArgType) -> None: ...
     def WhichOneof(self, oneof_group: _Never) -> None: ...
 
@@ -323,6 +352,16 @@ class DoStepResponse(_message.Message):
     DESCRIPTOR: _descriptor.Descriptor
 
     OUTPUTS_FIELD_NUMBER: _builtins.int
+    TERMINATE_FIELD_NUMBER: _builtins.int
+    TERMINATE_REASON_FIELD_NUMBER: _builtins.int
+    terminate: _builtins.bool
+    """The participant asks to end the run after this step (FMI 3's terminateSimulation, FMI 2's
+    terminated status): the outputs above are its last, at current_time + step_size. The
+    orchestrator records them, Terminates every participant and reports the run as
+    `terminated`, not `failed`.
+    """
+    terminate_reason: _builtins.str
+    """Why, for people: e.g. "the tank is empty". Empty when terminate is false."""
     @_builtins.property
     def outputs(self) -> _containers.RepeatedCompositeFieldContainer[Global___VariableBinding]:
         """Outputs at current_time + step_size."""
@@ -331,10 +370,12 @@ class DoStepResponse(_message.Message):
         self,
         *,
         outputs: _abc.Iterable[Global___VariableBinding] | None = ...,
+        terminate: _builtins.bool = ...,
+        terminate_reason: _builtins.str = ...,
     ) -> None: ...
     _HasFieldArgType: _TypeAlias = _Never  # noqa: Y015
     def HasField(self, field_name: _HasFieldArgType) -> _builtins.bool: ...
-    _ClearFieldArgType: _TypeAlias = _typing.Literal["outputs", b"outputs"]  # noqa: Y015
+    _ClearFieldArgType: _TypeAlias = _typing.Literal["outputs", b"outputs", "terminate", b"terminate", "terminate_reason", b"terminate_reason"]  # noqa: Y015
     def ClearField(self, field_name: _ClearFieldArgType) -> None: ...
     def WhichOneof(self, oneof_group: _Never) -> None: ...
 
@@ -345,15 +386,21 @@ class TerminateRequest(_message.Message):
     DESCRIPTOR: _descriptor.Descriptor
 
     REASON_FIELD_NUMBER: _builtins.int
+    RUN_ID_FIELD_NUMBER: _builtins.int
     reason: _builtins.str
+    run_id: _builtins.str
+    """The run to end (InitializeRequest.run_id). Terminate for a run that has already ended is
+    answered OK; for another run than the active one, FAILED_PRECONDITION.
+    """
     def __init__(
         self,
         *,
         reason: _builtins.str = ...,
+        run_id: _builtins.str = ...,
     ) -> None: ...
     _HasFieldArgType: _TypeAlias = _Never  # noqa: Y015
     def HasField(self, field_name: _HasFieldArgType) -> _builtins.bool: ...
-    _ClearFieldArgType: _TypeAlias = _typing.Literal["reason", b"reason"]  # noqa: Y015
+    _ClearFieldArgType: _TypeAlias = _typing.Literal["reason", b"reason", "run_id", b"run_id"]  # noqa: Y015
     def ClearField(self, field_name: _ClearFieldArgType) -> None: ...
     def WhichOneof(self, oneof_group: _Never) -> None: ...
 

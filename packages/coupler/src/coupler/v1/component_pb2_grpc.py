@@ -72,7 +72,8 @@ class GRPCComponentServiceServicer:
         raise NotImplementedError('Method not implemented!')
 
     def Initialize(self, request, context):
-        """Starts a run. A participant serves one run at a time.
+        """Starts a run and grants its lease. A participant serves one run at a time: Initialize during
+        another run is FAILED_PRECONDITION (the message does not reveal that run's id).
         """
         context.set_code(grpc.StatusCode.UNIMPLEMENTED)
         context.set_details('Method not implemented!')
@@ -86,7 +87,8 @@ class GRPCComponentServiceServicer:
         raise NotImplementedError('Method not implemented!')
 
     def StepStream(self, request_iterator, context):
-        """The step loop as one bidirectional stream: one response per request, in order.
+        """The step loop as one bidirectional stream: one response per request, in order. Every
+        request carries the run id. When the stream ends before Terminate, the run ends.
         """
         context.set_code(grpc.StatusCode.UNIMPLEMENTED)
         context.set_details('Method not implemented!')

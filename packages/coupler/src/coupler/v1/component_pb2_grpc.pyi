@@ -6,6 +6,13 @@ Coupler's one generic participant service.
 Every participant of a co-simulation -- an FMU host, a simulator wrapped by an adapter, a live
 view -- implements GRPCComponentService once. Initialize and DoStep keep the names of the
 published design; Describe, Terminate and StepStream extend it.
+
+Runs are leases. Initialize starts a run with an id chosen by the orchestrator; every later
+call of that run (DoStep, every StepStream request, Terminate) carries the same id, and a call
+carrying another id is refused with FAILED_PRECONDITION. The run ends on Terminate, when the
+StepStream that carried it ends without Terminate, or when no call arrives for `lease_seconds`
+-- whichever comes first. The participant then serves the next Initialize: an orchestrator
+that dies never locks a participant.
 """
 
 from collections import abc as _abc
@@ -39,11 +46,15 @@ class GRPCComponentServiceStub:
     Describe: _grpc.UnaryUnaryMultiCallable[_component_pb2.DescribeRequest, _component_pb2.DescribeResponse]
     """The participant's channels and capabilities."""
     Initialize: _grpc.UnaryUnaryMultiCallable[_component_pb2.InitializeRequest, _component_pb2.InitializeResponse]
-    """Starts a run. A participant serves one run at a time."""
+    """Starts a run and grants its lease. A participant serves one run at a time: Initialize during
+    another run is FAILED_PRECONDITION (the message does not reveal that run's id).
+    """
     DoStep: _grpc.UnaryUnaryMultiCallable[_component_pb2.DoStepRequest, _component_pb2.DoStepResponse]
     """Advances the run by one communication step."""
     StepStream: _grpc.StreamStreamMultiCallable[_component_pb2.DoStepRequest, _component_pb2.DoStepResponse]
-    """The step loop as one bidirectional stream: one response per request, in order."""
+    """The step loop as one bidirectional stream: one response per request, in order. Every
+    request carries the run id. When the stream ends before Terminate, the run ends.
+    """
     Terminate: _grpc.UnaryUnaryMultiCallable[_component_pb2.TerminateRequest, _component_pb2.TerminateResponse]
     """Ends the run; the participant is free for the next Initialize."""
 
@@ -53,11 +64,15 @@ class GRPCComponentServiceAsyncStub(GRPCComponentServiceStub):
     Describe: _aio.UnaryUnaryMultiCallable[_component_pb2.DescribeRequest, _component_pb2.DescribeResponse]  # type: ignore[assignment]
     """The participant's channels and capabilities."""
     Initialize: _aio.UnaryUnaryMultiCallable[_component_pb2.InitializeRequest, _component_pb2.InitializeResponse]  # type: ignore[assignment]
-    """Starts a run. A participant serves one run at a time."""
+    """Starts a run and grants its lease. A participant serves one run at a time: Initialize during
+    another run is FAILED_PRECONDITION (the message does not reveal that run's id).
+    """
     DoStep: _aio.UnaryUnaryMultiCallable[_component_pb2.DoStepRequest, _component_pb2.DoStepResponse]  # type: ignore[assignment]
     """Advances the run by one communication step."""
     StepStream: _aio.StreamStreamMultiCallable[_component_pb2.DoStepRequest, _component_pb2.DoStepResponse]  # type: ignore[assignment]
-    """The step loop as one bidirectional stream: one response per request, in order."""
+    """The step loop as one bidirectional stream: one response per request, in order. Every
+    request carries the run id. When the stream ends before Terminate, the run ends.
+    """
     Terminate: _aio.UnaryUnaryMultiCallable[_component_pb2.TerminateRequest, _component_pb2.TerminateResponse]  # type: ignore[assignment]
     """Ends the run; the participant is free for the next Initialize."""
 
@@ -76,7 +91,9 @@ class GRPCComponentServiceServicer(metaclass=_abc_1.ABCMeta):
         request: _component_pb2.InitializeRequest,
         context: _ServicerContext,
     ) -> _typing.Union[_component_pb2.InitializeResponse, _abc.Awaitable[_component_pb2.InitializeResponse]]:
-        """Starts a run. A participant serves one run at a time."""
+        """Starts a run and grants its lease. A participant serves one run at a time: Initialize during
+        another run is FAILED_PRECONDITION (the message does not reveal that run's id).
+        """
 
     @_abc_1.abstractmethod
     def DoStep(
@@ -92,7 +109,9 @@ class GRPCComponentServiceServicer(metaclass=_abc_1.ABCMeta):
         request_iterator: _MaybeAsyncIterator[_component_pb2.DoStepRequest],
         context: _ServicerContext,
     ) -> _typing.Union[_abc.Iterator[_component_pb2.DoStepResponse], _abc.AsyncIterator[_component_pb2.DoStepResponse]]:
-        """The step loop as one bidirectional stream: one response per request, in order."""
+        """The step loop as one bidirectional stream: one response per request, in order. Every
+        request carries the run id. When the stream ends before Terminate, the run ends.
+        """
 
     @_abc_1.abstractmethod
     def Terminate(

@@ -1,0 +1,305 @@
+"""Python values <-> protobuf messages of the protocol. The only module that builds or reads them.
+
+Every value is checked against its channel's description (``coupler.values.check``): the
+type, the int32 range, the NaN/Inf policy and the size limit of binary values. Errors name the
+channel and what it expects. ``coupler.server`` and ``coupler.client`` call these functions;
+the rest of Coupler speaks Python values.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
+
+from coupler.channels import (
+    Capabilities,
+    Causality,
+    Channel,
+    Description,
+    RunSetup,
+    Value,
+    ValueType,
+)
+from coupler.errors import ChannelValueError
+from coupler.v1 import component_pb2 as pb
+from coupler.values import DEFAULT_POLICY, ValuePolicy, check
+
+_FIELD_OF_TYPE = {
+    ValueType.REAL: "real",
+    ValueType.INTEGER: "integer",
+    ValueType.ENUMERATION: "integer",
+    ValueType.BOOLEAN: "boolean",
+    ValueType.STRING: "text",
+    ValueType.BINARY: "binary",
+}
+_KIND_OF_FIELD = {
+    "real": "Real",
+    "integer": "Integer",
+    "boolean": "Boolean",
+    "text": "String",
+    "binary": "Binary",
+}
+_CAUSALITY_TO_PB = {
+    Causality.INPUT: pb.CAUSALITY_INPUT,
+    Causality.OUTPUT: pb.CAUSALITY_OUTPUT,
+    Causality.PARAMETER: pb.CAUSALITY_PARAMETER,
+}
+_CAUSALITY_FROM_PB = {v: k for k, v in _CAUSALITY_TO_PB.items()}
+_TYPE_TO_PB = {
+    ValueType.REAL: pb.VALUE_TYPE_REAL,
+    ValueType.INTEGER: pb.VALUE_TYPE_INTEGER,
+    ValueType.BOOLEAN: pb.VALUE_TYPE_BOOLEAN,
+    ValueType.STRING: pb.VALUE_TYPE_STRING,
+    ValueType.BINARY: pb.VALUE_TYPE_BINARY,
+    ValueType.ENUMERATION: pb.VALUE_TYPE_ENUMERATION,
+}
+_TYPE_FROM_PB = {v: k for k, v in _TYPE_TO_PB.items()}
+
+# Message classes, re-exported so that server and client name them through this module.
+DescribeRequest = pb.DescribeRequest
+DescribeResponse = pb.DescribeResponse
+InitializeRequest = pb.InitializeRequest
+InitializeResponse = pb.InitializeResponse
+DoStepRequest = pb.DoStepRequest
+DoStepResponse = pb.DoStepResponse
+TerminateRequest = pb.TerminateRequest
+TerminateResponse = pb.TerminateResponse
+SERVICE_NAME = pb.DESCRIPTOR.services_by_name["GRPCComponentService"].full_name
+
+
+class Codec:
+    """Encodes and decodes the bindings of one participant, checked against its channels."""
+
+    def __init__(self, description: Description, policy: ValuePolicy = DEFAULT_POLICY) -> None:
+        self.description = description
+        self.policy = policy
+        self._channels = {c.name: c for c in description.channels}
+
+    def channel(self, name: str, allowed: Iterable[Causality] | None = None) -> Channel:
+        """The channel ``name``, or ChannelValueError listing the channels there are."""
+        channel = self._channels.get(name)
+        wanted = set(allowed) if allowed is not None else None
+        if channel is None or (wanted is not None and channel.causality not in wanted):
+            candidates = sorted(
+                c.name for c in self.description.channels if wanted is None or c.causality in wanted
+            )
+            kinds = "/".join(sorted(str(c) for c in wanted)) if wanted else "any"
+            what = "no channel" if channel is None else f"no {kinds} channel"
+            raise ChannelValueError(
+                f"participant '{self.description.name}' has {what} '{name}' "
+                f"({kinds} channels: {', '.join(candidates) or 'none'})",
+                channel=name,
+                expected=kinds,
+            )
+        return channel
+
+    def encode(
+        self, values: Mapping[str, object], allowed: Iterable[Causality] | None = None
+    ) -> list[pb.VariableBinding]:
+        """Bindings for ``values``, each checked against its channel."""
+        allowed = tuple(allowed) if allowed is not None else None
+        return [self.binding(self.channel(n, allowed), v) for n, v in values.items()]
+
+    def binding(self, channel: Channel, value: object) -> pb.VariableBinding:
+        """One checked binding."""
+        checked = check(channel, value, self.policy)
+        binding = pb.VariableBinding(channel=channel.name)
+        setattr(binding, _FIELD_OF_TYPE[channel.type], checked)
+        return binding
+
+    def decode(
+        self, bindings: Iterable[pb.VariableBinding], allowed: Iterable[Causality] | None = None
+    ) -> dict[str, Value]:
+        """Python values of ``bindings``, each checked against its channel."""
+        allowed = tuple(allowed) if allowed is not None else None
+        values: dict[str, Value] = {}
+        for binding in bindings:
+            channel = self.channel(binding.channel, allowed)
+            field = binding.WhichOneof("value")
+            if field != _FIELD_OF_TYPE[channel.type]:
+                raise ChannelValueError(
+                    f"channel '{channel.name}' expects {channel.type}, got "
+                    f"{_KIND_OF_FIELD.get(field or '', 'no value')}",
+                    channel=channel.name,
+                    expected=str(channel.type),
+                )
+            values[channel.name] = check(channel, getattr(binding, field), self.policy)
+        return values
+
+
+def _untyped_binding(name: str, value: Value) -> pb.VariableBinding:
+    binding = pb.VariableBinding(channel=name)
+    if isinstance(value, bool):
+        binding.boolean = value
+    elif isinstance(value, int):
+        binding.integer = value
+    elif isinstance(value, float):
+        binding.real = value
+    elif isinstance(value, str):
+        binding.text = value
+    else:
+        binding.binary = bytes(value)
+    return binding
+
+
+def _untyped_value(binding: pb.VariableBinding) -> Value:
+    field = binding.WhichOneof("value")
+    value: Value = getattr(binding, field) if field else 0.0
+    return value
+
+
+# --- Describe --------------------------------------------------------------------------------
+
+
+def description_to_pb(description: Description) -> pb.DescribeResponse:
+    """The Describe answer for ``description``."""
+    caps = description.capabilities
+    return pb.DescribeResponse(
+        name=description.name,
+        implementation=description.implementation,
+        capabilities=pb.Capabilities(
+            streaming=caps.streaming,
+            variable_step_size=caps.variable_step_size,
+            fixed_step_size=caps.fixed_step_size,
+        ),
+        channels=[
+            pb.ChannelDescription(
+                name=c.name,
+                causality=_CAUSALITY_TO_PB[c.causality],
+                type=_TYPE_TO_PB[c.type],
+                unit=c.unit,
+                description=c.description,
+                message_type=c.message_type,
+                start=_untyped_binding(c.name, c.start) if c.start is not None else None,
+            )
+            for c in description.channels
+        ],
+    )
+
+
+def description_from_pb(response: pb.DescribeResponse) -> Description:
+    """The Python description carried by a Describe answer."""
+    channels = []
+    for c in response.channels:
+        if c.causality not in _CAUSALITY_FROM_PB or c.type not in _TYPE_FROM_PB:
+            raise ChannelValueError(
+                f"participant '{response.name}' describes channel '{c.name}' with an "
+                f"unspecified causality or type",
+                channel=c.name,
+            )
+        channels.append(
+            Channel(
+                name=c.name,
+                causality=_CAUSALITY_FROM_PB[c.causality],
+                type=_TYPE_FROM_PB[c.type],
+                unit=c.unit,
+                description=c.description,
+                message_type=c.message_type,
+                start=_untyped_value(c.start) if c.HasField("start") else None,
+            )
+        )
+    caps = response.capabilities
+    return Description(
+        name=response.name,
+        channels=tuple(channels),
+        implementation=response.implementation,
+        capabilities=Capabilities(
+            streaming=caps.streaming,
+            variable_step_size=caps.variable_step_size,
+            fixed_step_size=caps.fixed_step_size,
+        ),
+    )
+
+
+# --- Initialize ------------------------------------------------------------------------------
+
+
+def initialize_to_pb(setup: RunSetup, codec: Codec) -> pb.InitializeRequest:
+    """The Initialize request for ``setup``, values checked against the participant's channels."""
+    return pb.InitializeRequest(
+        run_id=setup.run_id,
+        start_time=setup.start_time,
+        step_size=setup.step_size,
+        stop_time=setup.stop_time,
+        parameters=codec.encode(setup.parameters, (Causality.PARAMETER,)),
+        inputs=codec.encode(setup.inputs, (Causality.INPUT,)),
+        lease_seconds=setup.lease,
+    )
+
+
+def initialize_from_pb(request: pb.InitializeRequest, codec: Codec) -> RunSetup:
+    """The run set-up an Initialize request carries."""
+    return RunSetup(
+        run_id=request.run_id,
+        start_time=request.start_time,
+        step_size=request.step_size,
+        stop_time=request.stop_time if request.HasField("stop_time") else None,
+        parameters=codec.decode(request.parameters, (Causality.PARAMETER,)),
+        inputs=codec.decode(request.inputs, (Causality.INPUT,)),
+        lease=request.lease_seconds,
+    )
+
+
+def initialize_response(outputs: Mapping[str, object], codec: Codec) -> pb.InitializeResponse:
+    return pb.InitializeResponse(outputs=codec.encode(outputs, (Causality.OUTPUT,)))
+
+
+# --- DoStep ----------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, slots=True)
+class Step:
+    """What a DoStep request carries."""
+
+    run_id: str
+    time: float
+    step: float
+    inputs: dict[str, Value]
+
+
+def step_to_pb(
+    run_id: str, time: float, step: float, inputs: Mapping[str, object], codec: Codec
+) -> pb.DoStepRequest:
+    return pb.DoStepRequest(
+        run_id=run_id,
+        current_time=time,
+        step_size=step,
+        inputs=codec.encode(inputs, (Causality.INPUT,)),
+    )
+
+
+def step_from_pb(request: pb.DoStepRequest, codec: Codec) -> Step:
+    """The step a DoStep request asks for, inputs checked."""
+    inputs = codec.decode(request.inputs, (Causality.INPUT,))
+    return Step(request.run_id, request.current_time, request.step_size, inputs)
+
+
+def step_response(
+    outputs: Mapping[str, object], codec: Codec, *, terminate_reason: str | None = None
+) -> pb.DoStepResponse:
+    """The answer to a step; with ``terminate_reason`` it asks to end the run."""
+    response = pb.DoStepResponse(outputs=codec.encode(outputs, (Causality.OUTPUT,)))
+    if terminate_reason is not None:
+        response.terminate = True
+        response.terminate_reason = terminate_reason
+    return response
+
+
+def outputs_from_pb(
+    response: pb.InitializeResponse | pb.DoStepResponse, codec: Codec
+) -> dict[str, Value]:
+    return codec.decode(response.outputs, (Causality.OUTPUT,))
+
+
+def termination_requested(response: pb.DoStepResponse) -> str | None:
+    """The reason when the answer asks to end the run, else None."""
+    if not response.terminate:
+        return None
+    return response.terminate_reason or "the participant asked to end the run"
+
+
+# --- Terminate -------------------------------------------------------------------------------
+
+
+def terminate_to_pb(run_id: str, reason: str) -> pb.TerminateRequest:
+    return pb.TerminateRequest(run_id=run_id, reason=reason)
