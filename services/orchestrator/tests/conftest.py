@@ -25,6 +25,7 @@ from coupler.examples.gain import GainParticipant
 from coupler.fmubuild import build_all
 from coupler.logs import configure_logging
 from coupler.participant import Participant, Values
+from coupler.security import ServerSecurity
 from coupler.server import ParticipantServer
 from coupler_orchestrator.cli import main
 
@@ -93,12 +94,14 @@ def coupler(capsys: pytest.CaptureFixture[str]) -> Coupler:
 
 
 @contextlib.contextmanager
-def serving(participant: Participant) -> Iterator[ParticipantServer]:
+def serving(
+    participant: Participant, security: ServerSecurity | None = None
+) -> Iterator[ParticipantServer]:
     """``participant`` served on 127.0.0.1, port 0, by a loop in a background thread."""
     loop = asyncio.new_event_loop()
     thread = threading.Thread(target=loop.run_forever, name="participant-server", daemon=True)
     thread.start()
-    server = ParticipantServer(participant, host="127.0.0.1", port=0)
+    server = ParticipantServer(participant, host="127.0.0.1", port=0, security=security)
     try:
         asyncio.run_coroutine_threadsafe(server.start(), loop).result(10)
         yield server

@@ -1,4 +1,5 @@
-"""``RemoteParticipant``: a participant behind ``grpc://HOST:PORT``, seen as a local one.
+"""``RemoteParticipant``: a participant behind ``grpc://HOST:PORT`` (or ``grpcs://`` with TLS),
+seen as a local one.
 
 gRPC errors are translated to Coupler's exception tree here, in ``_translate``, and nowhere else.
 """
@@ -8,7 +9,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import time
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from types import TracebackType
 from typing import Any, TypeVar
 from urllib.parse import urlsplit
@@ -26,22 +27,36 @@ from coupler.errors import (
     ScenarioError,
 )
 from coupler.participant import EndRun, Participant, Values
+from coupler.security import ClientSecurity
 from coupler.v1 import component_pb2_grpc as pb_grpc
 
 T = TypeVar("T")
 _UNAVAILABLE = {grpc.StatusCode.UNAVAILABLE, grpc.StatusCode.CANCELLED}
 
 
+SCHEMES = ("grpc", "grpcs")
+
+
 def parse_address(address: str) -> str:
-    """``grpc://host:port`` (or bare ``host:port``) as the target string grpc wants."""
-    parts = urlsplit(address if "://" in address else f"grpc://{address}")
-    if parts.scheme != "grpc" or not parts.hostname or parts.port is None:
+    """``grpc://host:port``, ``grpcs://host:port`` (or bare ``host:port``) as the target string
+    grpc wants."""
+    try:
+        parts = urlsplit(address if "://" in address else f"grpc://{address}")
+        port = parts.port
+    except ValueError:
+        port = None
+    if parts.scheme not in SCHEMES or not parts.hostname or port is None:
         raise ScenarioError(
-            f"'{address}' is not a participant address; write grpc://HOST:PORT, "
-            f"e.g. grpc://127.0.0.1:50051"
+            f"'{address}' is not a participant address; write grpc://HOST:PORT (or grpcs:// "
+            f"for TLS), e.g. grpc://127.0.0.1:50051"
         )
     host = f"[{parts.hostname}]" if ":" in parts.hostname else parts.hostname
-    return f"{host}:{parts.port}"
+    return f"{host}:{port}"
+
+
+def uses_tls(address: str) -> bool:
+    """Whether ``address`` asks for TLS (``grpcs://``)."""
+    return address.startswith("grpcs://")
 
 
 class RemoteParticipant(Participant):
@@ -60,9 +75,14 @@ class RemoteParticipant(Participant):
         connect_timeout: float = 10.0,
         call_timeout: float = 30.0,
         streaming: bool = True,
+        security: ClientSecurity | None = None,
+        on_waiting: Callable[[str], None] | None = None,
     ) -> None:
         self.address = address
         self.target = parse_address(address)
+        self.security = security or ClientSecurity()
+        self._metadata = self.security.metadata()
+        self.on_waiting = on_waiting
         self.name = name or address
         self.connect_timeout = connect_timeout
         self.call_timeout = call_timeout
@@ -91,21 +111,30 @@ class RemoteParticipant(Participant):
         self._ensure_channel()
         await self.wait_until_serving()
         response = await self._call(
-            "Describe", self._stubbed().Describe(wire.DescribeRequest(), timeout=self.call_timeout)
+            "Describe",
+            self._stubbed().Describe(
+                wire.DescribeRequest(), timeout=self.call_timeout, metadata=self._metadata
+            ),
         )
         self._codec = wire.Codec(wire.description_from_pb(response))
 
     async def wait_until_serving(self) -> None:
-        """Poll the health service until SERVING; ParticipantUnavailable after the deadline."""
+        """Poll the health service until SERVING; ParticipantUnavailable after the deadline, or
+        at once when TLS cannot work (a certificate problem does not go away by waiting).
+
+        ``on_waiting(reason)`` is called once, as soon as the first check is not SERVING.
+        """
         assert self._channel is not None
         health_stub = health_pb2_grpc.HealthStub(self._channel)
         deadline = time.monotonic() + self.connect_timeout
-        delay, last = 0.05, "no answer"
+        delay, last, told = 0.05, "no answer", False
         while True:
             remaining = deadline - time.monotonic()
             try:
                 reply = await health_stub.Check(
-                    health_pb2.HealthCheckRequest(service=""), timeout=max(0.1, min(2.0, remaining))
+                    health_pb2.HealthCheckRequest(service=""),
+                    timeout=max(0.1, min(2.0, remaining)),
+                    metadata=self._metadata,
                 )
                 if reply.status == health_pb2.HealthCheckResponse.SERVING:
                     return
@@ -113,7 +142,18 @@ class RemoteParticipant(Participant):
                     f"health is {health_pb2.HealthCheckResponse.ServingStatus.Name(reply.status)}"
                 )
             except grpc.aio.AioRpcError as exc:
-                last = f"{exc.code().name}: {exc.details()}"
+                tls = tls_problem(exc.details() or "", self.address, self.security)
+                if tls is not None:
+                    raise ParticipantUnavailable(
+                        f"{tls} ({self.address})",
+                        participant=self.name,
+                        call="connect",
+                        status="UNAVAILABLE",
+                    ) from exc
+                last = _why_unreachable(exc)
+            if not told and self.on_waiting is not None:
+                told = True
+                self.on_waiting(last)
             if time.monotonic() + delay > deadline:
                 raise ParticipantUnavailable(
                     f"not SERVING at {self.address} within {self.connect_timeout:g} s ({last}); "
@@ -151,7 +191,11 @@ class RemoteParticipant(Participant):
 
     def _ensure_channel(self) -> None:
         if self._channel is None:
-            self._channel = grpc.aio.insecure_channel(self.target)
+            if uses_tls(self.address):
+                credentials = self.security.channel_credentials()
+                self._channel = grpc.aio.secure_channel(self.target, credentials)
+            else:
+                self._channel = grpc.aio.insecure_channel(self.target)
             self._stub = pb_grpc.GRPCComponentServiceStub(self._channel)
 
     @property
@@ -170,10 +214,11 @@ class RemoteParticipant(Participant):
         request = self._request("Initialize", lambda: wire.initialize_to_pb(setup, self.codec))
         self._run_id = setup.run_id  # Terminate names it even when Initialize's answer is bad
         response = await self._call(
-            "Initialize", self._stubbed().Initialize(request, timeout=self.call_timeout)
+            "Initialize",
+            self._stubbed().Initialize(request, timeout=self.call_timeout, metadata=self._metadata),
         )
         if self.streaming and self.codec.description.capabilities.streaming:
-            self._stream = self._stubbed().StepStream()
+            self._stream = self._stubbed().StepStream(metadata=self._metadata)
         return self._response("Initialize", lambda: wire.outputs_from_pb(response, self.codec))
 
     async def do_step(self, time: float, step: float, inputs: Mapping[str, Value]) -> Values:
@@ -184,7 +229,8 @@ class RemoteParticipant(Participant):
             response = await self._call("DoStep", self._stream_step(self._stream, request))
         else:
             response = await self._call(
-                "DoStep", self._stubbed().DoStep(request, timeout=self.call_timeout)
+                "DoStep",
+                self._stubbed().DoStep(request, timeout=self.call_timeout, metadata=self._metadata),
             )
         outputs = self._response("DoStep", lambda: wire.outputs_from_pb(response, self.codec))
         reason = wire.termination_requested(response)
@@ -212,7 +258,9 @@ class RemoteParticipant(Participant):
             await self._call(
                 "Terminate",
                 self._stubbed().Terminate(
-                    wire.terminate_to_pb(self._run_id, reason), timeout=self.call_timeout
+                    wire.terminate_to_pb(self._run_id, reason),
+                    timeout=self.call_timeout,
+                    metadata=self._metadata,
                 ),
             )
         finally:
@@ -280,9 +328,62 @@ def _translate(
     """The one place gRPC errors become Coupler errors."""
     details = details or code.name
     if code in _UNAVAILABLE:
+        details = tls_problem(details, address, None) or details
         return ParticipantUnavailable(
             f"{details} ({address})", participant=participant, call=call, status=code.name
         )
     if code is grpc.StatusCode.DEADLINE_EXCEEDED:
         return ParticipantTimeout(details, participant=participant, call=call, status=code.name)
     return ParticipantError(details, participant=participant, call=call, status=code.name)
+
+
+def _why_unreachable(exc: grpc.aio.AioRpcError) -> str:
+    """A short reason why a health check did not answer, e.g. "connection refused"."""
+    details = exc.details() or ""
+    if "Connection refused" in details or "connection refused" in details:
+        return "connection refused: nothing listens on that port yet"
+    if exc.code() is grpc.StatusCode.DEADLINE_EXCEEDED:
+        return "no answer within the check's deadline"
+    return f"{exc.code().name}: {details}"
+
+
+_UNTRUSTED = ("CERTIFICATE_VERIFY_FAILED", "BAD_SIGNATURE", "unable to get local issuer")
+
+
+def tls_problem(details: str, address: str, security: ClientSecurity | None) -> str | None:
+    """What a failed connection says about TLS, in words; None when it is not about TLS."""
+    tls = uses_tls(address)
+    if "WRONG_VERSION_NUMBER" in details:
+        return (
+            "TLS handshake failed: the participant does not speak TLS; write grpc:// or give "
+            "the participant a certificate"
+        )
+    if any(mark in details for mark in _UNTRUSTED):
+        return (
+            "TLS: the participant's certificate is not trusted by the CA given "
+            "(--tls-ca / COUPLER_TLS_CA), or it was signed by another CA"
+        )
+    if "Peer name" in details or ("hostname" in details.lower() and "match" in details):
+        return (
+            "TLS: the participant's certificate is not valid for the host name in the address; "
+            "use a name its certificate names"
+        )
+    if "Socket closed" in details and security is not None:
+        if not tls:
+            return (
+                "the participant closed the connection at once: if it serves TLS, write "
+                "grpcs:// in its address"
+            )
+        if security.cert is None:
+            return (
+                "the participant closed the TLS connection during the handshake: it requires a "
+                "client certificate (mutual TLS) and none was given (--tls-cert and --tls-key "
+                "/ COUPLER_TLS_CERT and COUPLER_TLS_KEY)"
+            )
+        return (
+            "the participant refused the TLS handshake: it does not accept the client "
+            "certificate (is it signed by the client CA the participant trusts?)"
+        )
+    if "handshake" in details.lower() and tls:
+        return f"TLS handshake failed: {details}"
+    return None

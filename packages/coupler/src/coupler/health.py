@@ -1,7 +1,8 @@
 """Health probe for containers and scripts: ``python -m coupler.health grpc://HOST:PORT``.
 
 Exits 0 when the participant's gRPC health service answers SERVING within the timeout
-(``--timeout``, default 3 s), 1 otherwise with the reason on stderr.
+(``--timeout``, default 3 s), 1 otherwise with the reason on stderr. ``grpcs://`` addresses use
+the ``COUPLER_TLS_*`` environment variables (docs/security.md); health needs no token.
 """
 
 from __future__ import annotations
@@ -11,11 +12,14 @@ import sys
 
 from coupler.client import RemoteParticipant
 from coupler.errors import CouplerError
+from coupler.security import ClientSecurity
 
 
 async def probe(address: str, connect_timeout: float = 3.0) -> None:
     """Returns when ``address`` is SERVING; ParticipantUnavailable (or a CouplerError) if not."""
-    remote = RemoteParticipant(address, connect_timeout=connect_timeout)
+    remote = RemoteParticipant(
+        address, connect_timeout=connect_timeout, security=ClientSecurity.from_environment()
+    )
     try:
         await remote.wait_until_serving_once()
     finally:

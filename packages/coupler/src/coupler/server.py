@@ -34,6 +34,7 @@ from coupler import wire
 from coupler.channels import Description
 from coupler.errors import ChannelValueError, ParticipantUnavailable, ScenarioError
 from coupler.participant import EndRun, Participant
+from coupler.security import ServerSecurity
 from coupler.v1 import component_pb2_grpc as pb_grpc
 
 log = structlog.get_logger("coupler.server")
@@ -283,11 +284,13 @@ class ParticipantServer:
         host: str = "127.0.0.1",
         port: int = 0,
         reflection: bool = False,
+        security: ServerSecurity | None = None,
     ):
         self.participant = participant
         self.host = host
         self.requested_port = port
         self.reflection = reflection
+        self.security = security or ServerSecurity()
         self.port = 0
         self.health = health.aio.HealthServicer()
         self._server: grpc.aio.Server | None = None
@@ -295,12 +298,17 @@ class ParticipantServer:
 
     @property
     def address(self) -> str:
-        """``grpc://host:port`` of the running server."""
-        return f"grpc://{self.host}:{self.port}"
+        """``grpc://host:port`` (``grpcs://`` with TLS) of the running server."""
+        scheme = "grpcs" if self.security.tls else "grpc"
+        return f"{scheme}://{self.host}:{self.port}"
 
     async def start(self) -> int:
         """Bind, open the participant, describe it, then report SERVING. Returns the port."""
-        server = grpc.aio.server()
+        warning = self.security.check(self.host)
+        if warning:
+            log.warning("insecure_interface", host=self.host, detail=warning)
+        credentials = self.security.credentials()
+        server = grpc.aio.server(interceptors=self.security.interceptors())
         self._server = server
         await self._set_health(health_pb2.HealthCheckResponse.NOT_SERVING)
         self._servicer = _Servicer(self.participant)
@@ -310,7 +318,11 @@ class ParticipantServer:
             reflection.enable_server_reflection(
                 (SERVICE_NAME, health.SERVICE_NAME, reflection.SERVICE_NAME), server
             )
-        self.port = server.add_insecure_port(f"{self.host}:{self.requested_port}")
+        bind = f"{self.host}:{self.requested_port}"
+        if credentials is None:
+            self.port = server.add_insecure_port(bind)
+        else:
+            self.port = server.add_secure_port(bind, credentials)
         await server.start()
         await self.participant.open()
         description = await self.participant.describe()
@@ -347,10 +359,13 @@ async def serve(
     host: str = "127.0.0.1",
     port: int = 0,
     reflection: bool = False,
+    security: ServerSecurity | None = None,
     on_started: Callable[[ParticipantServer], None] | None = None,
 ) -> None:
     """Serve ``participant`` until SIGTERM or SIGINT, then shut down gracefully."""
-    server = ParticipantServer(participant, host=host, port=port, reflection=reflection)
+    server = ParticipantServer(
+        participant, host=host, port=port, reflection=reflection, security=security
+    )
     stop = asyncio.Event()
     loop = asyncio.get_running_loop()
     for sig in (signal.SIGTERM, signal.SIGINT):

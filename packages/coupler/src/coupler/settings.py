@@ -1,20 +1,78 @@
-"""Configuration from environment variables, one prefix per service (pydantic-settings)."""
+"""Configuration from environment variables, one prefix per service (pydantic-settings).
+
+Every participant process reads ``ParticipantSettings`` (bind address, port, logging, and the
+security of its gRPC server); services subclass it with their own prefix, so the bridge reads
+``OPENRAILS_BRIDGE_PORT``, ``OPENRAILS_BRIDGE_TLS_CERT``, ... and command-line options override
+them (``add_security_arguments``).
+"""
 
 from __future__ import annotations
 
+import argparse
+from pathlib import Path
+
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
+from coupler.security import ServerSecurity
 
-class ParticipantSettings(BaseSettings):
-    """What every participant process reads; services subclass it with their own prefix."""
+
+class SecuritySettings(BaseSettings):
+    """How a participant's gRPC server is secured (docs/security.md)."""
 
     model_config = SettingsConfigDict(env_prefix="COUPLER_", extra="ignore", frozen=True)
 
+    tls_cert: Path | None = None
+    """Server certificate chain (PEM); with ``tls_key`` it turns TLS on."""
+    tls_key: Path | None = None
+    """Private key of ``tls_cert`` (PEM)."""
+    tls_client_ca: Path | None = None
+    """CA bundle (PEM) that must have signed the clients' certificates (mutual TLS)."""
+    token_file: Path | None = None
+    """File holding the bearer token every call must carry."""
+    insecure: bool = False
+    """Allow plaintext gRPC on an interface other than loopback (logged as a warning)."""
+    reflection: bool = False
+    """Serve gRPC server reflection (for grpcurl); off by default."""
+
+    def security(self) -> ServerSecurity:
+        return ServerSecurity(
+            cert=self.tls_cert,
+            key=self.tls_key,
+            client_ca=self.tls_client_ca,
+            token_file=self.token_file,
+            insecure=self.insecure,
+        )
+
+
+class ParticipantSettings(SecuritySettings):
+    """What every participant process reads; services subclass it with their own prefix."""
+
     host: str = "127.0.0.1"
-    """Address the gRPC server binds; 0.0.0.0 in containers."""
+    """Address the gRPC server binds; 0.0.0.0 in containers (with TLS, or ``insecure``)."""
     port: int = 50051
     """gRPC port; 0 picks a free one (printed at start)."""
     log_level: str = "INFO"
     """DEBUG, INFO, WARNING or ERROR."""
     log_json: bool | None = None
     """JSON log lines; default: when stderr is not a terminal."""
+
+
+def add_security_arguments(parser: argparse.ArgumentParser) -> None:
+    """``--tls-cert``, ``--tls-key``, ``--tls-client-ca``, ``--token-file``, ``--insecure``,
+    ``--reflection``; unset options leave the environment's values (dest = field names)."""
+    group = parser.add_argument_group("security (docs/security.md)")
+    group.add_argument("--tls-cert", type=Path, help="server certificate (PEM): serve TLS")
+    group.add_argument("--tls-key", type=Path, help="its private key (PEM)")
+    group.add_argument(
+        "--tls-client-ca", type=Path, help="require client certificates signed by this CA"
+    )
+    group.add_argument("--token-file", type=Path, help="require this bearer token on every call")
+    group.add_argument(
+        "--insecure",
+        action="store_true",
+        default=None,
+        help="allow plaintext on a non-loopback address",
+    )
+    group.add_argument(
+        "--reflection", action="store_true", default=None, help="serve gRPC reflection"
+    )

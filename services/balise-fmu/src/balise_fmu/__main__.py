@@ -14,10 +14,12 @@ from pathlib import Path
 
 import structlog
 
+from coupler.errors import CouplerError
 from coupler.fmu import FmuParticipant
 from coupler.fmubuild import FmuBuildError
 from coupler.logs import configure_logging
 from coupler.server import ParticipantServer, serve
+from coupler.settings import add_security_arguments
 from coupler_railway import RailMLError
 
 from .build import DEFAULT_FMU, DEFAULT_RAILML, build_track_balises
@@ -36,6 +38,7 @@ def _parse(argv: list[str] | None) -> BaliseFmuSettings:
     parser.add_argument("--host", help="gRPC bind address (default 127.0.0.1)")
     parser.add_argument("--port", type=int, help="gRPC port, 0 = any free one (default 50062)")
     parser.add_argument("--log-level", dest="log_level")
+    add_security_arguments(parser)
     given = {k: v for k, v in vars(parser.parse_args(argv)).items() if v is not None}
     return BaliseFmuSettings(**given)
 
@@ -72,7 +75,19 @@ def main(argv: list[str] | None = None) -> None:
     def announce(server: ParticipantServer) -> None:
         print(f"balise-fmu serving {path} at {server.address}", flush=True)
 
-    asyncio.run(serve(participant, host=settings.host, port=settings.port, on_started=announce))
+    try:
+        asyncio.run(
+            serve(
+                participant,
+                host=settings.host,
+                port=settings.port,
+                security=settings.security(),
+                reflection=settings.reflection,
+                on_started=announce,
+            )
+        )
+    except CouplerError as exc:
+        raise SystemExit(f"balise-fmu: {exc}") from exc
 
 
 if __name__ == "__main__":

@@ -13,8 +13,10 @@ from typing import Any
 
 import structlog
 
+from coupler.errors import CouplerError
 from coupler.logs import configure_logging
 from coupler.server import ParticipantServer
+from coupler.settings import add_security_arguments
 from coupler_railway import Infrastructure, RailMLError, load_infrastructure
 from mapserver.config import MapServerSettings
 from mapserver.feed import Feed
@@ -37,6 +39,7 @@ def _parse(argv: list[str] | None) -> MapServerSettings:
     parser.add_argument("--tile-url", dest="tile_url", help="Leaflet tile URL; empty: no tiles")
     parser.add_argument("--tile-attribution", dest="tile_attribution")
     parser.add_argument("--log-level", dest="log_level")
+    add_security_arguments(parser)
     args = parser.parse_args(argv)
     overrides: dict[str, Any] = {k: v for k, v in vars(args).items() if v is not None}
     return MapServerSettings(**overrides)
@@ -57,7 +60,11 @@ async def run(settings: MapServerSettings) -> None:
     state = build_state(infrastructure, settings)
     feed = Feed(state, backlog=settings.client_backlog)
     server = ParticipantServer(
-        MapParticipant(state), host=settings.grpc_host, port=settings.grpc_port
+        MapParticipant(state),
+        host=settings.grpc_host,
+        port=settings.grpc_port,
+        security=settings.security(),
+        reflection=settings.reflection,
     )
     stop = asyncio.Event()
     loop = asyncio.get_running_loop()
@@ -93,6 +100,8 @@ def main(argv: list[str] | None = None) -> None:
     configure_logging(settings.log_level, json=settings.log_json)
     try:
         asyncio.run(run(settings))
+    except CouplerError as exc:
+        raise SystemExit(f"mapserver: {exc}") from exc
     except (RailMLError, FileNotFoundError) as exc:
         log.error("mapserver_failed", problem=str(exc), railml=str(settings.railml))
         raise SystemExit(f"mapserver: {exc}") from exc

@@ -5,7 +5,9 @@ from __future__ import annotations
 from pathlib import Path
 
 from pydantic import Field
-from pydantic_settings import BaseSettings, SettingsConfigDict
+from pydantic_settings import SettingsConfigDict
+
+from coupler.settings import SecuritySettings
 
 SCENARIO_RAILML = (
     Path(__file__).resolve().parents[4]
@@ -17,7 +19,7 @@ SCENARIO_RAILML = (
 """The railway scenario's infrastructure, in a source checkout."""
 
 
-class MapServerSettings(BaseSettings):
+class MapServerSettings(SecuritySettings):
     """Where the map server listens, what it draws and how it treats browsers."""
 
     model_config = SettingsConfigDict(env_prefix="MAPSERVER_", extra="ignore", frozen=True)

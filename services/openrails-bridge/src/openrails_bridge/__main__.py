@@ -12,8 +12,10 @@ from pathlib import Path
 
 from coupler.adapter import AdapterConfig, AdapterParticipant
 from coupler.channels import Causality
+from coupler.errors import CouplerError
 from coupler.logs import configure_logging
 from coupler.server import ParticipantServer, serve
+from coupler.settings import add_security_arguments
 
 from .adapter import OpenRailsAdapter
 from .config import BridgeSettings
@@ -34,6 +36,7 @@ def _parse(argv: list[str] | None) -> BridgeSettings:
     parser.add_argument("--host", help="gRPC bind address (default 127.0.0.1)")
     parser.add_argument("--port", type=int, help="gRPC port, 0 = any free one (default 50061)")
     parser.add_argument("--log-level", dest="log_level")
+    add_security_arguments(parser)
     given = {k: v for k, v in vars(parser.parse_args(argv)).items() if v is not None}
     return BridgeSettings(**given)
 
@@ -70,7 +73,19 @@ def main(argv: list[str] | None = None) -> None:
             flush=True,
         )
 
-    asyncio.run(serve(participant, host=settings.host, port=settings.port, on_started=announce))
+    try:
+        asyncio.run(
+            serve(
+                participant,
+                host=settings.host,
+                port=settings.port,
+                security=settings.security(),
+                reflection=settings.reflection,
+                on_started=announce,
+            )
+        )
+    except CouplerError as exc:
+        raise SystemExit(f"openrails-bridge: {exc}") from exc
 
 
 if __name__ == "__main__":

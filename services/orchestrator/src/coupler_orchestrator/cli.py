@@ -16,6 +16,7 @@ from coupler.errors import CouplerError, ValidationError
 from coupler.fmu import FmuParticipant
 from coupler.logs import configure_logging
 from coupler.participant import Participant
+from coupler.security import ClientSecurity
 from coupler_orchestrator.fleet import Fleet, FleetSpec
 from coupler_orchestrator.plan import Algorithm
 from coupler_orchestrator.planning import RunOptions
@@ -61,8 +62,9 @@ def parser() -> argparse.ArgumentParser:
     fleet.add_argument("--health-timeout", type=float, default=60.0, help="[s] per service")
 
     describe = commands.add_parser("describe", help="print a participant's channels")
-    describe.add_argument("target", help="grpc://HOST:PORT or an .fmu file")
+    describe.add_argument("target", help="grpc://HOST:PORT, grpcs://HOST:PORT or an .fmu file")
     describe.add_argument("--timeout", type=float, default=10.0, help="connect timeout [s]")
+    _security_options(describe)
     return top
 
 
@@ -91,6 +93,27 @@ def _run_options(command: argparse.ArgumentParser) -> None:
         "larger of 60 s and 4 call deadlines)",
     )
     command.add_argument("--connect-timeout", type=float, default=10.0, help="[s]")
+    _security_options(command)
+
+
+def _security_options(command: argparse.ArgumentParser) -> None:
+    group = command.add_argument_group(
+        "security of grpcs:// participants (default: COUPLER_TLS_CA, COUPLER_TLS_CERT, "
+        "COUPLER_TLS_KEY, COUPLER_TOKEN_FILE; docs/security.md)"
+    )
+    group.add_argument("--tls-ca", type=Path, help="CA bundle (PEM) trusted for participants")
+    group.add_argument("--tls-cert", type=Path, help="client certificate (PEM), mutual TLS")
+    group.add_argument("--tls-key", type=Path, help="its private key (PEM)")
+    group.add_argument("--token-file", type=Path, help="bearer token sent with every call")
+
+
+def security_of(args: argparse.Namespace) -> ClientSecurity:
+    """The environment's client security with the command line's options on top."""
+    return ClientSecurity.from_environment().override(
+        ClientSecurity(
+            ca=args.tls_ca, cert=args.tls_cert, key=args.tls_key, token_file=args.token_file
+        )
+    )
 
 
 def options_of(args: argparse.Namespace) -> RunOptions:
@@ -109,6 +132,7 @@ def options_of(args: argparse.Namespace) -> RunOptions:
         parameters=parameters,
         connect_timeout=args.connect_timeout,
         lease=args.lease,
+        security=security_of(args),
         **({"run_id": args.run_id} if args.run_id else {}),
     )
 
@@ -162,7 +186,7 @@ async def _interruptible(command: Coroutine[Any, Any, int]) -> int:
 
 async def _dispatch(args: argparse.Namespace, out: TextIO) -> int:
     if args.command == "describe":
-        return await _describe(args.target, args.timeout, out=out)
+        return await _describe(args.target, args.timeout, security_of(args), out=out)
     if args.command == "fleet":
         return await _fleet(args, out)
     options = options_of(args)
@@ -217,10 +241,12 @@ async def _fleet(args: argparse.Namespace, out: TextIO) -> int:
     return code
 
 
-async def _describe(target: str, connect_timeout: float, *, out: TextIO) -> int:
+async def _describe(
+    target: str, connect_timeout: float, security: ClientSecurity, *, out: TextIO
+) -> int:
     participant: Participant
-    if target.startswith("grpc://") or not target.endswith(".fmu"):
-        participant = RemoteParticipant(target, connect_timeout=connect_timeout)
+    if target.startswith(("grpc://", "grpcs://")) or not target.endswith(".fmu"):
+        participant = RemoteParticipant(target, connect_timeout=connect_timeout, security=security)
     else:
         participant = FmuParticipant(Path(target))
     try:

@@ -26,6 +26,7 @@ from coupler.client import RemoteParticipant
 from coupler.errors import CouplerError, ScenarioError, ValidationError
 from coupler.fmu import FmuParticipant
 from coupler.participant import Participant
+from coupler.security import ClientSecurity
 from coupler_orchestrator import ssp
 from coupler_orchestrator.master import gauss_seidel_order
 from coupler_orchestrator.plan import Algorithm, Converter, Link, Member, Plan, TimeGrid
@@ -63,6 +64,9 @@ class RunOptions:
     """How long a remote participant may take to report SERVING [s]."""
     call_timeout: float = 30.0
     """Deadline of each call to a remote participant [s]."""
+    security: ClientSecurity = field(default_factory=ClientSecurity.from_environment)
+    """TLS trust, client certificate and token for every remote participant (default: the
+    ``COUPLER_TLS_*`` and ``COUPLER_TOKEN_FILE`` environment variables)."""
 
 
 def create_participant(component: ssp.Component, options: RunOptions) -> Participant:
@@ -75,6 +79,7 @@ def create_participant(component: ssp.Component, options: RunOptions) -> Partici
             name=component.name,
             connect_timeout=options.connect_timeout,
             call_timeout=options.call_timeout,
+            security=options.security,
         )
     raise ScenarioError(
         f"{_where(component)}: component '{component.name}' has type '{component.type}'; "

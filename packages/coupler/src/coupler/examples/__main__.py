@@ -5,27 +5,42 @@ from __future__ import annotations
 import argparse
 import asyncio
 
+from coupler.errors import CouplerError
 from coupler.examples.gain import GainParticipant
 from coupler.logs import configure_logging
 from coupler.server import ParticipantServer, serve
+from coupler.settings import ParticipantSettings, add_security_arguments
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(prog="python -m coupler.examples", description=__doc__)
     parser.add_argument("example", choices=["gain"], help="which example participant")
     parser.add_argument("--name", default="Gain", help="participant name (default: Gain)")
-    parser.add_argument("--host", default="127.0.0.1", help="bind address (default: 127.0.0.1)")
-    parser.add_argument("--port", type=int, default=50051, help="gRPC port, 0 = any free one")
-    parser.add_argument("--log-level", default="INFO")
+    parser.add_argument("--host", help="bind address (default: 127.0.0.1)")
+    parser.add_argument("--port", type=int, help="gRPC port, 0 = any free one (default 50051)")
+    parser.add_argument("--log-level", dest="log_level")
+    add_security_arguments(parser)
     args = parser.parse_args()
-    configure_logging(args.log_level)
+    given = {k: v for k, v in vars(args).items() if v is not None and k not in ("example", "name")}
+    settings = ParticipantSettings(**given)
+    configure_logging(settings.log_level, json=settings.log_json)
 
     def announce(server: ParticipantServer) -> None:
         print(f"serving {args.name} at {server.address}", flush=True)
 
-    asyncio.run(
-        serve(GainParticipant(args.name), host=args.host, port=args.port, on_started=announce)
-    )
+    try:
+        asyncio.run(
+            serve(
+                GainParticipant(args.name),
+                host=settings.host,
+                port=settings.port,
+                security=settings.security(),
+                reflection=settings.reflection,
+                on_started=announce,
+            )
+        )
+    except CouplerError as exc:
+        raise SystemExit(f"coupler.examples: {exc}") from exc
 
 
 if __name__ == "__main__":

@@ -13,6 +13,11 @@ carrying another id is refused with FAILED_PRECONDITION. The run ends on Termina
 StepStream that carried it ends without Terminate, or when no call arrives for `lease_seconds`
 -- whichever comes first. The participant then serves the next Initialize: an orchestrator
 that dies never locks a participant.
+
+Security is the transport's and the metadata's: a participant may serve TLS (grpcs://
+addresses), require client certificates (mutual TLS) and require a bearer token in the call
+metadata (`authorization: Bearer <token>`) on every call of this service; a missing or wrong
+token is UNAUTHENTICATED. The standard health service (grpc.health.v1) answers without one.
 """
 
 from collections import abc as _abc

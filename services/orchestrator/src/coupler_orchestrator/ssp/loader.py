@@ -306,9 +306,14 @@ class _Loader:
             source = str(fmu)
         else:
             parts = urlsplit(source)
-            if parts.scheme != "grpc" or not parts.hostname or parts.port is None:
+            try:
+                port = parts.port
+            except ValueError:
+                port = None
+            if parts.scheme not in ("grpc", "grpcs") or not parts.hostname or port is None:
                 raise ScenarioError(
-                    f"{what}: source '{source}' is not of the form grpc://HOST:PORT; fix it"
+                    f"{what}: source '{source}' is not of the form grpc://HOST:PORT (or "
+                    f"grpcs:// for TLS); fix it"
                 )
         implementation = element.get("implementation", "any")
         if implementation == "ModelExchange":
