@@ -92,7 +92,18 @@ def _run_options(command: argparse.ArgumentParser) -> None:
         help="[s] a participant ends the run after this long without a call (default: the "
         "larger of 60 s and 4 call deadlines)",
     )
-    command.add_argument("--connect-timeout", type=float, default=10.0, help="[s]")
+    command.add_argument(
+        "--connect-timeout",
+        type=float,
+        default=10.0,
+        help="[s] how long a participant may take to report SERVING (default 10)",
+    )
+    command.add_argument(
+        "--call-timeout",
+        type=float,
+        default=30.0,
+        help="[s] deadline of every call to a participant (default 30)",
+    )
     _security_options(command)
 
 
@@ -131,6 +142,7 @@ def options_of(args: argparse.Namespace) -> RunOptions:
         realtime_factor=getattr(args, "realtime_factor", None) or None,
         parameters=parameters,
         connect_timeout=args.connect_timeout,
+        call_timeout=args.call_timeout,
         lease=args.lease,
         security=security_of(args),
         **({"run_id": args.run_id} if args.run_id else {}),
