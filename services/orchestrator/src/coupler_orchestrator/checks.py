@@ -91,6 +91,8 @@ class Member:
     """Outputs recorded, in column order."""
     multiple: int = 1
     """Steps every ``multiple`` base steps (per-component deltaTime = multiple x h)."""
+    step: float
+    """The step size it receives, exactly as configured: its deltaTime, else h [s]."""
     parameters: Mapping[str, Value] = field(default_factory=dict)
     """Parameter values sent with Initialize, typed."""
     start_inputs: Mapping[str, Value] = field(default_factory=dict)
@@ -487,11 +489,12 @@ class _Checker:
                 continue
             target = parameters if channel.causality is Causality.PARAMETER else start_inputs
             target[name] = typed
-        multiple = 1
+        multiple, step = 1, 0.0
         if grid is not None:
             try:
                 multiple = multiple_of(component, grid)
-                self.fixed_step(component, description, grid.step * multiple)
+                step = grid.step if component.delta_time is None else component.delta_time
+                self.fixed_step(component, description, step)
             except ScenarioError as exc:
                 problems.append(str(exc))
         if problems:
@@ -501,6 +504,7 @@ class _Checker:
             participant=seat.participant,
             outputs=description.of(Causality.OUTPUT),
             multiple=multiple,
+            step=step,
             parameters=parameters,
             start_inputs=start_inputs,
         )

@@ -4,7 +4,8 @@ Each base step reads like FMPy's SSP loop: gather inputs from the outputs they a
 to, step the members that are due, store their outputs, record. Jacobi steps all due members
 concurrently on the outputs of the previous communication point; Gauss-Seidel steps them one
 after another in the plan's order, each seeing what its predecessors just produced.
-t_k = t_0 + k*h; each member steps from t_k by exactly its step h*m.
+t_k = t_0 + k*h; each member steps from t_k by exactly its configured step (its deltaTime,
+else h), never by a difference of two communication points.
 """
 
 from __future__ import annotations
@@ -162,7 +163,7 @@ class Master:
             setup = RunSetup(
                 run_id=self.plan.run_id,
                 start_time=grid.start,
-                step_size=grid.step * m.multiple,
+                step_size=m.step,
                 stop_time=grid.stop,
                 parameters=m.parameters,
                 inputs=m.start_inputs,
@@ -183,7 +184,7 @@ class Master:
         inputs = self.feeds[m.name].gather(self.store) if m.name in self.feeds else {}
         started = wallclock.perf_counter()
         try:
-            outputs = await m.participant.do_step(grid.time(k), grid.step * m.multiple, inputs)
+            outputs = await m.participant.do_step(grid.time(k), m.step, inputs)
         except EndRun as end:
             outputs = end.outputs
             if self._ended is None:
