@@ -122,6 +122,13 @@ def _run_options(command: argparse.ArgumentParser) -> None:
         default=30.0,
         help="[s] deadline of every call to a participant (default 30)",
     )
+    command.add_argument(
+        "--isolate-fmus",
+        action="store_true",
+        help="run every FMU in a child process: a crash or hang of an FMU fails the run "
+        "cleanly instead of the orchestrator (per component: SSD annotation "
+        "org.coupler.component isolate)",
+    )
     _security_options(command)
 
 
@@ -161,6 +168,7 @@ def options_of(args: argparse.Namespace) -> RunOptions:
         parameters=parameters,
         connect_timeout=args.connect_timeout,
         call_timeout=args.call_timeout,
+        isolate_fmus=args.isolate_fmus,
         lease=args.lease,
         security=security_of(args),
         output_interval=getattr(args, "output_interval", None),

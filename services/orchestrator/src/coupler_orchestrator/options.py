@@ -44,7 +44,10 @@ class RunOptions:
     connect_timeout: float = 10.0
     """How long a remote participant may take to report SERVING [s]."""
     call_timeout: float = 30.0
-    """Deadline of each call to a participant [s]."""
+    """Deadline of each call to a participant [s]; per component: the SSD annotation
+    ``org.coupler.component callTimeout``."""
+    isolate_fmus: bool = False
+    """Run every FMU in a child process (per component: ``org.coupler.component isolate``)."""
     output_interval: float | None = None
     """Record every communication point that is a whole multiple of this past t_0 [s]; None:
     every one. Must be a multiple of the step."""

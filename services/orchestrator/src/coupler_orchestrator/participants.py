@@ -18,7 +18,9 @@ from coupler.channels import Description
 from coupler.client import RemoteParticipant
 from coupler.errors import CouplerError, ScenarioError
 from coupler.fmu import FmuParticipant
+from coupler.fmuhost import IsolatedFmu
 from coupler.participant import Participant
+from coupler.security import ClientSecurity
 from coupler_orchestrator import ssp
 from coupler_orchestrator.options import RunOptions
 
@@ -58,16 +60,28 @@ def where(item: ssp.Component | ssp.Connection | ssp.Connector, file: str = "") 
 
 
 def create(component: ssp.Component, options: RunOptions) -> Participant:
-    """The participant behind a component: an FMU in-process, or a remote one."""
+    """The participant behind a component: an FMU in-process or isolated in a child process,
+    or a remote one; the component's own settings (SSD annotation) over the options."""
+    settings = component.settings
+    call_timeout = settings.call_timeout or options.call_timeout
     if component.type == ssp.FMU_TYPE:
+        isolate = options.isolate_fmus if settings.isolate is None else settings.isolate
+        if isolate:
+            return IsolatedFmu(component.source, name=component.name, call_timeout=call_timeout)
         return FmuParticipant(Path(component.source), name=component.name)
     if component.type == ssp.GRPC_TYPE:
+        own = ClientSecurity(
+            ca=settings.tls_ca,
+            cert=settings.tls_cert,
+            key=settings.tls_key,
+            token_file=settings.token_file,
+        )
         return RemoteParticipant(
             component.source,
             name=component.name,
             connect_timeout=options.connect_timeout,
-            call_timeout=options.call_timeout,
-            security=options.security,
+            call_timeout=call_timeout,
+            security=options.security.override(own),
         )
     raise ScenarioError(
         f"{where(component)}: component '{component.name}' has type '{component.type}'; "
@@ -77,7 +91,7 @@ def create(component: ssp.Component, options: RunOptions) -> Participant:
 
 def units_of(participant: Participant) -> dict[str, ssp.BaseUnit]:
     """The unit definitions an FMU's modelDescription carries (FMI 2 and 3), by name."""
-    if not isinstance(participant, FmuParticipant):
+    if not isinstance(participant, FmuParticipant | IsolatedFmu):
         return {}
     units = {}
     for unit in participant.model_description.unitDefinitions:

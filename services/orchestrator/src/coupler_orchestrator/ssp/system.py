@@ -165,6 +165,13 @@ class SystemReader:
             connectors=self.read_connectors(element, name),
             implementation=implementation,
             delta_time=notes.component_delta_time(element, self.display, self.warnings),
+            settings=notes.component_settings(
+                element,
+                self.display,
+                lambda source, what: self.documents.resolve(
+                    source, element, self.display, what=what
+                ),
+            ),
             file=self.display,
             line=line_of(element),
         )
