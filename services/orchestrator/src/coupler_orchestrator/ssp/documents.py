@@ -59,6 +59,11 @@ def parse(path: Path, display: str) -> Element:
         raise ScenarioError(
             f"{display} line {line}: malformed XML: {exc.msg}; fix the XML syntax"
         ) from exc
+    except OSError as exc:  # lxml: bytes that are invalid in the document's encoding
+        raise ScenarioError(
+            f"{display}: cannot be read as XML ({exc}); save it as UTF-8 (or in the encoding "
+            "its XML declaration names)"
+        ) from exc
     if getattr(tree.docinfo, "doctype", ""):
         raise ScenarioError(
             f"{display} line 1: a DOCTYPE declaration is not allowed in SSP files "
