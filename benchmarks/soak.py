@@ -93,7 +93,7 @@ def main() -> int:
             ],
             stdout=subprocess.DEVNULL,
             stderr=log,
-        )  # fmt: skip
+        )
         for port, log in zip(ports, logs, strict=True)
     ]
     ssd = work / "soak.ssd"
