@@ -18,8 +18,9 @@ from coupler.logs import configure_logging
 from coupler.participant import Participant
 from coupler.security import ClientSecurity
 from coupler_orchestrator.fleet import Fleet, FleetSpec
+from coupler_orchestrator.observer import Observer
 from coupler_orchestrator.options import Algorithm, RunOptions
-from coupler_orchestrator.progress import ProgressBar
+from coupler_orchestrator.progress import ProgressBar, ProgressLines
 from coupler_orchestrator.runner import run_scenario, validate_scenario
 
 EXIT_OK, EXIT_ERROR, EXIT_INTERRUPTED = 0, 1, 130
@@ -57,7 +58,11 @@ def parser() -> argparse.ArgumentParser:
         help="results directory (default: the SSD's OpenMCx outputDirectory, else ./results)",
     )
     run.add_argument("--realtime-factor", type=float, help="pace at X times real time")
-    run.add_argument("--no-progress", action="store_true", help="no progress bar")
+    run.add_argument(
+        "--no-progress",
+        action="store_true",
+        help="no progress (default: a bar on a terminal, else a line every 10 s on stderr)",
+    )
 
     validate = commands.add_parser("validate", help="check a scenario and its participants")
     validate.add_argument(
@@ -245,7 +250,9 @@ async def _dispatch(args: argparse.Namespace, out: TextIO) -> int:
 
 
 async def _run(args: argparse.Namespace, options: RunOptions, out: TextIO) -> int:
-    observers = [] if args.no_progress or not sys.stderr.isatty() else [ProgressBar()]
+    observers: list[Observer] = []
+    if not args.no_progress:
+        observers.append(ProgressBar() if sys.stderr.isatty() else ProgressLines())
     outcome = await run_scenario(args.ssp, options, out_dir=args.out, observers=observers)
     end = outcome.end
     print(
