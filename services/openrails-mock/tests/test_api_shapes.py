@@ -38,6 +38,7 @@ Floats must arrive as JSON floats (Newtonsoft writes ``0.0``, never ``0``), ints
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass
 from typing import Any
@@ -207,7 +208,7 @@ async def test_map_init_draws_the_route(serve: Serve) -> None:
         info = await resp.json()
     lines = info["LineOnApiMapList"]
     assert lines[0]["LatLonFrom"] == {"Lat": 50.0, "Lon": 13.0}
-    assert all(a["LatLonTo"] == b["LatLonFrom"] for a, b in zip(lines, lines[1:], strict=False))
+    assert all(a["LatLonTo"] == b["LatLonFrom"] for a, b in itertools.pairwise(lines))
     end = route.position(1000.0)
     assert lines[-1]["LatLonTo"] == {"Lat": end.latitude_deg, "Lon": end.longitude_deg}
     assert len(info["PointOnApiMapList"]) == len(lines) + 1

@@ -1,6 +1,6 @@
 """POST /API/RESET, the mock's extension: every run can start from the scenario's start.
 
-    test --HTTP--> openrails-mock: drive, RESET, drive again == a fresh mock driven the same way
+test --HTTP--> openrails-mock: drive, RESET, drive again == a fresh mock driven the same way
 """
 
 from __future__ import annotations
@@ -74,9 +74,11 @@ async def test_reset_with_options_is_refused_and_changes_nothing(serve: Serve) -
 
 
 async def test_without_reset_the_mock_answers_404_like_openrails(serve: Serve) -> None:
-    async with serve(config(reset=False), route=route()) as session:
-        async with session.post("/API/RESET") as resp:
-            assert resp.status == 404
+    async with (
+        serve(config(reset=False), route=route()) as session,
+        session.post("/API/RESET") as resp,
+    ):
+        assert resp.status == 404
 
 
 async def test_stock_mode_reset_restarts_the_clock(serve: Serve) -> None:
