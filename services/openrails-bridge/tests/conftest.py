@@ -26,11 +26,11 @@ Bridge = Callable[..., AbstractAsyncContextManager[RemoteParticipant]]
 
 
 @asynccontextmanager
-async def serve_app(app: web.Application) -> AsyncIterator[str]:
-    """``app`` on 127.0.0.1, a free port; yields its base URL."""
+async def serve_app(app: web.Application, port: int = 0) -> AsyncIterator[str]:
+    """``app`` on 127.0.0.1, ``port`` (0: a free one); yields its base URL."""
     runner = web.AppRunner(app, shutdown_timeout=0.5)
     await runner.setup()
-    site = web.TCPSite(runner, "127.0.0.1", 0)
+    site = web.TCPSite(runner, "127.0.0.1", port)
     await site.start()
     port = runner.addresses[0][1]
     try:
@@ -43,25 +43,30 @@ async def serve_app(app: web.Application) -> AsyncIterator[str]:
 def mock() -> Mock:
     """The real OpenRails mock: ``async with mock(mode=..., loading_delay_s=...) as url``."""
 
-    def _mock(**config: Any) -> AbstractAsyncContextManager[str]:
+    def _mock(port: int = 0, **config: Any) -> AbstractAsyncContextManager[str]:
         config.setdefault("loading_delay_s", 0.0)
-        return serve_app(create_app(MockConfig(port=0, **config)))
+        return serve_app(create_app(MockConfig(port=0, **config)), port)
 
     return _mock
 
 
 @pytest.fixture
 def bridge() -> Bridge:
-    """The bridge on a real ParticipantServer: ``async with bridge(url, mode=...) as remote``."""
+    """The bridge on a real ParticipantServer: ``async with bridge(url, mode=...) as remote``;
+    keywords are ``BridgeSettings`` but ``connect_timeout`` (how long to wait for SERVING)."""
 
     @asynccontextmanager
-    async def _bridge(url: str, **settings: Any) -> AsyncIterator[RemoteParticipant]:
+    async def _bridge(
+        url: str, *, connect_timeout: float = 10.0, **settings: Any
+    ) -> AsyncIterator[RemoteParticipant]:
         settings.setdefault("request_timeout_s", 2.0)
         settings.setdefault("ready_timeout_s", 5.0)
         server = ParticipantServer(build(BridgeSettings(openrails_url=url, **settings)))
         try:
             await server.start()
-            async with RemoteParticipant(server.address, name="OpenRails") as remote:
+            async with RemoteParticipant(
+                server.address, name="OpenRails", connect_timeout=connect_timeout
+            ) as remote:
                 yield remote
         finally:
             await server.stop(grace=0.1)
