@@ -3,8 +3,10 @@
 Lockstep mode (OpenRails' build for simulation): GET /API/READY gates start-up, and each
 POST /API/CABCONTROLS applies the controls, advances one fixed step and returns the trains.
 Stock mode (upstream OpenRails): POST /API/CABCONTROLS takes a plain list and returns no body;
-the simulation follows the wall clock times ``speedup``. Every request the mock cannot take
-gets 400 with ``{"error": "..."}`` and leaves the simulation as it was.
+the simulation follows the wall clock times ``speedup``. POST /API/RESET (the mock's own
+extension, both modes) puts the simulation back to the scenario's start. The JSON shapes are
+the simulation build's (README: "Endpoints"). Every request the mock cannot take gets 400 with
+``{"error": "..."}`` and leaves the simulation as it was.
 """
 
 from __future__ import annotations
