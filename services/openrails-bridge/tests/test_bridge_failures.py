@@ -23,46 +23,18 @@ from coupler.server import ParticipantServer
 from openrails_bridge.__main__ import build
 from openrails_bridge.config import BridgeSettings
 
-from .conftest import Bridge, Mock, serve_app
-
-RANGES = [
-    {"TypeName": name, "MinValue": lo, "MaxValue": hi, "RangeFraction": 0.0}
-    for name, lo, hi in [
-        ("THROTTLE", 0.0, 1.0),
-        ("TRAIN_BRAKE", 0.0, 1.0),
-        ("DYNAMIC_BRAKE", 0.0, 1.0),
-        ("DIRECTION", -1.0, 1.0),
-    ]
-]
+from .conftest import Bridge, Handler, Mock, serve_app, tiny_openrails
 
 
-def tiny_openrails(post: str, release: asyncio.Event) -> web.Application:
-    """READY, the GETs the bridge reads, and a POST /API/CABCONTROLS that fails as told."""
-
-    async def ready(request: web.Request) -> web.Response:
-        return web.Response(status=200)
-
-    async def cabcontrols(request: web.Request) -> web.Response:
-        return web.json_response(RANGES)
-
-    async def map_(request: web.Request) -> web.Response:
-        return web.json_response({"LatLon": {"Lat": 50.5, "Lon": 13.0}, "DirectionDeg": 90.0})
-
-    async def display(request: web.Request) -> web.Response:
-        return web.json_response([{"FirstCol": "Speed", "LastCol": "0.0 km/h"}])
+def failing_step(how: str, release: asyncio.Event) -> Handler:
+    """A POST /API/CABCONTROLS that answers 503, or hangs until ``release`` first."""
 
     async def step(request: web.Request) -> web.Response:
-        if post == "hang":
+        if how == "hang":
             await release.wait()
         return web.Response(status=503, text="Service Unavailable: simulator paused")
 
-    app = web.Application()
-    app.router.add_get("/API/READY", ready)
-    app.router.add_get("/API/CABCONTROLS", cabcontrols)
-    app.router.add_post("/API/CABCONTROLS", step)
-    app.router.add_get("/API/MAP", map_)
-    app.router.add_get("/API/TRAINDRIVINGDISPLAY", display)
-    return app
+    return step
 
 
 @pytest.fixture
@@ -147,7 +119,10 @@ async def test_openrails_gone_before_initialize(mock: Mock, bridge: Bridge) -> N
 
 
 async def test_error_answer_is_unavailable(release: asyncio.Event, bridge: Bridge) -> None:
-    async with serve_app(tiny_openrails("503", release)) as url, bridge(url) as remote:
+    async with (
+        serve_app(tiny_openrails(step=failing_step("503", release))) as url,
+        bridge(url) as remote,
+    ):
         await remote.initialize(RunSetup(run_id="t", start_time=0.0, step_size=0.2))
         with pytest.raises(ParticipantUnavailable) as caught:
             await remote.do_step(0.0, 0.2, {"throttle": 0.5})
@@ -158,7 +133,7 @@ async def test_error_answer_is_unavailable(release: asyncio.Event, bridge: Bridg
 
 async def test_hanging_openrails_times_out(release: asyncio.Event, bridge: Bridge) -> None:
     """POST /API/CABCONTROLS never answers: DoStep fails after the 0.5 s request timeout."""
-    async with serve_app(tiny_openrails("hang", release)) as url:
+    async with serve_app(tiny_openrails(step=failing_step("hang", release))) as url:
         async with bridge(url, request_timeout_s=0.5) as remote:
             await remote.initialize(RunSetup(run_id="t", start_time=0.0, step_size=0.2))
             started = time.monotonic()

@@ -12,9 +12,7 @@ on purpose, so this one stands in for it.
 from __future__ import annotations
 
 import asyncio
-import copy
 import json
-from collections.abc import Awaitable, Callable
 from typing import Any
 
 import pytest
@@ -23,75 +21,10 @@ from aiohttp import web
 from coupler.channels import RunSetup
 from coupler.errors import ParticipantError, ParticipantUnavailable
 
-from .conftest import Bridge, serve_app
-from .test_bridge_failures import RANGES
+from .conftest import GOOD_TRAIN, RANGES, Bridge, Handler, serve_app, step_reply, tiny_openrails
 
-TRACK = {
-    "trackNodeIndex": 1,
-    "trackNodeLength": 500.0,
-    "trackNodeOffset": 42.0,
-    "trackVectorSectionIndex": 0,
-    "movementDirection": "Forward",
-}
-WORLD = {"tileX": 1, "tileZ": 2, "x": 3.0, "y": 4.0, "z": 5.0}
-GOOD_TRAIN: dict[str, Any] = {
-    "location": WORLD,
-    "trackLocation": TRACK,
-    "rearTrackLocation": TRACK,
-    "rotation": 0.5,
-    "locomotiveState": {
-        "v": 1.5,
-        "a": 0.1,
-        "distance": 12.0,
-        "wheelslip": False,
-        "wheelskid": False,
-    },
-    "trainLength": {"length": 41.7},
-    "carPositions": {"Front": WORLD, "Rear": WORLD},
-}
 MIB = 1024 * 1024
 HUGE = 400 * MIB
-
-Handler = Callable[[web.Request], Awaitable[web.StreamResponse]]
-
-
-def step_reply(**train_changes: Any) -> dict[str, Any]:
-    train = copy.deepcopy(GOOD_TRAIN)
-    for dotted, value in train_changes.items():
-        *parents, leaf = dotted.split("__")
-        node = train
-        for part in parents:
-            node = node[part]
-        if value is KeyError:
-            del node[leaf]
-        else:
-            node[leaf] = value
-    return {"trains": {"PLAYER": train}, "CameraSensors": {}}
-
-
-def tiny_openrails(*, step: Handler | None = None, controls: Any = RANGES) -> web.Application:
-    async def ready(request: web.Request) -> web.Response:
-        return web.Response(status=200)
-
-    async def cabcontrols(request: web.Request) -> web.Response:
-        return web.json_response(controls)
-
-    async def map_(request: web.Request) -> web.Response:
-        return web.json_response({"LatLon": {"Lat": 50.5, "Lon": 13.0}, "DirectionDeg": 90.0})
-
-    async def display(request: web.Request) -> web.Response:
-        return web.json_response([{"FirstCol": "Speed", "LastCol": "0.0 km/h"}])
-
-    async def good_step(request: web.Request) -> web.Response:
-        return web.json_response(step_reply())
-
-    app = web.Application()
-    app.router.add_get("/API/READY", ready)
-    app.router.add_get("/API/CABCONTROLS", cabcontrols)
-    app.router.add_post("/API/CABCONTROLS", step or good_step)
-    app.router.add_get("/API/MAP", map_)
-    app.router.add_get("/API/TRAINDRIVINGDISPLAY", display)
-    return app
 
 
 def answering(payload: Any) -> Handler:

@@ -48,7 +48,7 @@ import aiohttp
 from openrails_mock.config import MockConfig
 from openrails_mock.route import StraightRoute
 
-from .conftest import Serve
+from .conftest import Serve, body
 
 TILE = 2048.0
 START_TILE = (-5354, 14849)  # DEFAULT_START_TILE of the public client (routecreation)
@@ -157,17 +157,6 @@ def test_the_checker_catches_departures() -> None:
     assert problems(good | {"trackNodeIndex": True}, TRACK_LOCATION)
     assert problems({k: v for k, v in good.items() if k != "trackNodeLength"}, TRACK_LOCATION)
     assert problems(good | {"extra": 1}, TRACK_LOCATION)
-
-
-def body(**controls: float) -> dict[str, Any]:
-    return {
-        "Controls": [
-            {"LocomotiveName": "PLAYER", "TypeName": name, "ControlIndex": 1, "Value": value}
-            for name, value in controls.items()
-        ],
-        "Commands": [],
-        "SwitchCommands": {},
-    }
 
 
 async def post(session: aiohttp.ClientSession, path: str, payload: Any) -> Any:

@@ -16,7 +16,7 @@ import aiohttp
 from openrails_mock.config import ConsistOverrides, MockConfig
 from openrails_mock.route import StraightRoute
 
-from .conftest import FakeClock, Serve
+from .conftest import FakeClock, Serve, body
 
 G = 9.80665
 
@@ -48,17 +48,6 @@ def config(**changes: Any) -> MockConfig:
 
 def flat_route() -> StraightRoute:
     return StraightRoute(length_m=10_000.0, section_length_m=500.0)
-
-
-def body(**controls: float) -> dict[str, Any]:
-    return {
-        "Controls": [
-            {"LocomotiveName": "PLAYER", "TypeName": name, "ControlIndex": 1, "Value": value}
-            for name, value in controls.items()
-        ],
-        "Commands": [],
-        "SwitchCommands": {},
-    }
 
 
 async def step(session: aiohttp.ClientSession, **controls: float) -> dict[str, Any]:

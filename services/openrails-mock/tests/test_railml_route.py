@@ -14,22 +14,11 @@ from coupler.errors import ScenarioError
 from coupler_railway import load_infrastructure
 from openrails_mock.config import MockConfig
 
-from .conftest import Serve
+from .conftest import Serve, body
 
 ROOT = Path(__file__).resolve().parents[3]
 TEST_LINE = ROOT / "packages/railway/tests/data/test-line.railml"
 SCENARIO = ROOT / "scenarios/railway/data/annaberg-schwarzenberg.railml"
-
-
-def body(**controls: float) -> dict[str, object]:
-    return {
-        "Controls": [
-            {"LocomotiveName": "PLAYER", "TypeName": k, "ControlIndex": 1, "Value": v}
-            for k, v in controls.items()
-        ],
-        "Commands": [],
-        "SwitchCommands": {},
-    }
 
 
 async def test_test_line_track_nodes_follow_the_railml_tracks(serve: Serve) -> None:

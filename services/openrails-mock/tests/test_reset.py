@@ -12,18 +12,7 @@ import aiohttp
 from openrails_mock.config import MockConfig
 from openrails_mock.route import StraightRoute
 
-from .conftest import FakeClock, Serve
-
-
-def body(**controls: float) -> dict[str, Any]:
-    return {
-        "Controls": [
-            {"LocomotiveName": "PLAYER", "TypeName": name, "ControlIndex": 1, "Value": value}
-            for name, value in controls.items()
-        ],
-        "Commands": [],
-        "SwitchCommands": {},
-    }
+from .conftest import FakeClock, Serve, body
 
 
 async def drive(session: aiohttp.ClientSession) -> list[Any]:
