@@ -38,8 +38,13 @@ SCHEMES = ("grpc", "grpcs")
 
 
 def parse_address(address: str) -> str:
-    """``grpc://host:port``, ``grpcs://host:port`` (or bare ``host:port``) as the target string
-    grpc wants."""
+    """``grpc://host:port``, ``grpcs://host:port``, ``unix:///path`` (or bare ``host:port``) as
+    the target string grpc wants."""
+    if address.startswith("unix://"):
+        path = address.removeprefix("unix://")
+        if not path.startswith("/"):
+            raise ScenarioError(f"'{address}' is not a unix socket address; write unix:///PATH")
+        return f"unix:{path}"
     try:
         parts = urlsplit(address if "://" in address else f"grpc://{address}")
         port = parts.port

@@ -23,6 +23,7 @@ import signal
 import time
 from collections.abc import AsyncIterator, Awaitable, Callable
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import NoReturn, TypeVar
 
 import grpc
@@ -285,8 +286,10 @@ class ParticipantServer:
         port: int = 0,
         reflection: bool = False,
         security: ServerSecurity | None = None,
+        unix_socket: Path | None = None,
     ):
         self.participant = participant
+        self.unix_socket = unix_socket
         self.host = host
         self.requested_port = port
         self.reflection = reflection
@@ -298,13 +301,16 @@ class ParticipantServer:
 
     @property
     def address(self) -> str:
-        """``grpc://host:port`` (``grpcs://`` with TLS) of the running server."""
+        """``grpc://host:port`` (``grpcs://`` with TLS, ``unix:///path`` on a unix socket)."""
+        if self.unix_socket is not None:
+            return f"unix://{self.unix_socket}"
         scheme = "grpcs" if self.security.tls else "grpc"
         return f"{scheme}://{self.host}:{self.port}"
 
     async def start(self) -> int:
         """Bind, open the participant, describe it, then report SERVING. Returns the port."""
-        warning = self.security.check(self.host)
+        # a unix socket stays on this machine, protected by its file permissions
+        warning = self.security.check("localhost" if self.unix_socket else self.host)
         if warning:
             log.warning("insecure_interface", host=self.host, detail=warning)
         credentials = self.security.credentials()
@@ -318,7 +324,9 @@ class ParticipantServer:
             reflection.enable_server_reflection(
                 (SERVICE_NAME, health.SERVICE_NAME, reflection.SERVICE_NAME), server
             )
-        bind = f"{self.host}:{self.requested_port}"
+        bind = (
+            f"unix:{self.unix_socket}" if self.unix_socket else f"{self.host}:{self.requested_port}"
+        )
         if credentials is None:
             self.port = server.add_insecure_port(bind)
         else:

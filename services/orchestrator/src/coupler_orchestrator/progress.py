@@ -4,11 +4,11 @@ from __future__ import annotations
 
 import sys
 import time
-from collections.abc import Mapping, Sequence
-from typing import IO, Any
+from collections.abc import Sequence
+from typing import IO
 
 from coupler.channels import Value
-from coupler_orchestrator.observer import Observer, RunInfo
+from coupler_orchestrator.observer import Observer, RunEnd, RunInfo
 
 
 class ProgressBar(Observer):
@@ -49,8 +49,8 @@ class ProgressBar(Observer):
         self.stream.flush()
         self._shown = True
 
-    def finished(self, summary: Mapping[str, Any]) -> None:
+    def finished(self, end: RunEnd) -> None:
         if self._shown:
-            self._draw(float(summary["end_time"]), time.monotonic())
+            self._draw(end.end_time, time.monotonic())
             self.stream.write("\n")
             self.stream.flush()
