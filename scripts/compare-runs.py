@@ -24,8 +24,7 @@ def load(check: str, folder: Path) -> tuple[list[tuple[str, ...]], list[tuple[st
     summary = json.loads((folder / "summary.json").read_text())
     if summary.get("status") != "completed":
         sys.exit(
-            f"{check}: {folder}: status {summary.get('status')!r}, "
-            f"reason {summary.get('reason')!r}"
+            f"{check}: {folder}: status {summary.get('status')!r}, reason {summary.get('reason')!r}"
         )
     with (folder / "results.csv").open(newline="") as file:
         rows = list(csv.DictReader(file))

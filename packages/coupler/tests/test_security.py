@@ -181,7 +181,7 @@ async def test_a_health_port_answers_plaintext_probes_and_nothing_else(pki: DevP
         assert server.health_port
         health = f"grpc://127.0.0.1:{server.health_port}"
         await probe(health)  # SERVING, plaintext, no certificate, no token
-        with pytest.raises(ParticipantError, match="UNIMPLEMENTED|Method not found"):
+        with pytest.raises(ParticipantError, match=r"UNIMPLEMENTED|Method not found"):
             async with RemoteParticipant(health, connect_timeout=2.0) as remote:
                 await remote.describe()
         await server.stop(grace=0.1)

@@ -63,7 +63,8 @@ class ParticipantSettings(SecuritySettings):
 
 def add_security_arguments(parser: argparse.ArgumentParser) -> None:
     """``--tls-cert``, ``--tls-key``, ``--tls-client-ca``, ``--token-file``, ``--insecure``,
-    ``--reflection``, ``--health-port``; unset options leave the environment's values (dest = field names)."""
+    ``--reflection``, ``--health-port``; unset options leave the environment's values (dest =
+    field names)."""
     group = parser.add_argument_group("security (docs/security.md)")
     group.add_argument("--tls-cert", type=Path, help="server certificate (PEM): serve TLS")
     group.add_argument("--tls-key", type=Path, help="its private key (PEM)")
