@@ -246,8 +246,11 @@ class RemoteParticipant(Participant):
     async def _stream_step(
         self, stream: grpc.aio.StreamStreamCall, request: wire.DoStepRequest
     ) -> wire.DoStepResponse:
-        await stream.write(request)
-        response = await asyncio.wait_for(stream.read(), self.call_timeout)
+        try:
+            await stream.write(request)
+            response = await asyncio.wait_for(stream.read(), self.call_timeout)
+        except asyncio.InvalidStateError:  # the stream ended before this step was written
+            response = grpc.aio.EOF
         if response is grpc.aio.EOF:  # the server closed the stream: its status says why
             code = await stream.code()
             details = await stream.details()

@@ -66,6 +66,8 @@ class _Servicer(pb_grpc.GRPCComponentServiceServicer):
         self.run: _Run | None = None
         self._lock = asyncio.Lock()
         self._watchdog: asyncio.Task[None] | None = None
+        self.stopping = False
+        """The server is shutting down: calls are refused as UNAVAILABLE."""
 
     @property
     def run_id(self) -> str | None:
@@ -148,6 +150,12 @@ class _Servicer(pb_grpc.GRPCComponentServiceServicer):
     ) -> wire.DoStepResponse:
         await _guard(context, lambda: self.codec)
         run = self.run
+        if self.stopping:
+            await _abort(
+                context,
+                grpc.StatusCode.UNAVAILABLE,
+                f"participant '{self.name}' is shutting down (its process was asked to stop)",
+            )
         if run is None:
             await _abort(
                 context,
@@ -348,6 +356,7 @@ class ParticipantServer:
         """NOT_SERVING, end the active run, stop the server, close the participant."""
         await self._set_health(health_pb2.HealthCheckResponse.NOT_SERVING)
         if self._servicer is not None:
+            self._servicer.stopping = True
             try:
                 await self._servicer.close_run("participant shutting down")
             except Exception:

@@ -117,8 +117,8 @@ class Master:
                 if plan.realtime_factor:
                     await self._pace(wall_start, grid.time(k + 1) - grid.start)
         except CouplerError as exc:
-            status, reason = "failed", str(exc)
-            log.error("run_failed", run_id=plan.run_id, reason=reason, time=self._time_reached())
+            status, reason = "failed", f"{exc} (the run had reached t={self._time_reached():g} s)"
+            log.error("run_failed", run_id=plan.run_id, reason=reason)
         except Exception as exc:  # a bug or a foreign error: still a clean end and a summary
             status, reason = "failed", f"{type(exc).__name__}: {exc}"
             log.exception("run_failed", run_id=plan.run_id, reason=reason)

@@ -15,6 +15,7 @@ steps costs what a run of ten does.
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import fnmatch
 import io
@@ -97,6 +98,15 @@ def _write_failed(path: Path, exc: OSError) -> ResultsError:
     )
 
 
+def _cut(path: Path, good: int) -> None:
+    """Cut a file after its last complete line at or after byte ``good`` (best effort): every
+    row that reached the disk whole stays, no half-written row survives."""
+    with contextlib.suppress(OSError), path.open("rb") as file:
+        file.seek(good)
+        tail = file.read()
+        os.truncate(path, good + tail.rfind(b"\n") + 1)
+
+
 class CsvRecorder(Observer):
     """Writes results.csv: buffered, flushed once a second and when the run ends."""
 
@@ -109,6 +119,8 @@ class CsvRecorder(Observer):
         self._picked: list[int] = []
         self._count = 0
         self._flushed = 0.0
+        self._good = 0
+        """Bytes of results.csv known to hold only complete rows (flushed without error)."""
 
     def started(self, info: RunInfo) -> None:
         self._picked = self.selection.columns(info.columns)
@@ -119,8 +131,9 @@ class CsvRecorder(Observer):
             self._writer = csv.writer(self._file, lineterminator="\n")
             self._writer.writerow(["time", *(c.name for c in self._columns)])
             self._file.flush()
+            self._good = self._file.tell()
         except OSError as exc:
-            raise _write_failed(self.path, exc) from exc
+            self._fail(exc)
         self._flushed = wallclock.monotonic()
 
     def stepped(self, time: float, row: Sequence[Value]) -> None:
@@ -135,18 +148,30 @@ class CsvRecorder(Observer):
             now = wallclock.monotonic()
             if now - self._flushed >= FLUSH_EVERY_S:
                 self._file.flush()
+                self._good = self._file.tell()
                 self._flushed = now
         except OSError as exc:
-            raise _write_failed(self.path, exc) from exc
+            self._fail(exc)
 
     def finished(self, end: RunEnd) -> None:
-        file, self._file = self._file, None
+        file = self._file
         if file is None:
             return
         try:
-            file.close()
+            file.flush()
         except OSError as exc:
-            raise _write_failed(self.path, exc) from exc
+            self._fail(exc)
+        self._file = None
+        file.close()
+
+    def _fail(self, exc: OSError) -> None:
+        """Drop what could not be written whole, keep every complete row, say why."""
+        file, self._file = self._file, None
+        if file is not None:
+            with contextlib.suppress(OSError):
+                file.close()  # may fail again flushing the rest; the cut below removes it
+        _cut(self.path, self._good)
+        raise _write_failed(self.path, exc) from exc
 
 
 class LatencyStats:
@@ -272,12 +297,20 @@ def write_json(path: Path, data: Mapping[str, Any]) -> None:
     json.dump(data, text, indent=2)
     text.write("\n")
     partial = path.with_name(f".{path.name}.partial")
+    encoded = text.getvalue().encode()
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
-        partial.write_text(text.getvalue(), encoding="utf-8")
+        partial.write_bytes(encoded)
         os.replace(partial, path)
     except OSError as exc:
-        raise ResultsError(f"cannot write {path}: {exc.strerror or exc}") from exc
+        with contextlib.suppress(OSError):
+            partial.unlink()
+        try:  # a full disk: rewrite in place, in the blocks the file already has
+            with path.open("r+b") as file:
+                file.write(encoded)
+                file.truncate()
+        except OSError:
+            raise ResultsError(f"cannot write {path}: {exc.strerror or exc}") from exc
 
 
 def coupler_version() -> str:
