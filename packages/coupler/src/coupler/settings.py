@@ -20,9 +20,7 @@ from coupler.security import ServerSecurity
 class SecuritySettings(BaseSettings):
     """How a participant's gRPC server is secured (docs/security.md)."""
 
-    model_config = SettingsConfigDict(
-        env_prefix="COUPLER_EXAMPLE_", extra="ignore", frozen=True
-    )
+    model_config = SettingsConfigDict(env_prefix="COUPLER_EXAMPLE_", extra="ignore", frozen=True)
 
     tls_cert: Path | None = None
     """Server certificate chain (PEM); with ``tls_key`` it turns TLS on."""
