@@ -319,11 +319,14 @@ class ParticipantServer:
         self.reflection = reflection
         self.security = security or ServerSecurity()
         self.port = 0
+        self.health_port: int | None = None
+        """Port of the plaintext health-only server, when ``security.health_port`` asks for one."""
         self.health = _Health()
         self._stopping = False
         self._reported = False
         self._name = ""
         self._server: grpc.aio.Server | None = None
+        self._health_server: grpc.aio.Server | None = None
         self._servicer: _Servicer | None = None
 
     @property
@@ -359,6 +362,8 @@ class ParticipantServer:
         else:
             self.port = server.add_secure_port(bind, credentials)
         await server.start()
+        if self.security.health_port is not None:
+            await self._start_health_server(self.security.health_port)
         await self.participant.open()
         description = await self.participant.describe()
         self._servicer.ready(description)
@@ -379,6 +384,8 @@ class ParticipantServer:
                 log.exception("terminate_on_shutdown_failed")
         if self._server is not None:
             await self._server.stop(grace)
+        if self._health_server is not None:
+            await self._health_server.stop(0)
         await self.participant.close()
         log.info("participant_stopped", address=self.address)
 
@@ -400,6 +407,15 @@ class ParticipantServer:
             )
         else:
             log.info("participant_serving", participant=self._name, address=self.address)
+
+    async def _start_health_server(self, port: int) -> None:
+        """The health service alone, plaintext: it tells whether this participant serves and
+        nothing else, so probes that cannot do TLS (Kubernetes, Docker) need no secrets."""
+        self._health_server = grpc.aio.server()
+        health_pb2_grpc.add_HealthServicer_to_server(self.health, self._health_server)
+        self.health_port = self._health_server.add_insecure_port(f"{self.host}:{port}")
+        await self._health_server.start()
+        log.info("health_serving", address=f"grpc://{self.host}:{self.health_port}")
 
     async def _set_health(self, status: health_pb2.HealthCheckResponse.ServingStatus) -> None:
         await self.health.set("", status)
