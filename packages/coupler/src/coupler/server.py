@@ -338,7 +338,8 @@ class ParticipantServer:
         return f"{scheme}://{self.host}:{self.port}"
 
     async def start(self) -> int:
-        """Bind, open the participant, describe it, then report SERVING. Returns the port."""
+        """Bind, open the participant, describe it, then report its health (SERVING unless
+        ``Participant.watch_health`` says otherwise). Returns the port."""
         # a unix socket stays on this machine, protected by its file permissions
         warning = self.security.check("localhost" if self.unix_socket else self.host)
         if warning:
