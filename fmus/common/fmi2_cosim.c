@@ -28,10 +28,7 @@ static void logmsg(Instance *inst, fmi2Status status, const char *message) {
     if (inst->cb.logger == NULL) return;
     if (status == fmi2OK && !inst->logging) return;
     inst->cb.logger(inst->cb.componentEnvironment, inst->name, status,
-                    status == fmi2OK        ? "logAll"
-                    : status == fmi2Discard ? "logStatusDiscard"
-                                            : "logStatusError",
-                    "%s", message);
+                    status == fmi2OK ? "logAll" : "logStatusError", "%s", message);
 }
 
 static fmi2Status fail(Instance *inst, const char *message) {
@@ -246,7 +243,7 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint,
             inst->terminated = true;
             snprintf(inst->msg, sizeof inst->msg, "the model asks to end the simulation at t=%g",
                      end);
-            logmsg(inst, fmi2Discard, inst->msg);
+            logmsg(inst, fmi2OK, inst->msg); /* a request, not an error: logged when asked */
             return fmi2Discard;
         }
     }
