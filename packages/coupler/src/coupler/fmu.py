@@ -37,7 +37,7 @@ from coupler.fmuchannels import (
     ArrayInputs,
     Layout,
     check_supported,
-    unreadable_reason,
+    unsized_array,
 )
 from coupler.participant import EndRun, Participant, Values
 from coupler.values import coerce
@@ -117,11 +117,13 @@ class FmuParticipant(Participant):
             return
         if not self.path.is_file():
             raise ScenarioError(f"FMU not found: {self.path} (check the component's source)")
+        unsized = unsized_array(self.path)
+        if unsized is not None:
+            raise ScenarioError(f"{self.path}: {unsized}")
         try:
             md = fmpy.read_model_description(str(self.path), validate=False)
         except Exception as exc:
-            reason = unreadable_reason(self.path) or str(exc)
-            raise ScenarioError(f"{self.path}: not a readable FMU: {reason}") from exc
+            raise ScenarioError(f"{self.path}: not a readable FMU: {exc}") from exc
         check_supported(md, self.path)
         self._layout = Layout.of(md, self.path)
         self._md = md

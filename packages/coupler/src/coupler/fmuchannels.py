@@ -10,7 +10,7 @@ parameter keeps that value for every run (``check_parameters``).
 Refused, with a ScenarioError naming the FMU and the reason: FMUs without a co-simulation
 interface (model exchange or FMI 3.0 scheduled execution only), FMUs with FMI 3.0 Clock
 variables (Coupler steps FMUs and never ticks clocks), and arrays whose size Coupler cannot
-resolve (``unreadable_reason`` explains the model descriptions FMPy itself cannot read).
+resolve (``unsized_array`` finds those FMPy itself cannot read, before FMPy tries).
 """
 
 from __future__ import annotations
@@ -35,7 +35,7 @@ __all__ = [
     "Layout",
     "check_supported",
     "element_names",
-    "unreadable_reason",
+    "unsized_array",
 ]
 
 VALUE_TYPES = {
@@ -254,7 +254,9 @@ def _shape(
         size = int(sizer.start)
         shape.append(size)
         if sizer.causality == "structuralParameter":
-            fixed.setdefault(sizer.name, (size, []))[1].append(v.name)
+            arrays = fixed.setdefault(sizer.name, (size, []))[1]
+            if v.name not in arrays:
+                arrays.append(v.name)
     return tuple(shape)
 
 
@@ -287,15 +289,19 @@ def _parse(fmi_type: str, text: str) -> Value:
     return text
 
 
-def unreadable_reason(path: Path) -> str | None:
-    """Why FMPy could not read the FMU's arrays, when that is the cause; else None.
+def unsized_array(path: Path) -> str | None:
+    """Why an array of the FMU has no size, else None (also for FMUs that are not readable).
 
-    FMPy sizes every array while reading and fails on a ``<Dimension>`` whose value reference
-    names no variable or a variable without a start value.
+    FMPy sizes every array while reading and fails (leaving the FMU's file open) on a
+    ``<Dimension>`` whose value reference names no variable or a variable without a start
+    value: this is checked first. Model descriptions without arrays are not parsed here.
     """
     try:
         with zipfile.ZipFile(path) as fmu:
-            root = ElementTree.fromstring(fmu.read("modelDescription.xml"))
+            text = fmu.read("modelDescription.xml")
+        if b"<Dimension" not in text:
+            return None
+        root = ElementTree.fromstring(text)
     except (OSError, KeyError, zipfile.BadZipFile, ElementTree.ParseError):
         return None
     variables = root.find("ModelVariables")
