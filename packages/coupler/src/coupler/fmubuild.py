@@ -196,7 +196,8 @@ def find_model_folders(src_root: Path) -> list[Path]:
     """src_root and its direct subfolders that hold a modelDescription.xml (not deeper ones)."""
     root = Path(src_root)
     return sorted(
-        p.parent for p in (root / "modelDescription.xml", *root.glob("*/modelDescription.xml"))
+        p.parent
+        for p in (root / "modelDescription.xml", *root.glob("*/modelDescription.xml"))
         if p.is_file()
     )
 
