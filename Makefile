@@ -6,7 +6,7 @@ FMU_DIR := build/fmus
 RAILML := scenarios/railway/data/annaberg-schwarzenberg.railml
 
 .PHONY: setup sync proto proto-check lint test demo demo-example fmus faulty-fmus track-fmu \
-        assets browser bench compose-check clean
+        assets browser bench compose-check swarm-check k8s-check clean
 
 $(UV):
 	python3 -m venv .venv-uv && .venv-uv/bin/pip install --quiet uv
@@ -76,6 +76,14 @@ bench: setup
 
 compose-check:
 	bash scripts/compose-check.sh
+
+# The railway stack on a one-node Docker Swarm (TLS, docker secrets) vs the local run.
+swarm-check:
+	bash scripts/swarm-check.sh
+
+# deploy/k8s rendered with kustomize and validated against the Kubernetes schema (no cluster).
+k8s-check: sync
+	bash scripts/k8s-check.sh
 
 clean:
 	rm -rf .venv .venv-uv build .pytest_cache .mypy_cache .ruff_cache test-artifacts results

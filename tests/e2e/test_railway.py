@@ -23,7 +23,7 @@ import aiohttp
 import pytest
 
 from coupler_orchestrator.fleet import Fleet, FleetSpec, ServiceSpec
-from coupler_orchestrator.planning import RunOptions
+from coupler_orchestrator.options import RunOptions
 from coupler_orchestrator.runner import RunOutcome, run_scenario
 from coupler_railway import load_infrastructure
 

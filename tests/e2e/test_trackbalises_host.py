@@ -22,7 +22,7 @@ import pytest
 
 from balise_fmu.build import build_track_balises
 from coupler_orchestrator.fleet import Fleet, FleetSpec, ServiceSpec
-from coupler_orchestrator.planning import RunOptions
+from coupler_orchestrator.options import RunOptions
 from coupler_orchestrator.runner import run_scenario
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -116,7 +116,7 @@ async def test_host_under_coupler_run_equals_fmpy(tmp_path: Path) -> None:
         outcome = await run_scenario(
             ssd, RunOptions(stop_time=STOP, step_size=STEP), out_dir=tmp_path / "out"
         )
-    assert outcome.result.status == "completed", outcome.result.reason
+    assert outcome.end.status == "completed", outcome.end.reason
     with outcome.results_csv.open(newline="") as file:
         rows = list(csv.DictReader(file))
 

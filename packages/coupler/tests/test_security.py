@@ -164,3 +164,28 @@ def test_half_a_key_pair_is_an_error(pki: DevPki) -> None:
 def test_an_unreadable_secret_names_the_file(tmp_path: Path) -> None:
     with pytest.raises(ScenarioError, match=r"cannot read the token file .*nope"):
         ClientSecurity(token_file=tmp_path / "nope").metadata()
+
+
+async def test_a_health_port_answers_plaintext_probes_and_nothing_else(pki: DevPki) -> None:
+    """Kubernetes gRPC probes and Docker healthchecks cannot do TLS: the health-only port."""
+    server = await started(
+        ServerSecurity(
+            cert=pki.server_cert,
+            key=pki.server_key,
+            client_ca=pki.ca,
+            token_file=pki.token,
+            health_port=0,
+        )
+    )
+    try:
+        assert server.health_port
+        health = f"grpc://127.0.0.1:{server.health_port}"
+        await probe(health)  # SERVING, plaintext, no certificate, no token
+        with pytest.raises(ParticipantError, match=r"UNIMPLEMENTED|Method not found"):
+            async with RemoteParticipant(health, connect_timeout=2.0) as remote:
+                await remote.describe()
+        await server.stop(grace=0.1)
+        with pytest.raises(ParticipantUnavailable):
+            await probe(health, connect_timeout=0.5)
+    finally:
+        await server.stop(grace=0.1)

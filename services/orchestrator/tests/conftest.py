@@ -53,8 +53,8 @@ def faulty_fmus(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
 
 @pytest.fixture
 def fmus(built_fmus: dict[str, Path], monkeypatch: pytest.MonkeyPatch) -> dict[str, Path]:
-    """The built FMUs; ``${COUPLER_FMUS}`` in the SSDs of data/ names their folder."""
-    monkeypatch.setenv("COUPLER_FMUS", str(next(iter(built_fmus.values())).parent))
+    """The built FMUs; ``${COUPLER_FMU_DIR}`` in the SSDs of data/ names their folder."""
+    monkeypatch.setenv("COUPLER_FMU_DIR", str(next(iter(built_fmus.values())).parent))
     return built_fmus
 
 

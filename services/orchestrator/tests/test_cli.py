@@ -6,9 +6,13 @@ coupler describe Source2.fmu            -->  FMU
 
 from __future__ import annotations
 
+import io
+import time
 from pathlib import Path
 
 from coupler.server import ParticipantServer
+from coupler_orchestrator.observer import RunEnd, RunInfo
+from coupler_orchestrator.progress import ProgressLines
 
 from .conftest import DATA, Coupler
 
@@ -47,3 +51,31 @@ def test_validate_valid_scenario(
     outcome = coupler("validate", DATA / "mixed.ssd")
     assert outcome.code == 0, outcome.err
     assert outcome.out.endswith("mixed.ssd: valid (4 components, 11 connections)\n")
+
+
+def test_progress_lines_when_not_on_a_terminal(tmp_path: Path) -> None:
+    """Off a terminal (CI, compose) progress is a plain line every few seconds, not a bar."""
+    stream = io.StringIO()
+    lines = ProgressLines(stream, every=0.05)
+    info = RunInfo(
+        run_id="r",
+        algorithm="jacobi",
+        members=("A",),
+        multiples=(1,),
+        columns=(),
+        start_time=0.0,
+        stop_time=10.0,
+        step_size=1.0,
+        steps=10,
+    )
+    lines.started(info)
+    for k in range(11):
+        time.sleep(0.03)
+        lines.stepped(float(k), [])
+    lines.finished(RunEnd(status="completed", reason="", steps=10, end_time=10.0, wall_time=0.3))
+    text = stream.getvalue()
+    assert "\r" not in text
+    written = text.splitlines()
+    assert 2 <= len(written) <= 8
+    assert all(line.startswith("progress: t=") and "x real time  ETA" in line for line in written)
+    assert "%" in written[-1]

@@ -97,8 +97,8 @@ def test_step_multiple_must_divide_the_run(coupler: Coupler, tmp_path: Path) -> 
 def _ssp(tmp_path: Path, ssd: Path, fmus: list[str]) -> Path:
     """An .ssp archive: the SSD as SystemStructure.ssd, the FMUs under resources/."""
     archive = tmp_path / f"{ssd.stem}.ssp"
-    text = ssd.read_text().replace("${COUPLER_FMUS}/", "resources/")
-    built = Path(os.environ["COUPLER_FMUS"])
+    text = ssd.read_text().replace("${COUPLER_FMU_DIR}/", "resources/")
+    built = Path(os.environ["COUPLER_FMU_DIR"])
     with zipfile.ZipFile(archive, "w", zipfile.ZIP_DEFLATED) as zf:
         zf.writestr("SystemStructure.ssd", text)
         for name in fmus:

@@ -38,8 +38,13 @@ SCHEMES = ("grpc", "grpcs")
 
 
 def parse_address(address: str) -> str:
-    """``grpc://host:port``, ``grpcs://host:port`` (or bare ``host:port``) as the target string
-    grpc wants."""
+    """``grpc://host:port``, ``grpcs://host:port``, ``unix:///path`` (or bare ``host:port``) as
+    the target string grpc wants."""
+    if address.startswith("unix://"):
+        path = address.removeprefix("unix://")
+        if not path.startswith("/"):
+            raise ScenarioError(f"'{address}' is not a unix socket address; write unix:///PATH")
+        return f"unix:{path}"
     try:
         parts = urlsplit(address if "://" in address else f"grpc://{address}")
         port = parts.port
@@ -241,8 +246,11 @@ class RemoteParticipant(Participant):
     async def _stream_step(
         self, stream: grpc.aio.StreamStreamCall, request: wire.DoStepRequest
     ) -> wire.DoStepResponse:
-        await stream.write(request)
-        response = await asyncio.wait_for(stream.read(), self.call_timeout)
+        try:
+            await stream.write(request)
+            response = await asyncio.wait_for(stream.read(), self.call_timeout)
+        except asyncio.InvalidStateError:  # the stream ended before this step was written
+            response = grpc.aio.EOF
         if response is grpc.aio.EOF:  # the server closed the stream: its status says why
             code = await stream.code()
             details = await stream.details()

@@ -76,6 +76,10 @@ class ServerSecurity:
     """File holding the bearer token every call must carry."""
     insecure: bool = False
     """Allow plaintext on an interface other than loopback (a warning is logged)."""
+    health_port: int | None = None
+    """Also serve the health service alone, plaintext, on this port (0 = any free one): for
+    probes that cannot do TLS or client certificates (Kubernetes gRPC probes, Docker
+    healthchecks). It answers SERVING or NOT_SERVING and nothing else, without a token."""
 
     @property
     def tls(self) -> bool:

@@ -23,6 +23,7 @@ import signal
 import time
 from collections.abc import AsyncIterator, Awaitable, Callable
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import NoReturn, TypeVar
 
 import grpc
@@ -65,6 +66,8 @@ class _Servicer(pb_grpc.GRPCComponentServiceServicer):
         self.run: _Run | None = None
         self._lock = asyncio.Lock()
         self._watchdog: asyncio.Task[None] | None = None
+        self.stopping = False
+        """The server is shutting down: calls are refused as UNAVAILABLE."""
 
     @property
     def run_id(self) -> str | None:
@@ -147,6 +150,12 @@ class _Servicer(pb_grpc.GRPCComponentServiceServicer):
     ) -> wire.DoStepResponse:
         await _guard(context, lambda: self.codec)
         run = self.run
+        if self.stopping:
+            await _abort(
+                context,
+                grpc.StatusCode.UNAVAILABLE,
+                f"participant '{self.name}' is shutting down (its process was asked to stop)",
+            )
         if run is None:
             await _abort(
                 context,
@@ -285,26 +294,34 @@ class ParticipantServer:
         port: int = 0,
         reflection: bool = False,
         security: ServerSecurity | None = None,
+        unix_socket: Path | None = None,
     ):
         self.participant = participant
+        self.unix_socket = unix_socket
         self.host = host
         self.requested_port = port
         self.reflection = reflection
         self.security = security or ServerSecurity()
         self.port = 0
+        self.health_port: int | None = None
+        """Port of the plaintext health-only server, when ``security.health_port`` asks for one."""
         self.health = health.aio.HealthServicer()
         self._server: grpc.aio.Server | None = None
+        self._health_server: grpc.aio.Server | None = None
         self._servicer: _Servicer | None = None
 
     @property
     def address(self) -> str:
-        """``grpc://host:port`` (``grpcs://`` with TLS) of the running server."""
+        """``grpc://host:port`` (``grpcs://`` with TLS, ``unix:///path`` on a unix socket)."""
+        if self.unix_socket is not None:
+            return f"unix://{self.unix_socket}"
         scheme = "grpcs" if self.security.tls else "grpc"
         return f"{scheme}://{self.host}:{self.port}"
 
     async def start(self) -> int:
         """Bind, open the participant, describe it, then report SERVING. Returns the port."""
-        warning = self.security.check(self.host)
+        # a unix socket stays on this machine, protected by its file permissions
+        warning = self.security.check("localhost" if self.unix_socket else self.host)
         if warning:
             log.warning("insecure_interface", host=self.host, detail=warning)
         credentials = self.security.credentials()
@@ -318,12 +335,16 @@ class ParticipantServer:
             reflection.enable_server_reflection(
                 (SERVICE_NAME, health.SERVICE_NAME, reflection.SERVICE_NAME), server
             )
-        bind = f"{self.host}:{self.requested_port}"
+        bind = (
+            f"unix:{self.unix_socket}" if self.unix_socket else f"{self.host}:{self.requested_port}"
+        )
         if credentials is None:
             self.port = server.add_insecure_port(bind)
         else:
             self.port = server.add_secure_port(bind, credentials)
         await server.start()
+        if self.security.health_port is not None:
+            await self._start_health_server(self.security.health_port)
         await self.participant.open()
         description = await self.participant.describe()
         self._servicer.ready(description)
@@ -335,18 +356,30 @@ class ParticipantServer:
         """NOT_SERVING, end the active run, stop the server, close the participant."""
         await self._set_health(health_pb2.HealthCheckResponse.NOT_SERVING)
         if self._servicer is not None:
+            self._servicer.stopping = True
             try:
                 await self._servicer.close_run("participant shutting down")
             except Exception:
                 log.exception("terminate_on_shutdown_failed")
         if self._server is not None:
             await self._server.stop(grace)
+        if self._health_server is not None:
+            await self._health_server.stop(0)
         await self.participant.close()
         log.info("participant_stopped", address=self.address)
 
     async def wait(self) -> None:
         if self._server is not None:
             await self._server.wait_for_termination()
+
+    async def _start_health_server(self, port: int) -> None:
+        """The health service alone, plaintext: it tells whether this participant serves and
+        nothing else, so probes that cannot do TLS (Kubernetes, Docker) need no secrets."""
+        self._health_server = grpc.aio.server()
+        health_pb2_grpc.add_HealthServicer_to_server(self.health, self._health_server)
+        self.health_port = self._health_server.add_insecure_port(f"{self.host}:{port}")
+        await self._health_server.start()
+        log.info("health_serving", address=f"grpc://{self.host}:{self.health_port}")
 
     async def _set_health(self, status: health_pb2.HealthCheckResponse.ServingStatus) -> None:
         await self.health.set("", status)

@@ -3,7 +3,8 @@
 Every participant process reads ``ParticipantSettings`` (bind address, port, logging, and the
 security of its gRPC server); services subclass it with their own prefix, so the bridge reads
 ``OPENRAILS_BRIDGE_PORT``, ``OPENRAILS_BRIDGE_TLS_CERT``, ... and command-line options override
-them (``add_security_arguments``).
+them (``add_security_arguments``). The base prefix, ``COUPLER_EXAMPLE_`` (the example
+participants), never collides with the orchestrator's client settings (``COUPLER_TLS_CA``, ...).
 """
 
 from __future__ import annotations
@@ -19,7 +20,7 @@ from coupler.security import ServerSecurity
 class SecuritySettings(BaseSettings):
     """How a participant's gRPC server is secured (docs/security.md)."""
 
-    model_config = SettingsConfigDict(env_prefix="COUPLER_", extra="ignore", frozen=True)
+    model_config = SettingsConfigDict(env_prefix="COUPLER_EXAMPLE_", extra="ignore", frozen=True)
 
     tls_cert: Path | None = None
     """Server certificate chain (PEM); with ``tls_key`` it turns TLS on."""
@@ -33,6 +34,9 @@ class SecuritySettings(BaseSettings):
     """Allow plaintext gRPC on an interface other than loopback (logged as a warning)."""
     reflection: bool = False
     """Serve gRPC server reflection (for grpcurl); off by default."""
+    health_port: int | None = None
+    """Also serve the health service alone, plaintext, on this port (for probes that cannot
+    do TLS: Kubernetes gRPC probes, Docker healthchecks)."""
 
     def security(self) -> ServerSecurity:
         return ServerSecurity(
@@ -41,6 +45,7 @@ class SecuritySettings(BaseSettings):
             client_ca=self.tls_client_ca,
             token_file=self.token_file,
             insecure=self.insecure,
+            health_port=self.health_port,
         )
 
 
@@ -59,7 +64,8 @@ class ParticipantSettings(SecuritySettings):
 
 def add_security_arguments(parser: argparse.ArgumentParser) -> None:
     """``--tls-cert``, ``--tls-key``, ``--tls-client-ca``, ``--token-file``, ``--insecure``,
-    ``--reflection``; unset options leave the environment's values (dest = field names)."""
+    ``--reflection``, ``--health-port``; unset options leave the environment's values (dest =
+    field names)."""
     group = parser.add_argument_group("security (docs/security.md)")
     group.add_argument("--tls-cert", type=Path, help="server certificate (PEM): serve TLS")
     group.add_argument("--tls-key", type=Path, help="its private key (PEM)")
@@ -75,4 +81,10 @@ def add_security_arguments(parser: argparse.ArgumentParser) -> None:
     )
     group.add_argument(
         "--reflection", action="store_true", default=None, help="serve gRPC reflection"
+    )
+    group.add_argument(
+        "--health-port",
+        type=int,
+        help="also serve the health service alone, plaintext, on this port (probes that "
+        "cannot do TLS)",
     )

@@ -151,6 +151,14 @@ class _Reader:
             raise RailMLError(
                 self.file, exc.lineno, None, f"malformed XML: {exc.msg}", "fix the XML syntax"
             ) from exc
+        except OSError as exc:  # lxml: unreadable file, or bytes invalid in its encoding
+            raise RailMLError(
+                self.file,
+                None,
+                None,
+                f"cannot read it as XML: {exc}",
+                "check that it is a railML file in UTF-8 (or the encoding it declares)",
+            ) from exc
         if _local(root) != "railml":
             raise self.error(root, "the root element is not <railml>", "give a railML 2.x file")
         self.check_ids(root)

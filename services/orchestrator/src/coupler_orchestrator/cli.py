@@ -1,4 +1,4 @@
-"""The ``coupler`` command: run, validate, describe."""
+"""The ``coupler`` command: run, validate, describe, fleet."""
 
 from __future__ import annotations
 
@@ -18,9 +18,9 @@ from coupler.logs import configure_logging
 from coupler.participant import Participant
 from coupler.security import ClientSecurity
 from coupler_orchestrator.fleet import Fleet, FleetSpec
-from coupler_orchestrator.plan import Algorithm
-from coupler_orchestrator.planning import RunOptions
-from coupler_orchestrator.progress import ProgressBar
+from coupler_orchestrator.observer import Observer
+from coupler_orchestrator.options import Algorithm, RunOptions
+from coupler_orchestrator.progress import ProgressBar, ProgressLines
 from coupler_orchestrator.runner import run_scenario, validate_scenario
 
 EXIT_OK, EXIT_ERROR, EXIT_INTERRUPTED = 0, 1, 130
@@ -34,18 +34,40 @@ def parser() -> argparse.ArgumentParser:
     commands = top.add_subparsers(dest="command", required=True)
 
     run = commands.add_parser("run", help="run a scenario and record results")
-    run.add_argument("ssp", type=Path, help=".ssp archive or .ssd file")
+    run.add_argument(
+        "ssp", type=Path, help=".ssp archive, unpacked SSP folder, .ssd file or a single .fmu"
+    )
     _run_options(run)
+    run.add_argument(
+        "--output-interval",
+        type=float,
+        metavar="S",
+        help="record every communication point that is a multiple of S past the start "
+        "(default: every one)",
+    )
+    run.add_argument(
+        "--output-variables",
+        nargs="+",
+        default=[],
+        metavar="NAME",
+        help="record only these outputs: Component.output names or globs (Gain.*)",
+    )
     run.add_argument(
         "--out",
         type=Path,
         help="results directory (default: the SSD's OpenMCx outputDirectory, else ./results)",
     )
     run.add_argument("--realtime-factor", type=float, help="pace at X times real time")
-    run.add_argument("--no-progress", action="store_true", help="no progress bar")
+    run.add_argument(
+        "--no-progress",
+        action="store_true",
+        help="no progress (default: a bar on a terminal, else a line every 10 s on stderr)",
+    )
 
     validate = commands.add_parser("validate", help="check a scenario and its participants")
-    validate.add_argument("ssp", type=Path, help=".ssp archive or .ssd file")
+    validate.add_argument(
+        "ssp", type=Path, help=".ssp archive, unpacked SSP folder, .ssd file or a single .fmu"
+    )
     _run_options(validate)
 
     fleet = commands.add_parser(
@@ -83,7 +105,8 @@ def _run_options(command: argparse.ArgumentParser) -> None:
         action="append",
         default=[],
         metavar="COMPONENT.NAME=VALUE",
-        help="override a parameter (repeatable)",
+        help="override a parameter or input start value (repeatable; a single FMU's "
+        "parameters may be given as NAME=VALUE)",
     )
     command.add_argument("--run-id", help="run id sent to participants (default: a random UUID)")
     command.add_argument(
@@ -103,6 +126,13 @@ def _run_options(command: argparse.ArgumentParser) -> None:
         type=float,
         default=30.0,
         help="[s] deadline of every call to a participant (default 30)",
+    )
+    command.add_argument(
+        "--isolate-fmus",
+        action="store_true",
+        help="run every FMU in a child process: a crash or hang of an FMU fails the run "
+        "cleanly instead of the orchestrator (per component: SSD annotation "
+        "org.coupler.component isolate)",
     )
     _security_options(command)
 
@@ -131,7 +161,7 @@ def options_of(args: argparse.Namespace) -> RunOptions:
     parameters = {}
     for item in args.param:
         key, sep, value = item.partition("=")
-        if not sep or "." not in key:
+        if not sep or not key:
             raise CouplerError(f"--param {item!r}: write COMPONENT.NAME=VALUE")
         parameters[key] = value
     return RunOptions(
@@ -143,8 +173,11 @@ def options_of(args: argparse.Namespace) -> RunOptions:
         parameters=parameters,
         connect_timeout=args.connect_timeout,
         call_timeout=args.call_timeout,
+        isolate_fmus=args.isolate_fmus,
         lease=args.lease,
         security=security_of(args),
+        output_interval=getattr(args, "output_interval", None),
+        output_variables=tuple(getattr(args, "output_variables", ())),
         **({"run_id": args.run_id} if args.run_id else {}),
     )
 
@@ -203,9 +236,10 @@ async def _dispatch(args: argparse.Namespace, out: TextIO) -> int:
         return await _fleet(args, out)
     options = options_of(args)
     if args.command == "validate":
-        scenario = await validate_scenario(args.ssp, options)
-        for warning in scenario.warnings:
+        validation = await validate_scenario(args.ssp, options)
+        for warning in validation.warnings:
             print(f"warning: {warning}", file=out)
+        scenario = validation.scenario
         print(
             f"{args.ssp}: valid ({len(scenario.components)} components, "
             f"{len(scenario.connections)} connections)",
@@ -216,21 +250,22 @@ async def _dispatch(args: argparse.Namespace, out: TextIO) -> int:
 
 
 async def _run(args: argparse.Namespace, options: RunOptions, out: TextIO) -> int:
-    observers = [] if args.no_progress or not sys.stderr.isatty() else [ProgressBar()]
+    observers: list[Observer] = []
+    if not args.no_progress:
+        observers.append(ProgressBar() if sys.stderr.isatty() else ProgressLines())
     outcome = await run_scenario(args.ssp, options, out_dir=args.out, observers=observers)
-    result = outcome.result
+    end = outcome.end
     print(
-        f"{result.status}: {result.summary['steps']} steps to t={result.summary['end_time']:g} s"
-        f" in {result.summary['wall_time_s']:.3g} s",
+        f"{end.status}: {end.steps} steps to t={end.end_time:g} s in {end.wall_time:.3g} s",
         file=out,
     )
     print(f"results: {outcome.results_csv}", file=out)
     print(f"summary: {outcome.summary_json}", file=out)
-    if result.status == "terminated":
-        print(f"terminated early: {result.reason}", file=out)
+    if end.status == "terminated":
+        print(f"terminated early: {end.reason}", file=out)
         return EXIT_OK
-    if result.status != "completed":
-        print(f"error: run {result.status}: {result.reason}", file=sys.stderr)
+    if end.status != "completed":
+        print(f"error: run {end.status}: {end.reason}", file=sys.stderr)
         return EXIT_ERROR
     return EXIT_OK
 

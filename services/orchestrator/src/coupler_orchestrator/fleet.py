@@ -10,7 +10,7 @@ A fleet file (TOML) names the scenario and the services::
     [[service]]
     name = "openrails-mock"
     command = ["python", "-m", "openrails_mock", "--port", "2150"]
-    health = "http://127.0.0.1:2150/API/READY"   # or grpc://HOST:PORT (gRPC health)
+    health = "http://127.0.0.1:2150/API/READY"   # or grpc(s)://HOST:PORT (gRPC health)
 
     [urls]
     map = "http://127.0.0.1:8080/"
@@ -54,7 +54,8 @@ class ServiceSpec:
     command: tuple[str, ...]
     """Command line; a leading ``python`` means this interpreter."""
     health: str
-    """``grpc://HOST:PORT`` (gRPC health SERVING) or an http URL answering 200."""
+    """``grpc://HOST:PORT`` or ``grpcs://HOST:PORT`` (gRPC health SERVING; TLS from the
+    ``COUPLER_TLS_*`` environment) or an http URL answering 200."""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -166,7 +167,7 @@ class Fleet:
             await asyncio.sleep(0.2)
 
     async def _healthy(self, url: str) -> bool:
-        if url.startswith("grpc://"):
+        if url.startswith(("grpc://", "grpcs://")):
             try:
                 await probe(url, connect_timeout=0.5)
                 return True

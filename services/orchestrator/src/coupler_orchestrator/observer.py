@@ -1,10 +1,15 @@
-"""Observers see every step of a run: the CSV recorder, the progress bar, tests, live views."""
+"""What a run tells its observers: the CSV recorder, the summary, the progress display, live
+views and tests all see the same events, in this order: ``started``, then ``stepped`` (and
+``timed``) for every communication point from t_0 on, then ``finished`` — on every path.
+
+Observers are called on the event loop and must not block long; an observer that cannot do its
+job (a full disk) raises a CouplerError, which ends the run as ``failed`` with that reason.
+"""
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any
 
 from coupler.channels import Value
 
@@ -19,6 +24,8 @@ class Column:
     """Unit symbol, empty when none."""
     type: str
     """Value type name (Real, Integer, ...)."""
+    message_type: str = ""
+    """Binary columns: the protobuf message carried, when the participant names one."""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -27,26 +34,53 @@ class RunInfo:
 
     run_id: str
     """The run's id."""
+    algorithm: str
+    """Master algorithm."""
+    members: tuple[str, ...]
+    """Component names, in scenario order (the order of ``timed``'s samples)."""
+    multiples: tuple[int, ...]
+    """Each member's step multiple, aligned with ``members``."""
     columns: tuple[Column, ...]
     """Recorded outputs, in row order."""
     start_time: float
     """t_0 [s]."""
     stop_time: float
-    """Last communication point [s]."""
+    """Last communication point planned [s]."""
     step_size: float
     """Base step h [s]."""
     steps: int
     """Number of base steps planned."""
 
 
+@dataclass(frozen=True, kw_only=True)
+class RunEnd:
+    """How a run ended."""
+
+    status: str
+    """``completed``, ``terminated`` (a participant asked to end it), ``failed`` or
+    ``aborted`` (interrupted)."""
+    reason: str
+    """Why it ended so; empty when completed."""
+    steps: int
+    """Base steps completed."""
+    end_time: float
+    """Last communication point recorded [s]."""
+    wall_time: float
+    """Wall-clock duration from the start of initialization [s]."""
+
+
 class Observer:
-    """Override what you need; every method is called on the event loop and must not block long."""
+    """Override what you need."""
 
     def started(self, info: RunInfo) -> None:
-        """The participants are initialized; ``stepped`` follows for t_0."""
+        """The run begins (before the participants are initialized)."""
 
     def stepped(self, time: float, row: Sequence[Value]) -> None:
         """Outputs at communication point ``time``, aligned with ``RunInfo.columns``."""
 
-    def finished(self, summary: Mapping[str, Any]) -> None:
-        """The run ended (completed, aborted or failed); ``summary`` is what summary.json holds."""
+    def timed(self, seconds: Sequence[float | None]) -> None:
+        """How long each member's step just taken lasted [s], aligned with ``RunInfo.members``;
+        None for a member that was not due."""
+
+    def finished(self, end: RunEnd) -> None:
+        """The run ended, however it ended."""

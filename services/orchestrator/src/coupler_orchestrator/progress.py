@@ -1,31 +1,77 @@
-"""A progress bar on stderr for runs that last longer than two seconds on a terminal."""
+"""Progress of a run on stderr: a bar on a terminal, plain lines in logs (CI, compose).
+
+Both show the simulated time reached, the share of the run, the real-time factor and an ETA;
+neither ever slows the run (they draw at most ten times a second, respectively every
+``every`` seconds).
+"""
 
 from __future__ import annotations
 
 import sys
 import time
-from collections.abc import Mapping, Sequence
-from typing import IO, Any
+from collections.abc import Sequence
+from typing import IO
 
 from coupler.channels import Value
-from coupler_orchestrator.observer import Observer, RunInfo
+from coupler_orchestrator.observer import Observer, RunEnd, RunInfo
 
 
-class ProgressBar(Observer):
-    """Redraws at most ten times a second; silent for the first ``delay`` seconds."""
+class _Progress(Observer):
+    """What the bar and the lines share: where the run is and how fast it goes."""
 
-    def __init__(self, stream: IO[str] | None = None, *, delay: float = 2.0, width: int = 30):
-        self.stream = stream or sys.stderr
-        self.delay = delay
-        self.width = width
+    def __init__(self, stream: IO[str] | None) -> None:
+        self._stream = stream
         self._info: RunInfo | None = None
         self._started = 0.0
-        self._drawn = 0.0
-        self._shown = False
+
+    @property
+    def stream(self) -> IO[str]:
+        return self._stream or sys.stderr  # the current stderr (test runners swap it)
 
     def started(self, info: RunInfo) -> None:
         self._info = info
         self._started = time.monotonic()
+
+    def status(self, time_s: float, now: float) -> tuple[float, str]:
+        """(fraction done, 't=.../... s  NN.N%  RTFx real time  ETA ...')."""
+        assert self._info is not None
+        info = self._info
+        span = info.stop_time - info.start_time
+        done = (time_s - info.start_time) / span if span > 0 else 1.0
+        elapsed = now - self._started
+        simulated = time_s - info.start_time
+        rtf = simulated / elapsed if elapsed > 0 else 0.0
+        eta = (info.stop_time - time_s) / rtf if rtf > 0 else float("inf")
+        return done, (
+            f"t={time_s:.6g}/{info.stop_time:.6g} s  {done:6.1%}  {rtf:.3g}x real time  "
+            f"ETA {_duration(eta)}"
+        )
+
+
+def _duration(seconds: float) -> str:
+    if seconds == float("inf"):
+        return "?"
+    seconds = round(seconds)
+    if seconds < 60:
+        return f"{seconds} s"
+    minutes, seconds = divmod(seconds, 60)
+    if minutes < 60:
+        return f"{minutes} min {seconds:02d} s"
+    hours, minutes = divmod(minutes, 60)
+    return f"{hours} h {minutes:02d} min"
+
+
+class ProgressBar(_Progress):
+    """A bar redrawn in place on a terminal; silent for the first ``delay`` seconds."""
+
+    def __init__(
+        self, stream: IO[str] | None = None, *, delay: float = 2.0, width: int = 30
+    ) -> None:
+        super().__init__(stream)
+        self.delay = delay
+        self.width = width
+        self._drawn = 0.0
+        self._shown = False
 
     def stepped(self, time_s: float, row: Sequence[Value]) -> None:
         now = time.monotonic()
@@ -35,22 +81,35 @@ class ProgressBar(Observer):
         self._draw(time_s, now)
 
     def _draw(self, time_s: float, now: float) -> None:
-        assert self._info is not None
-        info = self._info
-        span = info.stop_time - info.start_time
-        done = (time_s - info.start_time) / span if span > 0 else 1.0
-        filled = round(done * self.width)
-        elapsed = now - self._started
-        rtf = (time_s - info.start_time) / elapsed if elapsed > 0 else 0.0
-        bar = "#" * filled + "." * (self.width - filled)
-        self.stream.write(
-            f"\r[{bar}] {done:6.1%}  t={time_s:.6g}/{info.stop_time:.6g} s  {rtf:.3g}x real time"
-        )
+        done, text = self.status(time_s, now)
+        filled = round(min(max(done, 0.0), 1.0) * self.width)
+        self.stream.write(f"\r[{'#' * filled}{'.' * (self.width - filled)}] {text} ")
         self.stream.flush()
         self._shown = True
 
-    def finished(self, summary: Mapping[str, Any]) -> None:
+    def finished(self, end: RunEnd) -> None:
         if self._shown:
-            self._draw(float(summary["end_time"]), time.monotonic())
+            self._draw(end.end_time, time.monotonic())
             self.stream.write("\n")
             self.stream.flush()
+
+
+class ProgressLines(_Progress):
+    """One plain line every ``every`` seconds (for logs, where a bar would be garbage)."""
+
+    def __init__(self, stream: IO[str] | None = None, *, every: float = 10.0) -> None:
+        super().__init__(stream)
+        self.every = every
+        self._next = 0.0
+
+    def started(self, info: RunInfo) -> None:
+        super().started(info)
+        self._next = self._started + self.every
+
+    def stepped(self, time_s: float, row: Sequence[Value]) -> None:
+        now = time.monotonic()
+        if self._info is None or now < self._next:
+            return
+        self._next = now + self.every
+        self.stream.write(f"progress: {self.status(time_s, now)[1]}\n")
+        self.stream.flush()

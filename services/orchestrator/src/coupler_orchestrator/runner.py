@@ -1,21 +1,39 @@
-"""One scenario run end to end: load, describe and check, plan, run, record, clean up."""
+"""One scenario end to end: load -> participants -> checks -> wiring -> plan -> master ->
+results. The CLI calls this; ``validate`` stops after the checks.
+
+Every path cleans up: participants are closed and an extracted archive is removed, also when
+loading, checking or running fails or the run is interrupted.
+"""
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import asyncio
+import shutil
+import tempfile
+import threading
+from collections.abc import AsyncIterator, Sequence
+from contextlib import asynccontextmanager
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import structlog
 
-from coupler.channels import Description
-from coupler.participant import Participant
 from coupler_orchestrator import ssp
-from coupler_orchestrator.master import Master, RunResult
-from coupler_orchestrator.observer import Observer
-from coupler_orchestrator.plan import Plan
-from coupler_orchestrator.planning import RunOptions, build_plan, close_all, describe_all
-from coupler_orchestrator.results import CsvRecorder, SummaryWriter, coupler_version
+from coupler_orchestrator.checks import Checked, check
+from coupler_orchestrator.master import Master
+from coupler_orchestrator.observer import Observer, RunEnd
+from coupler_orchestrator.options import RunOptions
+from coupler_orchestrator.participants import opened
+from coupler_orchestrator.plan import build_plan
+from coupler_orchestrator.results import (
+    CsvRecorder,
+    Selection,
+    SummaryWriter,
+    check_writable,
+    coupler_version,
+)
+from coupler_orchestrator.wiring import wire
 
 log = structlog.get_logger("coupler.runner")
 
@@ -24,37 +42,53 @@ log = structlog.get_logger("coupler.runner")
 class RunOutcome:
     """A finished run and where its results are."""
 
-    result: RunResult
+    end: RunEnd
+    summary: dict[str, Any]
+    """What summary.json holds."""
     results_csv: Path
     summary_json: Path
 
 
-async def plan_scenario(
-    scenario: ssp.Scenario, options: RunOptions
-) -> tuple[Plan, dict[str, Participant], dict[str, Description]]:
-    """Describe every participant, check everything, plan; ValidationError lists every
-    problem. The participants are open on return: the caller closes them."""
-    participants, descriptions, problems = await describe_all(scenario, options)
+@dataclass(frozen=True, kw_only=True)
+class Validation:
+    """A scenario that passed every check."""
+
+    scenario: ssp.Scenario
+    warnings: tuple[str, ...]
+
+
+@asynccontextmanager
+async def loaded(path: Path) -> AsyncIterator[ssp.Scenario]:
+    """The scenario at ``path`` (.ssp, unpacked folder, .ssd or .fmu), read off the event loop;
+    an extracted archive is removed on the way out, however it is left."""
+    if path.suffix.lower() == ".fmu":
+        yield await asyncio.to_thread(ssp.scenario_of_fmu, path)
+        return
+    workdir = Path(tempfile.mkdtemp(prefix="coupler-ssp-"))
+    stop = threading.Event()
+    loop = asyncio.get_running_loop()
+    reading = loop.run_in_executor(
+        None, lambda: ssp.load_ssp(path, workdir=workdir, cancelled=stop)
+    )
     try:
-        plan = build_plan(
-            scenario,
-            participants,
-            descriptions,
-            options,
-            problems=[*problems, *ssp.check_connections(scenario)],
-        )
-    except BaseException:
-        await close_all(list(participants.values()))
-        raise
-    return plan, participants, descriptions
+        try:
+            scenario = await asyncio.shield(reading)
+        except asyncio.CancelledError:
+            stop.set()  # the extraction stops at its next chunk; wait for it, then remove
+            await asyncio.wait([reading], timeout=10)
+            raise
+        for warning in scenario.warnings:
+            log.warning("scenario_warning", detail=warning)
+        yield scenario
+    finally:
+        await asyncio.to_thread(shutil.rmtree, workdir, True)
 
 
-async def validate_scenario(path: Path, options: RunOptions) -> ssp.Scenario:
-    """Schema and participant checks; ValidationError lists every problem."""
-    scenario = ssp.load_ssp(path)
-    _, participants, _ = await plan_scenario(scenario, options)
-    await close_all(list(participants.values()))
-    return scenario
+async def validate_scenario(path: Path, options: RunOptions) -> Validation:
+    """Every check of ``run`` without running; ValidationError lists every problem."""
+    async with loaded(path) as scenario, opened(scenario, options) as roster:
+        checked = check(scenario, roster, options)
+    return Validation(scenario=scenario, warnings=checked.warnings)
 
 
 async def run_scenario(
@@ -70,26 +104,29 @@ async def run_scenario(
     Raises ScenarioError/ValidationError before anything runs; a participant failing during
     the run ends it as ``failed`` with every completed step recorded.
     """
-    scenario = ssp.load_ssp(path)
-    for warning in scenario.warnings:
-        log.warning("scenario_warning", detail=warning)
-    if out_dir is None:
-        configured = scenario.results.output_directory if scenario.results else None
-        out_dir = Path(configured) if configured else Path("results")
-    plan, participants, descriptions = await plan_scenario(scenario, options)
-    try:
-        csv_path, summary_path = out_dir / "results.csv", out_dir / "summary.json"
-        summary = SummaryWriter(
-            summary_path,
-            extra={
-                "coupler_version": coupler_version(),
-                "ssp": {"path": str(scenario.source), "sha256": scenario.sha256},
-                "implementations": {n: d.implementation for n, d in descriptions.items()},
-                "warnings": list(scenario.warnings),
-            },
-        )
-        master = Master(plan, [CsvRecorder(csv_path), summary, *observers])
-        result = await master.run()
-    finally:
-        await close_all(list(participants.values()))
-    return RunOutcome(result=result, results_csv=csv_path, summary_json=summary_path)
+    async with loaded(path) as scenario:
+        if out_dir is None:
+            configured = scenario.results.output_directory if scenario.results else None
+            out_dir = Path(configured) if configured else Path("results")
+        check_writable(out_dir)
+        async with opened(scenario, options) as roster:
+            checked = check(scenario, roster, options)
+            plan = build_plan(checked, wire(checked), options)
+            csv_path, summary_path = out_dir / "results.csv", out_dir / "summary.json"
+            summary = SummaryWriter(summary_path, extra=_extra(checked, roster.described()))
+            selection = Selection(patterns=options.output_variables, every=checked.record_every)
+            recorders = [CsvRecorder(csv_path, selection), summary, *observers]
+            end = await Master(plan, recorders).run()
+    return RunOutcome(
+        end=end, summary=summary.summary, results_csv=csv_path, summary_json=summary_path
+    )
+
+
+def _extra(checked: Checked, descriptions: dict[str, Any]) -> dict[str, Any]:
+    scenario = checked.scenario
+    return {
+        "coupler_version": coupler_version(),
+        "ssp": {"path": str(scenario.source), "sha256": scenario.sha256},
+        "implementations": {n: d.implementation for n, d in descriptions.items()},
+        "warnings": list(checked.warnings),
+    }

@@ -1,14 +1,13 @@
-"""SSP loading: .ssp archives and bare .ssd files into a flattened, frozen :class:`Scenario`.
+"""SSP reading: .ssp archives, unpacked SSP folders and bare .ssd files into a flattened,
+frozen :class:`Scenario` (reading only: checking against participants, wiring and running are
+later stages of the orchestrator).
 
-load_ssp(path)            -> Scenario   (raises ScenarioError / ValidationError)
-check_connections(s)      -> list[str]  structural problems of the wiring
-converter(s, connection)  -> Callable[[Value], Value]  unit conversion + transformation
+load_ssp(path)      -> Scenario   (raises ScenarioError / ValidationError)
+scenario_of_fmu(p)  -> Scenario   one FMU alone, from its modelDescription
 """
 
 from __future__ import annotations
 
-from .checks import check_connections
-from .conversion import converter, identity
 from .loader import load_ssp
 from .model import (
     FMU_TYPE,
@@ -17,6 +16,7 @@ from .model import (
     BaseUnit,
     BooleanMappingTransformation,
     Component,
+    ComponentSettings,
     Connection,
     Connector,
     DictionaryEntry,
@@ -32,6 +32,7 @@ from .model import (
     Transformation,
     Unit,
 )
+from .single import scenario_of_fmu
 
 __all__ = [
     "FMU_TYPE",
@@ -40,6 +41,7 @@ __all__ = [
     "BaseUnit",
     "BooleanMappingTransformation",
     "Component",
+    "ComponentSettings",
     "Connection",
     "Connector",
     "DictionaryEntry",
@@ -54,8 +56,6 @@ __all__ = [
     "Task",
     "Transformation",
     "Unit",
-    "check_connections",
-    "converter",
-    "identity",
     "load_ssp",
+    "scenario_of_fmu",
 ]

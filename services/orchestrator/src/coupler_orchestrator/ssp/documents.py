@@ -59,6 +59,11 @@ def parse(path: Path, display: str) -> Element:
         raise ScenarioError(
             f"{display} line {line}: malformed XML: {exc.msg}; fix the XML syntax"
         ) from exc
+    except OSError as exc:  # lxml: bytes that are invalid in the document's encoding
+        raise ScenarioError(
+            f"{display}: cannot be read as XML ({exc}); save it as UTF-8 (or in the encoding "
+            "its XML declaration names)"
+        ) from exc
     if getattr(tree.docinfo, "doctype", ""):
         raise ScenarioError(
             f"{display} line 1: a DOCTYPE declaration is not allowed in SSP files "
@@ -119,14 +124,16 @@ def validate(root: Element, display: str) -> str | None:
     raise ValidationError(problems, subject=display)
 
 
-_VARIABLE = re.compile(r"\$\{[^}]*\}")
+_VARIABLE = re.compile(r"\$\{[^}:]*(?::-([^}]*))?\}")
 
 
 def _without_variables(root: Element) -> Element:
-    """A copy with ``${VAR}`` in source attributes replaced by ``0``.
+    """A copy with ``${VAR:-default}`` in source attributes replaced by its default, ``${VAR}``
+    by ``0``.
 
     ``${...}`` is Coupler's convention in component sources but not a valid xs:anyURI; the
-    schema checks the rest of the URI.
+    schema checks the rest of the URI (a scheme such as ``${BRIDGE_SCHEME:-grpc}`` needs its
+    default: ``0://`` is no URI).
     """
     if not any("${" in e.get("source", "") for e in root.iter("{*}Component")):
         return root
@@ -134,7 +141,7 @@ def _without_variables(root: Element) -> Element:
     for element in copy.iter("{*}Component"):
         source = element.get("source")
         if source and "${" in source:
-            element.set("source", _VARIABLE.sub("0", source))
+            element.set("source", _VARIABLE.sub(lambda m: m.group(1) or "0", source))
     return copy
 
 

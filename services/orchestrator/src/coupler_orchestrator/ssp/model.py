@@ -114,6 +114,26 @@ class ParameterValue:
 
 
 @dataclass(frozen=True, kw_only=True)
+class ComponentSettings:
+    """Coupler's own settings of one component (annotation ``org.coupler.component``); None
+    leaves the command line's (or the default) choice."""
+
+    isolate: bool | None = None
+    """FMUs: run in a child process (the generic FMU host), so a crash or hang of the FMU is a
+    participant fault, not the orchestrator's."""
+    call_timeout: float | None = None
+    """Deadline of every call to this participant [s]."""
+    tls_ca: Path | None = None
+    """CA bundle trusted for this participant (``grpcs://``)."""
+    tls_cert: Path | None = None
+    """Client certificate presented to it (mutual TLS)."""
+    tls_key: Path | None = None
+    """Key of ``tls_cert``."""
+    token_file: Path | None = None
+    """File holding the bearer token sent to it."""
+
+
+@dataclass(frozen=True, kw_only=True)
 class Component:
     """A component of the flattened system."""
 
@@ -129,6 +149,8 @@ class Component:
     implementation: str = "any"
     delta_time: float | None = None
     """Per-component communication step (OpenMCx ``com.avl.model.connect.ssp.component``)."""
+    settings: ComponentSettings = field(default_factory=ComponentSettings)
+    """Coupler's own settings (``org.coupler.component``)."""
     file: str = ""
     line: int = 0
 

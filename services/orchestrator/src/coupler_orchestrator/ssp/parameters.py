@@ -3,14 +3,16 @@
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from coupler.channels import Value, ValueType
-from coupler.errors import ScenarioError
+from coupler.errors import ScenarioError, ValidationError
+from coupler.values import parse, widen
 
 from .documents import Element, boolean, child, children, elements, local, required, where
 from .model import (
     BooleanMappingTransformation,
+    Component,
     Enumeration,
     EnumerationMappingTransformation,
     IntegerMappingTransformation,
@@ -18,9 +20,10 @@ from .model import (
     ParameterValue,
     Transformation,
     Unit,
+    frozen_mapping,
 )
 from .transformations import read_transformation
-from .units import read_units
+from .units import read_units, unit_converter
 
 PARAMETER_SET = "application/x-ssp-parameter-set"
 PARAMETER_MAPPING = "application/x-ssp-parameter-mapping"
@@ -85,6 +88,19 @@ def read_binding(
     parameters = read_parameter_set(root, set_display, {**enumerations, **local_enums})
     mapping = _mapping(binding, display, open_file=open_file, warn=warn)
     prefix = binding.get("prefix", "")
+    names = {prefix + name for name, _ in parameters}
+    unknown = [entry for source, entry in mapping.items() if source not in names]
+    if unknown:
+        raise ValidationError(
+            [
+                f"{entry.where}: parameter mapping source '{source}' names no parameter of the "
+                f"set it maps ({set_display}: {', '.join(sorted(names)) or 'none'}); fix the "
+                "name or remove the entry"
+                for source, entry in mapping.items()
+                if entry in unknown
+            ],
+            subject=display,
+        )
     result = []
     for name, value in parameters:
         full = prefix + name
@@ -133,20 +149,10 @@ def _value(
         raise ScenarioError(f"{origin}: unknown parameter type <{kind}>") from exc
     value: Value
     try:
-        if type_ is ValueType.REAL:
-            value = float(text)
-        elif type_ is ValueType.INTEGER:
-            value = int(text)
-        elif type_ is ValueType.BOOLEAN:
-            if text.strip() not in ("true", "false", "1", "0"):
-                raise ValueError(text)
-            value = text.strip() in ("true", "1")
-        elif type_ is ValueType.BINARY:
-            value = bytes.fromhex(text)
-        elif type_ is ValueType.ENUMERATION:
+        if type_ is ValueType.ENUMERATION:
             value = _enum_value(element, text, origin, enumerations)
         else:
-            value = text
+            value = parse(type_, text)
     except ValueError as exc:
         raise ScenarioError(f'{origin}: value "{text}" is not a valid {kind}') from exc
     return ParameterValue(value=value, type=type_, unit=element.get("unit"), origin=origin)
@@ -267,4 +273,107 @@ def _map_enum(
         name = names.get(value)
         if name is not None and t.mapping.get(name, name) in enum.items:
             return enum.items[t.mapping.get(name, name)]
+    return value
+
+
+# --- applying bindings to components -----------------------------------------------------------
+
+
+@dataclass(frozen=True, kw_only=True)
+class Binding:
+    """A ParameterBinding where it was found in the system tree."""
+
+    depth: int
+    """Nesting depth of its system or component (root = 0)."""
+    order: int
+    """Order of appearance, for ties."""
+    scope: tuple[str, ...]
+    """Path of the system or component it belongs to."""
+    is_component: bool
+    """Bound on a component (names are the component's) or on a system (names carry a path)."""
+    parameters: tuple[BoundParameter, ...]
+
+
+def apply_bindings(
+    components: Mapping[tuple[str, ...], Component],
+    systems: Mapping[tuple[str, ...], Mapping[str, str]],
+    bindings: list[Binding],
+    units: Mapping[str, Unit],
+    *,
+    warnings: list[str],
+    problems: list[str],
+) -> tuple[Component, ...]:
+    """Components with their parameters; deeper bindings first, so higher levels win."""
+    values: dict[tuple[str, ...], dict[str, ParameterValue]] = {p: {} for p in components}
+    for binding in sorted(bindings, key=lambda b: (-b.depth, b.order)):
+        for parameter in binding.parameters:
+            target = _target(components, systems, binding, parameter, warnings)
+            if target is None:
+                continue
+            path, name = target
+            try:
+                values[path][name] = _fit(components[path], name, parameter, units)
+            except ScenarioError as exc:
+                problems.append(str(exc))
+    return tuple(replace(c, parameters=frozen_mapping(values[p])) for p, c in components.items())
+
+
+def _target(
+    components: Mapping[tuple[str, ...], Component],
+    systems: Mapping[tuple[str, ...], Mapping[str, str]],
+    binding: Binding,
+    parameter: BoundParameter,
+    warnings: list[str],
+) -> tuple[tuple[str, ...], str] | None:
+    """(component path, parameter name) a bound parameter reaches, or None (warned)."""
+    if binding.is_component:
+        return binding.scope, parameter.name
+    parts = tuple(parameter.name.split("."))
+    for i in range(len(parts) - 1, 0, -1):
+        candidate = binding.scope + parts[:i]
+        if candidate in components:
+            return candidate, ".".join(parts[i:])
+    system = ".".join(binding.scope) or "the root system"
+    if parameter.name in systems.get(binding.scope, {}):
+        warnings.append(
+            f"{parameter.value.origin}: parameter '{parameter.name}' binds a connector of "
+            f"{system}; system-connector parameters are not propagated, ignored - bind the "
+            "component's parameter instead"
+        )
+    else:
+        warnings.append(
+            f"{parameter.value.origin}: parameter '{parameter.name}' matches no component in "
+            f"{system}; ignored (use Component.parameter names or a prefix)"
+        )
+    return None
+
+
+def _fit(
+    component: Component, name: str, parameter: BoundParameter, units: Mapping[str, Unit]
+) -> ParameterValue:
+    """The value converted to the connector's type and unit, when the SSD declares one."""
+    value = parameter.value
+    connector = component.connector(name)
+    if connector is None or connector.type is None:
+        return value
+    what = f"{value.origin}: parameter '{component.name}.{name}'"
+    if connector.type is not value.type:
+        widened = widen(connector.type, value.value)
+        if widened is value.value:
+            raise ScenarioError(
+                f"{what} is {value.type} but the connector is {connector.type}; "
+                f"give a {connector.type} value"
+            )
+        value = replace(value, value=widened, type=connector.type)
+    if (
+        connector.unit
+        and value.unit
+        and connector.unit != value.unit
+        and not parameter.suppress_unit_conversion
+    ):
+        convert = unit_converter(
+            {**units, **parameter.units}, value.unit, connector.unit, what=what
+        )
+        if convert is not None:
+            return replace(value, value=convert(float(value.value)), unit=connector.unit)
     return value

@@ -11,22 +11,32 @@ OpenMCx names (from its schemas in eclipse/openmcx ``scripts/SSP``):
 - Connection, ``com.avl.model.connect.ssp.connection.decoupling``: ``<Decoupling>`` with one of
   ``<Never/>``, ``<Always/>``, ``<IfNeeded priority="N"/>``
 
-Coupler's own: Connection, ``org.coupler.connection``: ``<coupler:Connection decoupled="true"/>``.
+Coupler's own: Connection, ``org.coupler.connection``: ``<coupler:Connection decoupled="true"/>``;
+Component, ``org.coupler.component``: ``<coupler:Component isolate="true" callTimeout="5"
+tlsCa="..." tlsCert="..." tlsKey="..." tokenFile="..."/>`` (paths relative to the SSD; secrets
+are never written inline).
 Every other annotation is reported as a warning by :func:`unsupported`.
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+import math
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+from coupler.errors import ScenarioError
 
 from .documents import Element, boolean, child, children, elements, integer, local, number, where
-from .model import Backend, Results, Task
+from .model import Backend, ComponentSettings, Results, Task
 
 TASK = "com.avl.model.connect.ssp.task"
 RESULTS = "com.avl.model.connect.ssp.results"
 COMPONENT = "com.avl.model.connect.ssp.component"
 DECOUPLING = "com.avl.model.connect.ssp.connection.decoupling"
 COUPLER_CONNECTION = "org.coupler.connection"
+COUPLER_COMPONENT = "org.coupler.component"
+_SETTING_PATHS = {"tlsCa": "tls_ca", "tlsCert": "tls_cert", "tlsKey": "tls_key"}
+_SETTING_PATHS["tokenFile"] = "token_file"
 
 #: (owner element local name, annotation type) pairs the loader applies.
 HANDLED = {
@@ -35,6 +45,7 @@ HANDLED = {
     ("Component", COMPONENT),
     ("Connection", DECOUPLING),
     ("Connection", COUPLER_CONNECTION),
+    ("Component", COUPLER_COMPONENT),
 }
 
 STEP_TYPES = ("sequential", "parallel_single_thread", "parallel_one_step_size", "parallel_sync_all")
@@ -135,6 +146,39 @@ def component_delta_time(component: Element, display: str, warnings: list[str]) 
                 "supported; ignored"
             )
     return number(settings, "deltaTime", display, None)
+
+
+def component_settings(
+    component: Element, display: str, resolve: Callable[[str, str], Path]
+) -> ComponentSettings:
+    """Coupler's own settings of a component; ``resolve(source, what)`` locates a file."""
+    settings = annotation(component, COUPLER_COMPONENT)
+    if settings is None:
+        return ComponentSettings()
+    known = {"isolate", "callTimeout", *_SETTING_PATHS}
+    unknown = sorted(set(settings.attrib) - known)
+    if unknown:
+        raise ScenarioError(
+            f"{where(display, settings)}: {COUPLER_COMPONENT} has no setting "
+            f"{', '.join(repr(u) for u in unknown)} (settings: {', '.join(sorted(known))})"
+        )
+    timeout = number(settings, "callTimeout", display, None)
+    if timeout is not None and not (math.isfinite(timeout) and timeout > 0):
+        raise ScenarioError(
+            f'{where(display, settings)}: callTimeout="{timeout}" must be a positive number '
+            "of seconds"
+        )
+    paths = {
+        field: resolve(text, attribute)
+        for attribute, field in _SETTING_PATHS.items()
+        if (text := settings.get(attribute))
+    }
+    isolate = settings.get("isolate")
+    return ComponentSettings(
+        isolate=None if isolate is None else boolean(settings, "isolate", display, False),
+        call_timeout=timeout,
+        **paths,
+    )
 
 
 def decoupling(connection: Element, display: str) -> tuple[bool, str | None, int | None]:

@@ -1,13 +1,30 @@
-"""SSP units: reading ``ssc:Units`` and converting values between units of one dimension."""
+"""Units: SSP's ``ssc:Units`` and what unit symbols mean, in one algebra.
+
+Every unit Coupler compares is brought to an SSP ``BaseUnit`` (SI exponents kg m s A K mol cd
+rad, plus ``value_in_base = factor * value + offset``): units defined in the SSD (or an .ssv/.ssb
+file, or an FMU's modelDescription) by their definition, plain symbols a participant declares
+(``km/h``, ``degC``) through the pint unit library. Two units convert when their exponents
+agree; ``affine`` gives the conversion.
+"""
 
 from __future__ import annotations
 
+import functools
+import math
+import re
 from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from typing import Any
 
 from coupler.errors import ScenarioError
 
 from .documents import Element, child, children, integer, line_of, number, required, where
 from .model import BaseUnit, Unit
+
+_SI = {"[mass]": "kg", "[length]": "m", "[time]": "s", "[current]": "A", "[temperature]": "K"}
+_SI.update({"[substance]": "mol", "[luminosity]": "cd"})
+#: pint treats angles as dimensionless; SSP counts radians. Units (pint names) that are angles:
+_ANGLES = {"radian", "degree", "arcminute", "arcsecond", "turn", "revolution", "gradian"}
 
 
 def read_units(units: Element | None, display: str) -> dict[str, Unit]:
@@ -24,26 +41,59 @@ def read_units(units: Element | None, display: str) -> dict[str, Unit]:
             k: integer(base, k, display, 0) or 0
             for k in ("kg", "m", "s", "A", "K", "mol", "cd", "rad")
         }
+        factor = number(base, "factor", display, 1.0)
+        offset = number(base, "offset", display, 0.0)
+        assert factor is not None and offset is not None  # defaults given
+        if not math.isfinite(factor) or not math.isfinite(offset) or not factor:
+            raise ScenarioError(
+                f"{where(display, base)}: unit '{name}' needs a finite, non-zero factor and a "
+                "finite offset"
+            )
         result[name] = Unit(
             name=name,
-            base_unit=BaseUnit(
-                **exps,
-                factor=number(base, "factor", display, 1.0) or 0.0,
-                offset=number(base, "offset", display, 0.0) or 0.0,
-            ),
+            base_unit=BaseUnit(**exps, factor=factor, offset=offset),
             file=display,
             line=line_of(element),
         )
     return result
 
 
+@dataclass(frozen=True)
+class Affine:
+    """``target = factor * source + offset``: the conversion between two units."""
+
+    factor: float
+    offset: float
+
+    def __call__(self, value: float) -> float:
+        return self.factor * value + self.offset
+
+
+class IncompatibleUnits(ScenarioError):
+    """Two units of different dimension."""
+
+
+def affine(source: BaseUnit, target: BaseUnit) -> Affine | None:
+    """The conversion from ``source`` to ``target``; None when they are the same unit.
+
+    IncompatibleUnits when their dimensions differ (the message names the dimensions; the caller
+    adds what it connects).
+    """
+    if source.exponents != target.exponents:
+        raise IncompatibleUnits(
+            f"{source.dimension()} and {target.dimension()} are different dimensions"
+        )
+    if source.factor == target.factor and source.offset == target.offset:
+        return None
+    # base = fa * v + oa = fb * w + ob  =>  w = (fa / fb) * v + (oa - ob) / fb
+    return Affine(source.factor / target.factor, (source.offset - target.offset) / target.factor)
+
+
 def unit_converter(
     units: Mapping[str, Unit], source: str, target: str, *, what: str
 ) -> Callable[[float], float] | None:
-    """A function converting a value in ``source`` to ``target``; None when nothing to do.
-
-    ``what`` names the culprit in error messages (e.g. the two connectors).
-    """
+    """A function converting a value in SSD unit ``source`` to SSD unit ``target``; None when
+    nothing is to do. ``what`` names the culprit in error messages."""
     if source == target:
         return None
     missing = [u for u in (source, target) if u not in units]
@@ -52,18 +102,61 @@ def unit_converter(
             f"{what}: unit '{missing[0]}' is not defined in the SSD's <Units>; "
             f"define it (known units: {', '.join(sorted(units)) or 'none'})"
         )
-    a, b = units[source].base_unit, units[target].base_unit
-    if a.exponents != b.exponents:
+    try:
+        return affine(units[source].base_unit, units[target].base_unit)
+    except IncompatibleUnits as exc:
         raise ScenarioError(
-            f"{what}: units '{source}' ({a.dimension()}) and '{target}' ({b.dimension()}) have "
-            "different base units and cannot be converted; connect connectors of the same "
-            "dimension or fix the units"
-        )
-    if a.factor == b.factor and a.offset == b.offset:
+            f"{what}: units '{source}' and '{target}' cannot be converted ({exc}); connect "
+            "connectors of the same dimension or fix the units"
+        ) from exc
+
+
+@functools.cache
+def _registry() -> Any:
+    import pint  # imported on first use: most runs convert no symbol
+
+    return pint.UnitRegistry(autoconvert_offset_to_baseunit=True)
+
+
+_MODELICA_POWER = re.compile(r"(?<=[A-Za-z])(-?\d+)")
+
+
+@functools.cache
+def from_symbol(symbol: str) -> BaseUnit | None:
+    """The BaseUnit of a unit symbol; None when the symbol means nothing to the unit library.
+
+    Plain symbols (``km/h``, ``degC``, ``1/s``, ``rad/s``) and Modelica/FMI unit syntax
+    (``m.s-1``, ``kg.m2``, ``m/s2``) are understood.
+    """
+    found = _from_pint(symbol)
+    if found is None and any(c.isdigit() or c == "." for c in symbol):
+        found = _from_pint(_MODELICA_POWER.sub(r"**\1", symbol.replace(".", "*")))
+    return found
+
+
+def _from_pint(symbol: str) -> BaseUnit | None:
+    import pint
+
+    registry = _registry()
+    try:
+        unit = registry.Unit(symbol)
+        zero = registry.Quantity(0.0, unit).to_base_units()
+        one = registry.Quantity(1.0, unit).to_base_units()
+    except (pint.errors.PintError, AttributeError, TypeError, ValueError, AssertionError):
         return None
-    fa, oa, fb, ob = a.factor, a.offset, b.factor, b.offset
-
-    def convert(value: float) -> float:
-        return (fa * value + oa - ob) / fb
-
-    return convert
+    exponents = {name: 0 for name in ("kg", "m", "s", "A", "K", "mol", "cd", "rad")}
+    for dimension, power in one.dimensionality.items():
+        name = _SI.get(dimension)
+        if name is None or power != int(power):
+            return None  # a dimension SSP does not have (e.g. currency) or a fractional power
+        exponents[name] = int(power)
+    radians = 0
+    for name, power in unit._units.items():
+        if name in _ANGLES:
+            radians += int(power)
+    exponents["rad"] = radians
+    factor = float(one.magnitude - zero.magnitude)
+    offset = float(zero.magnitude)
+    if not factor or not math.isfinite(factor) or not math.isfinite(offset):
+        return None
+    return BaseUnit(**exponents, factor=factor, offset=offset)

@@ -1,0 +1,633 @@
+"""Stage 3: every check before anything runs, against the SSD and what the participants declare.
+
+All problems are collected and raised together as one ValidationError, each a sentence naming
+the file and line, the culprit and the fix. What passes becomes a ``Checked``: the time grid,
+each member's settings and each connection's channels and unit conversion — the facts later
+stages build on without checking again.
+
+Checked here: the participants could be reached and described; connections join existing
+connectors that can drive and be driven, one driver per input; every SSD connector exists on its
+participant with the same causality, type and an equivalent unit; every input is driven, started
+or bound; connected types are compatible (Integer widens to Real and travels as Enumeration;
+anything else needs a transformation); units are compared across every connection from the best
+source (the SSD connector's unit, else the participant's declared unit: an FMU's own unit
+definitions, else the unit symbol) — convertible units are converted, units of another dimension
+are refused, units nobody understands are warned about; transformations fit their ends; the
+time grid is finite and reachable by whole steps; step multiples and fixed step sizes fit;
+``--param`` values and parameter bindings name parameters or inputs and fit their types; and for
+Gauss-Seidel every loop (a component feeding itself included) is broken by a decoupled
+connection.
+"""
+
+from __future__ import annotations
+
+import fnmatch
+import graphlib
+import math
+from collections import Counter
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from functools import partial
+from typing import TypeVar
+
+from coupler.channels import Causality, Channel, Description, Value, ValueType, fits_fixed_step
+from coupler.errors import ChannelValueError, ScenarioError, ValidationError
+from coupler.participant import Participant
+from coupler.values import check as check_value
+from coupler.values import parse, widen
+from coupler_orchestrator import ssp
+from coupler_orchestrator.options import Algorithm, RunOptions
+from coupler_orchestrator.participants import Roster, Seat, where
+from coupler_orchestrator.ssp.units import Affine, IncompatibleUnits, affine, from_symbol
+
+T = TypeVar("T")
+MAX_STEPS = 10**10
+"""More communication points than this is a unit mistake, not a run."""
+
+#: Connected types that are compatible without a transformation: (output, input).
+_COMPATIBLE = {
+    (ValueType.INTEGER, ValueType.REAL),
+    (ValueType.INTEGER, ValueType.ENUMERATION),
+    (ValueType.ENUMERATION, ValueType.INTEGER),
+}
+_SOURCES = ("output", "calculatedParameter", "inout")
+_SINKS = ("input", "parameter", "inout")
+#: The end type each transformation needs (None: any numeric end, see _transformation).
+_TRANSFORMED = {
+    ssp.BooleanMappingTransformation: ValueType.BOOLEAN,
+    ssp.IntegerMappingTransformation: ValueType.INTEGER,
+    ssp.EnumerationMappingTransformation: ValueType.ENUMERATION,
+}
+
+
+@dataclass(frozen=True, kw_only=True)
+class TimeGrid:
+    """Communication points t_k = start + k * step, computed by multiplication, never summed."""
+
+    start: float
+    """t_0 [s]."""
+    step: float
+    """Base communication step h [s]."""
+    steps: int
+    """Number of base steps; the last point is start + steps * step."""
+
+    def time(self, k: int) -> float:
+        return self.start + k * self.step
+
+    @property
+    def stop(self) -> float:
+        return self.time(self.steps)
+
+
+@dataclass(frozen=True, kw_only=True)
+class Member:
+    """One participant of the run, as checked."""
+
+    name: str
+    """Component name in the scenario."""
+    participant: Participant
+    """Local (FMU) or remote; the master cannot tell."""
+    outputs: tuple[Channel, ...] = ()
+    """Outputs recorded, in column order."""
+    multiple: int = 1
+    """Steps every ``multiple`` base steps (per-component deltaTime = multiple x h)."""
+    step: float
+    """The step size it receives, exactly as configured: its deltaTime, else h [s]."""
+    parameters: Mapping[str, Value] = field(default_factory=dict)
+    """Parameter values sent with Initialize, typed."""
+    start_inputs: Mapping[str, Value] = field(default_factory=dict)
+    """Start values of inputs sent with Initialize, typed."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class Route:
+    """One connection, checked: the channels at both ends and the unit conversion between."""
+
+    connection: ssp.Connection
+    source: Channel
+    """The output (as the participant declares it) that drives the connection."""
+    target: Channel
+    """The input it drives."""
+    conversion: Affine | None = None
+    """Unit conversion from the source's unit to the target's; None when there is none."""
+    source_enum: ssp.Enumeration | None = None
+    """The SSD enumeration of the start connector (Enumeration connectors)."""
+    target_enum: ssp.Enumeration | None = None
+    """The SSD enumeration of the end connector."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class Checked:
+    """A scenario that passed every check, and what the checks established."""
+
+    scenario: ssp.Scenario
+    grid: TimeGrid
+    algorithm: Algorithm
+    members: tuple[Member, ...]
+    """In scenario order."""
+    routes: tuple[Route, ...]
+    record_every: int = 1
+    """Results record every ``record_every``-th communication point (``--output-interval``)."""
+    warnings: tuple[str, ...]
+    """The scenario's warnings and the checks' own (units nobody understands)."""
+
+
+def check(scenario: ssp.Scenario, roster: Roster, options: RunOptions) -> Checked:
+    """Every check; ValidationError listing every problem, earlier stages' problems first."""
+    checker = _Checker(scenario, roster, options)
+    return checker.run()
+
+
+class _Checker:
+    def __init__(self, scenario: ssp.Scenario, roster: Roster, options: RunOptions) -> None:
+        self.scenario = scenario
+        self.roster = roster
+        self.options = options
+        self.problems: list[str] = list(roster.problems)
+        self.warnings: list[str] = list(scenario.warnings)
+
+    def run(self) -> Checked:
+        scenario = self.scenario
+        for connection in scenario.connections:
+            self.structure(connection)
+        self.drivers()
+        for seat in self.roster.seats.values():
+            if seat.description is not None:
+                self.seat(seat, seat.description)
+        routes = [r for c in scenario.connections if (r := self.route(c)) is not None]
+        grid = self.guard(lambda: grid_of(scenario, self.options))
+        overrides = self.overrides()
+        members = []
+        for seat in self.roster.seats.values():
+            if seat.description is not None:
+                member = self.guard(partial(self.member, seat, overrides.get(seat.name, {}), grid))
+                if member is not None:
+                    members.append(member)
+        algorithm = self.options.algorithm or algorithm_of(scenario)
+        if algorithm is Algorithm.GAUSS_SEIDEL:
+            self.loops()
+        record_every = self.recording(members, grid)
+        if self.problems or grid is None:
+            raise ValidationError(self.problems, subject=scenario.source.name)
+        return Checked(
+            scenario=scenario,
+            grid=grid,
+            algorithm=algorithm,
+            members=tuple(members),
+            routes=tuple(routes),
+            record_every=record_every,
+            warnings=tuple(dict.fromkeys(self.warnings)),
+        )
+
+    def recording(self, members: list[Member], grid: TimeGrid | None) -> int:
+        """Every how many communication points results are recorded; the selection is checked
+        to name at least one output each."""
+        names = [f"{m.name}.{c.name}" for m in members for c in m.outputs]
+        for pattern in self.options.output_variables:
+            if members and not any(fnmatch.fnmatchcase(n, pattern) for n in names):
+                self.problems.append(
+                    f"--output-variables {pattern}: matches no output (outputs: "
+                    f"{', '.join(names) or 'none'}); write Component.output names or globs"
+                )
+        interval = self.options.output_interval
+        if interval is None or grid is None:
+            return 1
+        ratio = interval / grid.step
+        every = round(ratio) if math.isfinite(ratio) else 0
+        if every < 1 or abs(ratio - every) > 1e-9 * max(1.0, ratio):
+            self.problems.append(
+                f"--output-interval {interval:g} s is not a whole multiple of the step "
+                f"{grid.step:g} s; choose a multiple"
+            )
+            return 1
+        return every
+
+    def guard(self, compute: Callable[[], T]) -> T | None:
+        """``compute()``, or None with its ScenarioError collected as a problem."""
+        try:
+            return compute()
+        except ValidationError as exc:
+            self.problems.extend(exc.problems)
+        except ScenarioError as exc:
+            self.problems.append(str(exc))
+        return None
+
+    # -- the SSD's own wiring -------------------------------------------------------------
+
+    def structure(self, c: ssp.Connection) -> None:
+        """The connection joins connectors that exist and can drive and be driven."""
+        what = f"{where(c)}: connection {c.start} -> {c.end}"
+        start = self.scenario.connector(c.start_element, c.start_connector)
+        end = self.scenario.connector(c.end_element, c.end_connector)
+        if start is None or end is None:  # the loader refuses unknown connectors
+            return
+        if start.kind not in _SOURCES:
+            self.problems.append(
+                f"{what}: '{c.start}' is {start.kind} and cannot drive a connection; "
+                "start from an output or calculatedParameter"
+            )
+        if end.kind not in _SINKS:
+            self.problems.append(
+                f"{what}: '{c.end}' is {end.kind} and cannot be driven; "
+                "end at an input or parameter"
+            )
+        if (
+            start.type is ValueType.ENUMERATION is end.type
+            and start.enumeration != end.enumeration
+            and not isinstance(c.transformation, ssp.EnumerationMappingTransformation)
+        ):
+            self.problems.append(
+                f"{what}: enumerations '{start.enumeration}' and '{end.enumeration}' differ; add "
+                "an EnumerationMappingTransformation"
+            )
+
+    def drivers(self) -> None:
+        driven = Counter(c.end for c in self.scenario.connections)
+        for name, count in driven.items():
+            if count > 1:
+                self.problems.append(
+                    f"input '{name}' is driven by {count} connections; an input takes exactly "
+                    "one driver"
+                )
+
+    # -- each participant against its component --------------------------------------------
+
+    def seat(self, seat: Seat, description: Description) -> None:
+        component = seat.component
+        for connector in component.connectors:
+            self.connector(seat, connector, description)
+        driven = {
+            c.end_connector for c in self.scenario.connections if c.end_element == component.name
+        }
+        for channel in description.of(Causality.INPUT):
+            if (
+                channel.name not in driven
+                and channel.start is None
+                and channel.name not in component.parameters
+            ):
+                self.problems.append(
+                    f"{where(component)}: input '{component.name}.{channel.name}' is neither "
+                    f"connected nor has a start value; connect it or bind a value to it"
+                )
+
+    def connector(self, seat: Seat, connector: ssp.Connector, description: Description) -> None:
+        component = seat.component
+        what = f"{where(connector, component.file)}: connector '{component.name}.{connector.name}'"
+        channel = description.channel(connector.name)
+        if channel is None:
+            names = ", ".join(c.name for c in description.channels) or "none"
+            self.problems.append(
+                f"{what} does not exist on participant '{description.name}' (its channels: "
+                f"{names}); rename the connector or the channel"
+            )
+            return
+        if connector.causality is not None and connector.causality is not channel.causality:
+            self.problems.append(
+                f"{what} is {connector.kind} in the SSD but the participant declares it "
+                f"{channel.causality}; change the connector's kind to {channel.causality}"
+            )
+        if connector.type is not None and connector.type is not channel.type:
+            self.problems.append(
+                f"{what} expects {connector.type}, but the participant declares {channel.type}; "
+                f"declare the connector <ssc:{channel.type}/>"
+            )
+        if connector.unit and channel.unit and connector.unit != channel.unit:
+            declared = self.scenario.units[connector.unit].base_unit
+            own = seat.units.get(channel.unit) or from_symbol(channel.unit)
+            if own is None:
+                self.warnings.append(
+                    f"{what}: the participant's unit '{channel.unit}' is not understood, so it "
+                    f"cannot be compared with the SSD's '{connector.unit}'; the SSD's applies"
+                )
+            elif own != declared:
+                self.problems.append(
+                    f"{what} has unit '{connector.unit}' in the SSD but the participant declares "
+                    f"'{channel.unit}'; declare the participant's unit in the SSD (connections "
+                    "convert units)"
+                )
+
+    # -- connections against the participants ------------------------------------------------
+
+    def channel(self, element: str, name: str) -> Channel | None:
+        seat = self.roster.seats.get(element)
+        description = seat.description if seat else None
+        return description.channel(name) if description else None
+
+    def route(self, c: ssp.Connection) -> Route | None:
+        """The connection's channels, types and unit conversion, or None (problems noted)."""
+        source = self.channel(c.start_element, c.start_connector)
+        target = self.channel(c.end_element, c.end_connector)
+        if source is None or target is None:
+            return None  # reported with the connector or the participant
+        what = f"{where(c)}: connection {c.start} -> {c.end}"
+        start = self.scenario.connector(c.start_element, c.start_connector)
+        end = self.scenario.connector(c.end_element, c.end_connector)
+        ok = self.types(c, what, source.type, target.type)
+        conversion = None
+        if not c.suppress_unit_conversion:
+            conversion = self.units(c, what, start, end, source, target)
+        if not ok:
+            return None
+        return Route(
+            connection=c,
+            source=source,
+            target=target,
+            conversion=conversion,
+            source_enum=self.scenario.enumerations.get(start.enumeration or "") if start else None,
+            target_enum=self.scenario.enumerations.get(end.enumeration or "") if end else None,
+        )
+
+    def types(self, c: ssp.Connection, what: str, a: ValueType, b: ValueType) -> bool:
+        t = c.transformation
+        if isinstance(t, ssp.LinearTransformation):
+            if b is not ValueType.REAL or a not in (ValueType.REAL, ValueType.INTEGER):
+                self.problems.append(
+                    f"{what}: a LinearTransformation needs a numeric start and a Real end, but "
+                    f"'{c.start}' is {a} and '{c.end}' is {b}"
+                )
+                return False
+            return True
+        if t is not None:
+            needed = _TRANSFORMED[type(t)]
+            if a is not needed or b is not needed:
+                self.problems.append(
+                    f"{what}: a {type(t).__name__} needs {needed} at both ends, but '{c.start}' "
+                    f"is {a} and '{c.end}' is {b}"
+                )
+                return False
+            if isinstance(t, ssp.EnumerationMappingTransformation):
+                return self.enumeration_mapping(c, what, t)
+            return True
+        if a is b or (a, b) in _COMPATIBLE:
+            return True
+        self.problems.append(
+            f"{what}: connector '{c.end}' expects {b}, but '{c.start}' is {a}; connect "
+            f"compatible channels or add a transformation"
+        )
+        return False
+
+    def enumeration_mapping(
+        self, c: ssp.Connection, what: str, t: ssp.EnumerationMappingTransformation
+    ) -> bool:
+        start = self.scenario.connector(c.start_element, c.start_connector)
+        end = self.scenario.connector(c.end_element, c.end_connector)
+        source = self.scenario.enumerations.get(start.enumeration or "") if start else None
+        target = self.scenario.enumerations.get(end.enumeration or "") if end else None
+        if source is None or target is None:
+            self.problems.append(
+                f"{what}: an EnumerationMappingTransformation needs Enumeration connectors with "
+                "enumerations defined in the SSD at both ends"
+            )
+            return False
+        unknown = [name for name in t.mapping.values() if name not in target.items]
+        if unknown:
+            self.problems.append(
+                f"{what}: mapping target '{unknown[0]}' is not an item of enumeration "
+                f"'{target.name}' (items: {', '.join(target.items)})"
+            )
+            return False
+        return True
+
+    def unit(
+        self, element: str, connector: ssp.Connector | None, channel: Channel
+    ) -> tuple[str, ssp.BaseUnit | None] | None:
+        """(unit name, its BaseUnit or None when not understood) of one end, from the best
+        source: the SSD connector's unit, else the participant's declared unit."""
+        if connector is not None and connector.unit:
+            return connector.unit, self.scenario.units[connector.unit].base_unit
+        if channel.unit:
+            seat = self.roster.seats[element]
+            return channel.unit, seat.units.get(channel.unit) or from_symbol(channel.unit)
+        return None
+
+    def units(
+        self,
+        c: ssp.Connection,
+        what: str,
+        start: ssp.Connector | None,
+        end: ssp.Connector | None,
+        source: Channel,
+        target: Channel,
+    ) -> Affine | None:
+        a = self.unit(c.start_element, start, source)
+        b = self.unit(c.end_element, end, target)
+        if a is None or b is None:
+            return None
+        (name_a, base_a), (name_b, base_b) = a, b
+        if base_a is None or base_b is None:
+            if name_a != name_b:
+                unknown = name_a if base_a is None else name_b
+                self.warnings.append(
+                    f"{what}: unit '{unknown}' is not understood, so '{c.start}' [{name_a}] -> "
+                    f"'{c.end}' [{name_b}] passes values unconverted; declare it in the SSD's "
+                    "<Units> or write a standard symbol (e.g. km/h, degC)"
+                )
+            return None
+        try:
+            return affine(base_a, base_b)
+        except IncompatibleUnits as exc:
+            self.problems.append(
+                f"{what}: '{c.start}' is in {name_a} but '{c.end}' is in {name_b}, and {exc}; "
+                "connect channels of the same quantity (or mark the connection "
+                'suppressUnitConversion="true" if the units are wrong)'
+            )
+            return None
+
+    # -- values ----------------------------------------------------------------------------
+
+    def overrides(self) -> dict[str, dict[str, Value]]:
+        """``--param`` texts as typed values per component."""
+        values: dict[str, dict[str, Value]] = {}
+        single = len(self.scenario.components) == 1
+        for key, text in self.options.parameters.items():
+            component, _, name = key.rpartition(".")
+            if not component and single:
+                component = self.scenario.components[0].name
+            seat = self.roster.seats.get(component)
+            if seat is None or seat.description is None:
+                if seat is None:
+                    known = ", ".join(self.roster.seats) or "none"
+                    self.problems.append(
+                        f"--param {key}: no component '{component}' (components: {known}); "
+                        "write COMPONENT.NAME=VALUE"
+                    )
+                continue
+            channel = seat.description.channel(name)
+            if channel is None or channel.causality is Causality.OUTPUT:
+                self.problems.append(
+                    f"--param {key}: no parameter or input '{name}' on component '{component}'"
+                )
+                continue
+            try:
+                values.setdefault(component, {})[name] = check_value(
+                    channel, parse(channel.type, text)
+                )
+            except (ValueError, ChannelValueError) as exc:
+                self.problems.append(f"--param {key}={text}: not a valid {channel.type} ({exc})")
+        return values
+
+    def member(self, seat: Seat, overrides: Mapping[str, Value], grid: TimeGrid | None) -> Member:
+        component, description = seat.component, seat.description
+        assert description is not None
+        parameters: dict[str, Value] = {}
+        start_inputs: dict[str, Value] = {}
+        bound = {name: (p.value, p.origin) for name, p in component.parameters.items()}
+        bound |= {name: (value, "--param") for name, value in overrides.items()}
+        problems = []
+        for name, (value, origin) in bound.items():
+            channel = description.channel(name)
+            if channel is None or channel.causality is Causality.OUTPUT:
+                problems.append(
+                    f"{origin or where(component)}: parameter binding '{component.name}.{name}' "
+                    f"names no parameter or input of participant '{description.name}'"
+                )
+                continue
+            try:
+                typed = check_value(channel, widen(channel.type, value))
+            except ChannelValueError as exc:
+                problems.append(f"{origin}: parameter '{component.name}.{name}': {exc}")
+                continue
+            target = parameters if channel.causality is Causality.PARAMETER else start_inputs
+            target[name] = typed
+        multiple, step = 1, 0.0
+        if grid is not None:
+            try:
+                multiple = multiple_of(component, grid)
+                step = grid.step if component.delta_time is None else component.delta_time
+                self.fixed_step(component, description, step)
+            except ScenarioError as exc:
+                problems.append(str(exc))
+        if problems:
+            raise ValidationError(problems)
+        return Member(
+            name=component.name,
+            participant=seat.participant,
+            outputs=description.of(Causality.OUTPUT),
+            multiple=multiple,
+            step=step,
+            parameters=parameters,
+            start_inputs=start_inputs,
+        )
+
+    def fixed_step(self, component: ssp.Component, description: Description, step: float) -> None:
+        fixed = description.capabilities.fixed_step_size
+        if not fits_fixed_step(step, fixed):
+            raise ScenarioError(
+                f"{where(component)}: participant '{component.name}' steps in whole multiples "
+                f"of {fixed:g} s, but its communication step is {step:g} s; choose --step "
+                f"(or its deltaTime) as a multiple of {fixed:g} s"
+            )
+
+    # -- Gauss-Seidel ------------------------------------------------------------------------
+
+    def loops(self) -> None:
+        """Every loop of non-decoupled connections, a component feeding itself included."""
+        predecessors: dict[str, set[str]] = {c.name: set() for c in self.scenario.components}
+        for c in self.scenario.connections:
+            if c.decoupled:
+                continue
+            if c.start_element == c.end_element:
+                self.problems.append(
+                    f"{where(c)}: component '{c.start_element}' feeds itself "
+                    f"({c.start} -> {c.end}), a loop Gauss-Seidel cannot order: mark the "
+                    f'connection decoupled (annotation org.coupler.connection decoupled="true" '
+                    f"or OpenMCx decoupling), or run with --algorithm jacobi"
+                )
+            elif c.end_element in predecessors:
+                predecessors[c.end_element].add(c.start_element)
+        try:
+            graphlib.TopologicalSorter(predecessors).prepare()
+        except graphlib.CycleError as exc:
+            cycle = list(exc.args[1])[:-1]
+            order = [c.name for c in self.scenario.components]
+            first = min(range(len(cycle)), key=lambda i: order.index(cycle[i]))
+            loop = [*cycle[first:], *cycle[:first], cycle[first]]
+            self.problems.append(
+                f"Gauss-Seidel cannot order the loop {' -> '.join(loop)}: mark one connection of "
+                f'it decoupled (annotation org.coupler.connection decoupled="true" or OpenMCx '
+                f"decoupling), or run with --algorithm jacobi"
+            )
+
+
+def algorithm_of(scenario: ssp.Scenario) -> Algorithm:
+    """The scenario's own choice: OpenMCx stepType ``sequential`` is Gauss-Seidel, the
+    ``parallel_*`` types are Jacobi; Jacobi when the SSD says nothing."""
+    if scenario.step_type == "sequential":
+        return Algorithm.GAUSS_SEIDEL
+    return Algorithm.JACOBI
+
+
+def grid_of(scenario: ssp.Scenario, options: RunOptions) -> TimeGrid:
+    """The communication points; ScenarioError naming where a bad value came from."""
+    source = scenario.source.name
+
+    def pick(
+        option: float | None, value: float | None, flag: str, ssd: str
+    ) -> tuple[float | None, str]:
+        if option is not None:
+            return option, flag
+        return value, f"{ssd} in {source}"
+
+    start, start_from = pick(options.start_time, scenario.start_time, "--start-time", "startTime")
+    stop, stop_from = pick(options.stop_time, scenario.stop_time, "--stop-time", "stopTime")
+    step, step_from = pick(options.step_size, scenario.step_size, "--step", "deltaTime")
+    if start is None:
+        start, start_from = 0.0, "the default"
+    if stop is None:
+        raise ScenarioError(
+            f"{source}: no stop time; give --stop-time T or a DefaultExperiment stopTime in the SSD"
+        )
+    if step is None:
+        raise ScenarioError(
+            f"{source}: no step size; give --step H or an OpenMCx task deltaTime in the SSD"
+        )
+    for value, origin, what in (
+        (start, start_from, "start time"),
+        (stop, stop_from, "stop time"),
+        (step, step_from, "step size"),
+    ):
+        if not math.isfinite(value):
+            raise ScenarioError(f"{what} {value} ({origin}) is not a finite number; give one")
+    if not step > 0:
+        raise ScenarioError(f"step size must be positive, got {step:g} s ({step_from})")
+    if not stop > start:
+        raise ScenarioError(
+            f"stop time {stop:g} s ({stop_from}) must be after start time {start:g} s "
+            f"({start_from})"
+        )
+    ratio = (stop - start) / step
+    if not ratio <= MAX_STEPS:
+        raise ScenarioError(
+            f"{start:g} .. {stop:g} s in steps of {step:g} s ({step_from}) is {ratio:.3g} "
+            f"communication points, more than {MAX_STEPS:.0e}; check the step's unit"
+        )
+    steps = round(ratio)
+    if not math.isclose(ratio, steps, rel_tol=1e-9, abs_tol=1e-9):
+        raise ScenarioError(
+            f"stop time {stop:g} s is not start {start:g} s plus a whole number of steps of "
+            f"{step:g} s ({ratio:.6g} steps); choose a step that divides the interval"
+        )
+    return TimeGrid(start=start, step=step, steps=steps)
+
+
+def multiple_of(component: ssp.Component, grid: TimeGrid) -> int:
+    """The component's step multiple m (its deltaTime = m h), checked against the run."""
+    delta = component.delta_time
+    if delta is None:
+        return 1
+    what = f"{where(component)}: component '{component.name}' deltaTime"
+    if not math.isfinite(delta) or not delta > 0:
+        raise ScenarioError(f"{what} {delta} is not a positive finite number of seconds")
+    ratio = delta / grid.step
+    multiple = round(ratio)
+    if multiple < 1 or abs(ratio - multiple) > 1e-9 * max(1.0, ratio):
+        raise ScenarioError(
+            f"{what} {delta:g} s is not a whole multiple of the step {grid.step:g} s"
+        )
+    if grid.steps % multiple:
+        raise ScenarioError(
+            f"{what} {delta:g} s does not divide the run {grid.start:g} .. {grid.stop:g} s "
+            f"({grid.steps} steps of {grid.step:g} s); choose a stop time the component reaches "
+            f"by whole steps of {delta:g} s"
+        )
+    return multiple

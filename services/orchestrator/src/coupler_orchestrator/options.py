@@ -1,0 +1,58 @@
+"""What the user may set on top of a scenario: the options of ``coupler run`` and ``validate``.
+
+Every stage of the pipeline reads the part it needs; none of them changes it.
+"""
+
+from __future__ import annotations
+
+import uuid
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from enum import StrEnum
+
+from coupler.security import ClientSecurity
+
+
+class Algorithm(StrEnum):
+    """Master algorithms."""
+
+    JACOBI = "jacobi"
+    GAUSS_SEIDEL = "gauss-seidel"
+
+
+@dataclass(frozen=True, kw_only=True)
+class RunOptions:
+    """Options of one run (the CLI flags of ``coupler run``)."""
+
+    start_time: float | None = None
+    """Overrides DefaultExperiment startTime [s]; default 0."""
+    stop_time: float | None = None
+    """Overrides DefaultExperiment stopTime [s]."""
+    step_size: float | None = None
+    """Base communication step [s]; default the OpenMCx task deltaTime."""
+    algorithm: Algorithm | None = None
+    """Master algorithm; default from the OpenMCx task stepType, else Jacobi."""
+    realtime_factor: float | None = None
+    """Pace the run; None runs as fast as possible."""
+    parameters: Mapping[str, str] = field(default_factory=dict)
+    """``Component.name`` -> value text, overriding the SSD's parameter bindings."""
+    run_id: str = field(default_factory=lambda: uuid.uuid4().hex)
+    """Identifies the run; a random UUID unless given."""
+    lease: float | None = None
+    """Lease of the run at each participant [s]; default: well above the call deadline and the
+    pacing (``plan.lease_of``)."""
+    connect_timeout: float = 10.0
+    """How long a remote participant may take to report SERVING [s]."""
+    call_timeout: float = 30.0
+    """Deadline of each call to a participant [s]; per component: the SSD annotation
+    ``org.coupler.component callTimeout``."""
+    isolate_fmus: bool = False
+    """Run every FMU in a child process (per component: ``org.coupler.component isolate``)."""
+    output_interval: float | None = None
+    """Record every communication point that is a whole multiple of this past t_0 [s]; None:
+    every one. Must be a multiple of the step."""
+    output_variables: tuple[str, ...] = ()
+    """Columns recorded: names or globs (``Gain.*``); empty: every output."""
+    security: ClientSecurity = field(default_factory=ClientSecurity.from_environment)
+    """TLS trust, client certificate and token for every remote participant (default: the
+    ``COUPLER_TLS_*`` and ``COUPLER_TOKEN_FILE`` environment variables)."""

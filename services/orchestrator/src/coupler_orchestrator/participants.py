@@ -1,0 +1,164 @@
+"""Stage 2: the participant behind each component — an FMU in-process or a remote participant —
+opened and described, all at once; closed again on every path.
+
+Local and remote participants look the same to every later stage (``coupler.participant``).
+What could not be created, reached or described becomes a problem for ``checks`` to report
+together with everything else.
+"""
+
+from __future__ import annotations
+
+import asyncio
+from collections.abc import AsyncIterator, Mapping
+from contextlib import asynccontextmanager
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from coupler.channels import Description
+from coupler.client import RemoteParticipant
+from coupler.errors import CouplerError, ScenarioError
+from coupler.fmu import FmuParticipant
+from coupler.fmuhost import IsolatedFmu
+from coupler.participant import Participant
+from coupler.security import ClientSecurity
+from coupler_orchestrator import ssp
+from coupler_orchestrator.options import RunOptions
+
+
+@dataclass(frozen=True, kw_only=True)
+class Seat:
+    """One component and the participant that fills it."""
+
+    component: ssp.Component
+    participant: Participant
+    description: Description | None
+    """What the participant declared; None when it could not be opened or described."""
+    units: Mapping[str, ssp.BaseUnit] = field(default_factory=dict)
+    """Units the participant defines itself (an FMU's UnitDefinitions), by name."""
+
+    @property
+    def name(self) -> str:
+        return self.component.name
+
+
+@dataclass(frozen=True, kw_only=True)
+class Roster:
+    """Every component's seat, in scenario order, and what went wrong filling them."""
+
+    seats: Mapping[str, Seat]
+    problems: tuple[str, ...] = ()
+
+    def described(self) -> dict[str, Description]:
+        """Descriptions of the participants that could be described."""
+        return {n: s.description for n, s in self.seats.items() if s.description is not None}
+
+
+def where(item: ssp.Component | ssp.Connection | ssp.Connector, file: str = "") -> str:
+    """``file line N`` of an SSD item, for messages."""
+    name = Path(getattr(item, "file", "") or file).name or "scenario"
+    return f"{name} line {item.line}"
+
+
+def create(component: ssp.Component, options: RunOptions) -> Participant:
+    """The participant behind a component: an FMU in-process or isolated in a child process,
+    or a remote one; the component's own settings (SSD annotation) over the options."""
+    settings = component.settings
+    call_timeout = settings.call_timeout or options.call_timeout
+    if component.type == ssp.FMU_TYPE:
+        isolate = options.isolate_fmus if settings.isolate is None else settings.isolate
+        if isolate:
+            return IsolatedFmu(component.source, name=component.name, call_timeout=call_timeout)
+        return FmuParticipant(Path(component.source), name=component.name)
+    if component.type == ssp.GRPC_TYPE:
+        own = ClientSecurity(
+            ca=settings.tls_ca,
+            cert=settings.tls_cert,
+            key=settings.tls_key,
+            token_file=settings.token_file,
+        )
+        return RemoteParticipant(
+            component.source,
+            name=component.name,
+            connect_timeout=options.connect_timeout,
+            call_timeout=call_timeout,
+            security=options.security.override(own),
+        )
+    raise ScenarioError(
+        f"{where(component)}: component '{component.name}' has type '{component.type}'; "
+        f"supported: {ssp.FMU_TYPE}, {ssp.GRPC_TYPE}"
+    )
+
+
+def units_of(participant: Participant) -> dict[str, ssp.BaseUnit]:
+    """The unit definitions an FMU's modelDescription carries (FMI 2 and 3), by name."""
+    if not isinstance(participant, FmuParticipant | IsolatedFmu):
+        return {}
+    units = {}
+    for unit in participant.model_description.unitDefinitions:
+        base = unit.baseUnit
+        if unit.name and base is not None:
+            units[unit.name] = ssp.BaseUnit(
+                kg=base.kg,
+                m=base.m,
+                s=base.s,
+                A=base.A,
+                K=base.K,
+                mol=base.mol,
+                cd=base.cd,
+                rad=base.rad,
+                factor=float(base.factor),
+                offset=float(base.offset),
+            )
+    return units
+
+
+@asynccontextmanager
+async def opened(scenario: ssp.Scenario, options: RunOptions) -> AsyncIterator[Roster]:
+    """Create, open and describe every component's participant concurrently; close them all on
+    the way out, whatever happened."""
+    created: dict[str, Participant] = {}
+    problems: list[str] = []
+    for component in scenario.components:
+        try:
+            created[component.name] = create(component, options)
+        except CouplerError as exc:
+            problems.append(str(exc))
+    try:
+        names = list(created)
+        results = await asyncio.gather(
+            *(_describe(created[n]) for n in names), return_exceptions=True
+        )
+        seats = {}
+        for name, result in zip(names, results, strict=True):
+            component = scenario.component(name)
+            assert component is not None
+            description = None
+            if isinstance(result, CouplerError):
+                problems.append(f"{where(component)}: component '{name}': {result}")
+            elif isinstance(result, BaseException):
+                if not isinstance(result, Exception):
+                    raise result  # cancelled, interrupted: not a problem to report
+                problems.append(
+                    f"{where(component)}: component '{name}': {type(result).__name__}: {result}"
+                )
+            else:
+                description = result
+            seats[name] = Seat(
+                component=component,
+                participant=created[name],
+                description=description,
+                units=units_of(created[name]) if description is not None else {},
+            )
+        yield Roster(seats=seats, problems=tuple(problems))
+    finally:
+        await close_all(list(created.values()))
+
+
+async def _describe(participant: Participant) -> Description:
+    await participant.open()
+    return await participant.describe()
+
+
+async def close_all(participants: list[Participant]) -> None:
+    """Close every participant, whatever happens to the others."""
+    await asyncio.gather(*(p.close() for p in participants), return_exceptions=True)

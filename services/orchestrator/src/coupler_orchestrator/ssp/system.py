@@ -1,0 +1,425 @@
+"""Walking an SSD's system tree: components, connectors, signal dictionaries, raw connections
+and parameter bindings, collected into a ``Tree`` for flattening (``graph``) and parameter
+resolution (``parameters``)."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from urllib.parse import urlsplit
+
+from coupler.channels import ValueType
+from coupler.errors import ScenarioError, ValidationError
+
+from . import tool_annotations as notes
+from .documents import Element, boolean, child, children, elements, line_of, local, required, where
+from .expansion import expand
+from .files import Documents
+from .graph import Edge, Graph, Node
+from .model import (
+    FMU_TYPE,
+    GRPC_TYPE,
+    SUPPORTED_COMPONENT_TYPES,
+    Component,
+    Connector,
+    DictionaryEntry,
+    Enumeration,
+    SignalDictionary,
+    Unit,
+)
+from .parameters import Binding, read_binding
+from .transformations import read_transformation
+from .units import read_units
+
+TYPES = {
+    **{t.value: t for t in ValueType},
+    # SSP 2.0 names
+    "Float64": ValueType.REAL,
+    "Float32": ValueType.REAL,
+    **{f"{s}Int{n}": ValueType.INTEGER for s in ("", "U") for n in (8, 16, 32, 64)},
+}
+"""Connector type elements, SSP 1.0 and 2.0 names."""
+_KINDS = ("input", "output", "parameter", "calculatedParameter", "inout")
+_GRAPHICAL = {"ElementGeometry", "SystemGeometry", "GraphicalElements", "ConnectorGeometry"}
+
+
+@dataclass
+class Tree:
+    """What the walk collects, by path in the system tree."""
+
+    components: dict[tuple[str, ...], Component] = field(default_factory=dict)
+    systems: dict[tuple[str, ...], dict[str, str]] = field(default_factory=dict)
+    """System path -> its own connectors (name -> kind)."""
+    dictionaries: dict[tuple[str, ...], SignalDictionary] = field(default_factory=dict)
+    """System path + dictionary name -> dictionary."""
+    bindings: list[Binding] = field(default_factory=list)
+    graph: Graph = field(default_factory=Graph)
+
+
+class SystemReader:
+    """Reads one SSD's system tree; problems and warnings are collected, not raised."""
+
+    def __init__(
+        self,
+        display: str,
+        documents: Documents,
+        *,
+        units: dict[str, Unit],
+        enumerations: Mapping[str, Enumeration],
+        env: Mapping[str, str],
+        warnings: list[str],
+        problems: list[str],
+    ) -> None:
+        self.display = display
+        self.documents = documents
+        self.units = units
+        self.enumerations = enumerations
+        self.env = env
+        self.warnings = warnings
+        self.problems = problems
+        self.tree = Tree()
+
+    def walk(self, system: Element, path: tuple[str, ...]) -> None:
+        """Collect components, connectors, dictionaries, bindings and raw connections."""
+        own = {}
+        connectors = child(system, "Connectors")
+        for c in children(connectors, "Connector") if connectors is not None else ():
+            own[required(c, "name", self.display)] = c.get("kind", "")
+        self.tree.systems[path] = own
+        dictionaries = child(system, "SignalDictionaries")
+        for d in children(dictionaries, "SignalDictionary") if dictionaries is not None else ():
+            self.guard(self.read_dictionary, d, path)
+        elements_ = child(system, "Elements")
+        kinds: dict[str, str] = {}
+        refs: dict[str, tuple[tuple[str, ...], Element]] = {}
+        for element in elements(elements_) if elements_ is not None else ():
+            kind = local(element)
+            name = element.get("name", "")
+            kinds[name] = kind
+            if kind == "Component":
+                self.guard(self.read_component, element, (*path, name))
+            elif kind == "System":
+                self.walk(element, (*path, name))
+            elif kind == "SignalDictionaryReference":
+                found = self.find_dictionary(element, path)
+                if found is not None:
+                    refs[name] = (found, element)
+            else:
+                self.warnings.append(
+                    f"{where(self.display, element)}: element <{kind}> is not supported; ignored"
+                )
+        self.read_bindings(system, path, is_component=False)
+        connections = child(system, "Connections")
+        for c in children(connections, "Connection") if connections is not None else ():
+            self.guard(self.read_connection, c, path, kinds, refs)
+
+    def guard(self, method: object, *args: object) -> None:
+        """Run ``method``; collect a ScenarioError as a problem and go on."""
+        try:
+            method(*args)  # type: ignore[operator]
+        except ValidationError as exc:
+            self.problems.extend(exc.problems)
+        except ScenarioError as exc:
+            self.problems.append(str(exc))
+
+    def read_component(self, element: Element, path: tuple[str, ...]) -> None:
+        name = ".".join(path)
+        here = where(self.display, element)
+        mime = element.get("type", FMU_TYPE)
+        if mime not in SUPPORTED_COMPONENT_TYPES:
+            raise ScenarioError(
+                f"{here}: component '{name}' has type '{mime}', which is not supported; "
+                f"use {FMU_TYPE} or {GRPC_TYPE}"
+            )
+        what = f"{here}: component '{name}'"
+        source = expand(required(element, "source", self.display), self.env, what=what)
+        if mime == FMU_TYPE:
+            fmu = self.documents.resolve(source, element, self.display, what="FMU")
+            if not fmu.is_file():
+                raise ScenarioError(
+                    f"{what}: FMU file '{source}' does not exist (looked for {fmu}); add the FMU "
+                    "to the archive/directory or fix the source attribute"
+                )
+            source = str(fmu)
+        else:
+            parts = urlsplit(source)
+            try:
+                port = parts.port
+            except ValueError:
+                port = None
+            if parts.scheme not in ("grpc", "grpcs") or not parts.hostname or port is None:
+                raise ScenarioError(
+                    f"{what}: source '{source}' is not of the form grpc://HOST:PORT (or "
+                    f"grpcs:// for TLS); fix it"
+                )
+        implementation = element.get("implementation", "any")
+        if implementation == "ModelExchange":
+            self.warnings.append(
+                f"{here}: component '{name}' asks for implementation=\"ModelExchange\", which is "
+                "not supported; it runs as co-simulation"
+            )
+        self.tree.components[path] = Component(
+            name=name,
+            type=mime,
+            source=source,
+            connectors=self.read_connectors(element, name),
+            implementation=implementation,
+            delta_time=notes.component_delta_time(element, self.display, self.warnings),
+            settings=notes.component_settings(
+                element,
+                self.display,
+                lambda source, what: self.documents.resolve(
+                    source, element, self.display, what=what
+                ),
+            ),
+            file=self.display,
+            line=line_of(element),
+        )
+        self.read_bindings(element, path, is_component=True)
+        for item in elements(element):
+            if local(item) not in ("Connectors", "ParameterBindings", "Annotations", *_GRAPHICAL):
+                self.warnings.append(
+                    f"{where(self.display, item)}: <{local(item)}> in component '{name}' "
+                    "is not supported; ignored"
+                )
+
+    def read_connectors(self, element: Element, owner: str) -> tuple[Connector, ...]:
+        result = []
+        connectors = child(element, "Connectors")
+        for c in children(connectors, "Connector") if connectors is not None else ():
+            name = required(c, "name", self.display)
+            kind = required(c, "kind", self.display)
+            if kind not in _KINDS:
+                raise ScenarioError(
+                    f"{where(self.display, c)}: connector '{owner}.{name}' has kind '{kind}'; "
+                    f"use one of {', '.join(_KINDS)}"
+                )
+            typed = next(
+                (
+                    e
+                    for e in elements(c)
+                    if local(e) in TYPES
+                    or local(e) not in ("ConnectorGeometry", "Annotations", "Dimension")
+                ),
+                None,
+            )
+            type_ = None
+            unit = enumeration = mime = None
+            if typed is not None:
+                tag = local(typed)
+                if tag not in TYPES:
+                    raise ScenarioError(
+                        f"{where(self.display, typed)}: connector '{owner}.{name}' has type "
+                        f"<{tag}>, which is not supported; use Real, Integer, Boolean, String, "
+                        "Enumeration or Binary"
+                    )
+                type_ = TYPES[tag]
+                unit = typed.get("unit")
+                if unit is not None and unit not in self.units:
+                    raise ScenarioError(
+                        f"{where(self.display, typed)}: connector '{owner}.{name}' uses unit "
+                        f"'{unit}', which is not defined in <Units> (units: "
+                        f"{', '.join(self.units) or 'none'}); define it"
+                    )
+                if type_ is ValueType.ENUMERATION:
+                    enumeration = typed.get("name")
+                    if enumeration not in self.enumerations:
+                        raise ScenarioError(
+                            f"{where(self.display, typed)}: connector '{owner}.{name}' uses "
+                            f"enumeration '{enumeration}', which is not defined in <Enumerations>"
+                        )
+                if type_ is ValueType.BINARY:
+                    mime = typed.get("mime-type", "application/octet-stream")
+            result.append(
+                Connector(
+                    name=name,
+                    kind=kind,
+                    type=type_,
+                    unit=unit,
+                    enumeration=enumeration,
+                    mime_type=mime,
+                    line=line_of(c),
+                )
+            )
+        return tuple(result)
+
+    def read_dictionary(self, element: Element, path: tuple[str, ...]) -> None:
+        name = required(element, "name", self.display)
+        source = element.get("source")
+        if source:
+            root, display = self.documents.open(source, element, self.display)
+        else:
+            inline = child(element, "SignalDictionary")
+            display = self.display
+            if inline is None:
+                raise ScenarioError(
+                    f"{where(self.display, element)}: signal dictionary '{name}' has neither a "
+                    "source nor inline content"
+                )
+            root = inline
+        for unit_name, unit in read_units(child(root, "Units"), display).items():
+            known = self.units.setdefault(unit_name, unit)
+            if known.base_unit != unit.base_unit:
+                self.warnings.append(
+                    f"{display} line {unit.line}: unit '{unit_name}' differs from the SSD's "
+                    "definition; the SSD's applies"
+                )
+        entries = {}
+        for entry in children(root, "DictionaryEntry"):
+            entry_name = required(entry, "name", display)
+            typed = next((e for e in elements(entry) if local(e) in TYPES), None)
+            entries[entry_name] = DictionaryEntry(
+                name=entry_name,
+                type=TYPES[local(typed)] if typed is not None else None,
+                unit=typed.get("unit") if typed is not None else None,
+            )
+        self.tree.dictionaries[(*path, name)] = SignalDictionary(
+            name=name, entries=entries, file=display, line=line_of(element)
+        )
+
+    def find_dictionary(self, element: Element, path: tuple[str, ...]) -> tuple[str, ...] | None:
+        """The key of the dictionary a reference names, looked up from ``path`` upwards."""
+        name = element.get("dictionary", "")
+        for depth in range(len(path), -1, -1):
+            key = (*path[:depth], name)
+            if key in self.tree.dictionaries:
+                return key
+        self.problems.append(
+            f"{where(self.display, element)}: SignalDictionaryReference "
+            f"'{element.get('name', '')}' names dictionary '{name}', which is not defined in "
+            "this system or an enclosing one; add it to <SignalDictionaries>"
+        )
+        return None
+
+    def read_connection(
+        self,
+        element: Element,
+        path: tuple[str, ...],
+        kinds: dict[str, str],
+        refs: dict[str, tuple[tuple[str, ...], Element]],
+    ) -> None:
+        start_el, end_el = element.get("startElement"), element.get("endElement")
+        start_c = required(element, "startConnector", self.display)
+        end_c = required(element, "endConnector", self.display)
+        start = f"{start_el}.{start_c}" if start_el else start_c
+        label = f"{start} -> {f'{end_el}.{end_c}' if end_el else end_c}"
+        what = f"{where(self.display, element)}: connection {label}"
+        a = self.endpoint(what, path, start_el, start_c, kinds, refs)
+        b = self.endpoint(what, path, end_el, end_c, kinds, refs)
+        decoupled, decouple_type, priority = notes.decoupling(element, self.display)
+        edge = Edge(
+            transformation=read_transformation(element, self.display),
+            suppress_unit_conversion=boolean(
+                element, "suppressUnitConversion", self.display, False
+            ),
+            decoupled=decoupled,
+            decouple_type=decouple_type,
+            decouple_priority=priority,
+            file=self.display,
+            line=line_of(element),
+            label=label,
+        )
+        self.tree.graph.add(a, b, edge)
+
+    def endpoint(
+        self,
+        what: str,
+        path: tuple[str, ...],
+        element: str | None,
+        connector: str,
+        kinds: dict[str, str],
+        refs: dict[str, tuple[tuple[str, ...], Element]],
+    ) -> Node:
+        """The graph node of one end of a connection, with its role seen from the system."""
+        if not element:
+            own = self.tree.systems[path]
+            if connector not in own:
+                system = ".".join(path) or "the root system"
+                raise ScenarioError(
+                    f"{what}: connector '{connector}' does not exist on {system} "
+                    f"(connectors: {', '.join(own) or 'none'})"
+                )
+            role = {
+                "input": "source",
+                "parameter": "source",
+                "output": "sink",
+                "calculatedParameter": "sink",
+            }
+            return Node(
+                key=("sys", *path, connector), role=role.get(own[connector]), label=connector
+            )
+        kind = kinds.get(element)
+        if kind is None:
+            raise ScenarioError(
+                f"{what}: element '{element}' does not exist in system "
+                f"'{'.'.join(path) or 'root'}' (elements: {', '.join(kinds) or 'none'})"
+            )
+        full = (*path, element)
+        flat = ".".join(full)
+        roles = {
+            "output": "source",
+            "calculatedParameter": "source",
+            "input": "sink",
+            "parameter": "sink",
+        }
+        if kind == "Component":
+            component = self.tree.components.get(full)
+            if component is None:  # already reported as a problem
+                raise ScenarioError(f"{what}: component '{flat}' could not be loaded (see above)")
+            c = component.connector(connector)
+            if c is None:
+                raise ScenarioError(
+                    f"{what}: connector '{element}.{connector}' does not exist in component "
+                    f"'{flat}' (connectors: "
+                    f"{', '.join(x.name for x in component.connectors) or 'none'})"
+                )
+            return Node(
+                key=("comp", *full, connector), role=roles.get(c.kind), label=f"{flat}.{connector}"
+            )
+        if kind == "System":
+            sub = self.tree.systems[full]
+            if connector not in sub:
+                raise ScenarioError(
+                    f"{what}: connector '{element}.{connector}' does not exist on system "
+                    f"'{flat}' (connectors: {', '.join(sub) or 'none'})"
+                )
+            return Node(
+                key=("sys", *full, connector),
+                role=roles.get(sub[connector]),
+                label=f"{flat}.{connector}",
+            )
+        if element not in refs:
+            raise ScenarioError(
+                f"{what}: signal dictionary reference '{flat}' could not be resolved"
+            )
+        key, _ = refs[element]
+        dictionary = self.tree.dictionaries[key]
+        if connector not in dictionary.entries:
+            raise ScenarioError(
+                f"{what}: '{connector}' is not an entry of signal dictionary '{dictionary.name}' "
+                f"(entries: {', '.join(dictionary.entries) or 'none'})"
+            )
+        return Node(key=("dict", *key, connector), role=None, label=f"{flat}.{connector}")
+
+    def read_bindings(self, element: Element, path: tuple[str, ...], *, is_component: bool) -> None:
+        bindings = child(element, "ParameterBindings")
+        for b in children(bindings, "ParameterBinding") if bindings is not None else ():
+            self.guard(self.read_binding, b, path, is_component)
+
+    def read_binding(self, binding: Element, path: tuple[str, ...], is_component: bool) -> None:
+        parameters = read_binding(
+            binding,
+            self.display,
+            open_file=self.documents.open,
+            enumerations=self.enumerations,
+            warn=self.warnings.append,
+        )
+        self.tree.bindings.append(
+            Binding(
+                depth=len(path),
+                order=len(self.tree.bindings),
+                scope=path,
+                is_component=is_component,
+                parameters=tuple(parameters),
+            )
+        )

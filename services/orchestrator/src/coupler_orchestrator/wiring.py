@@ -1,0 +1,118 @@
+"""Stage 4: one converter per connection — widen, convert units, transform — and the links the
+master routes values through.
+
+Applied to every value that travels a connection, in this order: Integer -> Real widening (the
+only implicit type change), the unit conversion ``checks`` established (SSP BaseUnit algebra),
+then the connection's transformation. A connection with nothing to do gets no converter at all.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+from coupler.channels import Value, ValueType
+from coupler_orchestrator import ssp
+from coupler_orchestrator.checks import Checked, Route
+
+Converter = Callable[[Value], Value]
+
+
+@dataclass(frozen=True, kw_only=True)
+class Link:
+    """One connection: an output feeding an input, converted on the way."""
+
+    source: str
+    """Component that writes."""
+    output: str
+    """Its output channel."""
+    target: str
+    """Component that reads."""
+    input: str
+    """Its input channel."""
+    convert: Converter | None = None
+    """Widening, unit conversion and transformation; None is identity."""
+    decoupled: bool = False
+    """Gauss-Seidel may break a loop here (the target may see the previous step's value)."""
+
+    @property
+    def label(self) -> str:
+        return f"{self.source}.{self.output} -> {self.target}.{self.input}"
+
+
+def wire(checked: Checked) -> tuple[Link, ...]:
+    """The links of every checked connection, in scenario order."""
+    return tuple(
+        Link(
+            source=r.connection.start_element,
+            output=r.connection.start_connector,
+            target=r.connection.end_element,
+            input=r.connection.end_connector,
+            convert=converter(r),
+            decoupled=r.connection.decoupled,
+        )
+        for r in checked.routes
+    )
+
+
+def converter(route: Route) -> Converter | None:
+    """The function a value of ``route.source`` goes through to fit ``route.target``."""
+    steps: list[Converter] = []
+    if route.source.type is ValueType.INTEGER and route.target.type is ValueType.REAL:
+        steps.append(float)
+    if route.conversion is not None:
+        conversion = route.conversion
+        steps.append(lambda value: conversion(float(value)))
+    transformation = route.connection.transformation
+    if transformation is not None:
+        steps.append(transformation_function(transformation, route))
+    if not steps:
+        return None
+    if len(steps) == 1:
+        return steps[0]
+
+    def chain(value: Value) -> Value:
+        for step in steps:
+            value = step(value)
+        return value
+
+    return chain
+
+
+def transformation_function(transformation: ssp.Transformation, route: Route) -> Converter:
+    """The run-time function of ``transformation`` (its fit was checked in ``checks``).
+
+    Enumeration values travel as ``int``: an EnumerationMappingTransformation turns the value
+    into its item name in the source's enumeration, maps the name and turns it back into the
+    value of the target's enumeration. Unmapped values pass unchanged.
+    """
+    if isinstance(transformation, ssp.LinearTransformation):
+        factor, offset = transformation.factor, transformation.offset
+
+        def linear(value: Value) -> Value:
+            return factor * float(value) + offset
+
+        return linear
+    if isinstance(transformation, ssp.BooleanMappingTransformation):
+        booleans = dict(transformation.mapping)
+
+        def boolean_map(value: Value) -> Value:
+            return booleans.get(bool(value), bool(value))
+
+        return boolean_map
+    table: dict[int, int]
+    if isinstance(transformation, ssp.EnumerationMappingTransformation):
+        source, target = route.source_enum, route.target_enum
+        assert source is not None and target is not None  # checked
+        table = {}
+        for value, name in ((v, k) for k, v in source.items.items()):
+            mapped = transformation.mapping.get(name, name)
+            if mapped in target.items:
+                table[value] = target.items[mapped]
+    else:
+        table = dict(transformation.mapping)
+
+    def integer_map(value: Value) -> Value:
+        return table.get(value, value) if isinstance(value, int) else value
+
+    return integer_map

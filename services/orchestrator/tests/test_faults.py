@@ -1,0 +1,394 @@
+"""Faults with real processes: participants killed, stopped, hung, slow, late or restarted; the
+orchestrator killed or interrupted; a second client meddling; a full disk. Every test asserts
+what summary.json and results.csv say afterwards.
+
+    Source (FMI 2) --ramp--> Gain (gRPC, its own process) --y--> Integ (FMI 2)
+
+0 .. 20 s in steps of 0.1 s; paced (--realtime-factor) where a fault must hit mid-run.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any
+
+import grpc
+import pytest
+
+from coupler.client import parse_address
+from coupler.v1 import component_pb2 as pb
+from coupler.v1 import component_pb2_grpc as pb_grpc
+
+from .conftest import Coupler
+
+pytestmark = pytest.mark.usefixtures("fmus")
+HERE = Path(__file__).parent
+SSD = """<?xml version="1.0" encoding="UTF-8"?>
+<ssd:SystemStructureDescription version="1.0" name="Faults"
+    xmlns:ssd="http://ssp-standard.org/SSP1/SystemStructureDescription"
+    xmlns:ssc="http://ssp-standard.org/SSP1/SystemStructureCommon">
+  <ssd:System name="Faults">
+    <ssd:Elements>
+      <ssd:Component name="Source" source="${COUPLER_FMU_DIR}/Source2.fmu">
+        <ssd:Connectors><ssd:Connector name="ramp" kind="output"/></ssd:Connectors>
+      </ssd:Component>
+      <ssd:Component name="Gain" type="application/x-coupler-grpc"
+                     source="grpc://127.0.0.1:${GAIN_PORT}">
+        <ssd:Connectors>
+          <ssd:Connector name="u" kind="input"/><ssd:Connector name="y" kind="output"/>
+        </ssd:Connectors>
+      </ssd:Component>
+      <ssd:Component name="Integ" source="${COUPLER_FMU_DIR}/Integrator2.fmu">
+        <ssd:Connectors><ssd:Connector name="u" kind="input"/></ssd:Connectors>
+      </ssd:Component>
+    </ssd:Elements>
+    <ssd:Connections>
+      <ssd:Connection startElement="Source" startConnector="ramp"
+                      endElement="Gain" endConnector="u"/>
+      <ssd:Connection startElement="Gain" startConnector="y"
+                      endElement="Integ" endConnector="u"/>
+    </ssd:Connections>
+  </ssd:System>
+  <ssd:DefaultExperiment startTime="0" stopTime="20"/>
+</ssd:SystemStructureDescription>
+"""
+RUN = ("--step", "0.1")
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+@pytest.fixture
+def ssd(tmp_path: Path) -> Path:
+    path = tmp_path / "faults.ssd"
+    path.write_text(SSD)
+    return path
+
+
+class Gain:
+    """A participant process (faulty_participant.py) on a port of its own."""
+
+    def __init__(self, port: int, *flags: str) -> None:
+        self.port = port
+        self.log = Path(os.environ.get("TMPDIR", "/tmp")) / f"gain-{port}-{time.time_ns()}.log"
+        with self.log.open("wb") as err:
+            self.process = subprocess.Popen(
+                [sys.executable, str(HERE / "faulty_participant.py"), "--port", str(port), *flags],
+                stdout=subprocess.PIPE,
+                stderr=err,
+                text=True,
+            )
+        assert self.process.stdout is not None
+        line = self.process.stdout.readline()
+        assert line.startswith("serving Gain at"), (line, self.log.read_text())
+
+    def signal(self, sig: int) -> None:
+        self.process.send_signal(sig)
+
+    def stop(self) -> None:
+        if self.process.poll() is None:
+            self.process.kill()
+        self.process.wait(10)
+        if self.process.stdout is not None:
+            self.process.stdout.close()
+
+
+@contextmanager
+def gain(monkeypatch: pytest.MonkeyPatch, *flags: str, port: int = 0) -> Iterator[Gain]:
+    port = port or free_port()
+    monkeypatch.setenv("GAIN_PORT", str(port))
+    process = Gain(port, *flags)
+    try:
+        yield process
+    finally:
+        process.stop()
+
+
+def later(seconds: float, action: Any) -> threading.Timer:
+    timer = threading.Timer(seconds, action)
+    timer.start()
+    return timer
+
+
+def once_rows(out: Path, count: int, action: Any) -> threading.Thread:
+    """Do ``action`` as soon as ``count`` rows are in out/results.csv (the run is stepping)."""
+
+    def watch() -> None:
+        wait_for_rows(out, count)
+        action()
+
+    thread = threading.Thread(target=watch, daemon=True)
+    thread.start()
+    return thread
+
+
+def rows(out: Path) -> list[dict[str, str]]:
+    with (out / "results.csv").open(newline="") as file:
+        return list(csv.DictReader(file))
+
+
+def summary(out: Path) -> dict[str, Any]:
+    return json.loads((out / "summary.json").read_text())  # type: ignore[no-any-return]
+
+
+def assert_rows_kept(out: Path) -> list[dict[str, str]]:
+    """Every recorded row is whole and the summary counts them."""
+    recorded = rows(out)
+    assert recorded, "no row was kept"
+    width = len(recorded[0])
+    for row in recorded:  # a cut row would have missing (None) or surplus cells
+        assert len(row) == width and None not in row.values() and None not in row, row
+        float(row["Integ.x"])
+    assert len(recorded) == summary(out)["steps"] + 1
+    return recorded
+
+
+def test_a_killed_participant_fails_the_run_rows_kept(
+    coupler: Coupler, ssd: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    with gain(monkeypatch) as process:
+        once_rows(tmp_path, 3, lambda: process.signal(signal.SIGKILL))
+        outcome = coupler("run", ssd, "--out", tmp_path, *RUN, "--realtime-factor", "10")
+    assert outcome.code == 1
+    result = summary(tmp_path)
+    assert result["status"] == "failed"
+    assert "Gain.DoStep [UNAVAILABLE]" in result["reason"]
+    assert "the run had reached t=" in result["reason"]
+    assert 1 < len(assert_rows_kept(tmp_path)) < 201
+
+
+def test_a_stopped_participant_says_it_is_shutting_down(
+    coupler: Coupler, ssd: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    with gain(monkeypatch) as process:
+        once_rows(tmp_path, 3, lambda: process.signal(signal.SIGTERM))
+        outcome = coupler("run", ssd, "--out", tmp_path, *RUN, "--realtime-factor", "10")
+    assert outcome.code == 1
+    result = summary(tmp_path)
+    assert result["status"] == "failed"
+    assert "Gain.DoStep [UNAVAILABLE]" in result["reason"]
+    assert_rows_kept(tmp_path)
+
+
+@pytest.mark.parametrize("flag", ["--hang-at", "--block-at"])
+def test_a_hung_participant_fails_within_the_deadline(
+    coupler: Coupler, ssd: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, flag: str
+) -> None:
+    """An async hang (the participant's loop still answers) and a blocked process (nothing
+    answers): both end at the call deadline, naming participant, call and time."""
+    with gain(monkeypatch, flag, "1.0"):
+        started = time.monotonic()
+        outcome = coupler("run", ssd, "--out", tmp_path, *RUN, "--call-timeout", "1")
+        took = time.monotonic() - started
+    assert outcome.code == 1
+    result = summary(tmp_path)
+    assert result["status"] == "failed"
+    assert "Gain.DoStep [DEADLINE_EXCEEDED]: no answer within 1 s" in result["reason"]
+    assert "the run had reached t=1 s" in result["reason"]
+    assert len(assert_rows_kept(tmp_path)) == 11
+    assert took < 10  # the deadline, Terminate's deadline, and start-up
+
+
+def test_a_slow_participant_is_waited_for(
+    coupler: Coupler, ssd: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    with gain(monkeypatch, "--slow", "0.02"):
+        outcome = coupler("run", ssd, "--out", tmp_path, "--step", "0.5", "--call-timeout", "5")
+    assert outcome.code == 0, outcome.err
+    assert summary(tmp_path)["participants"]["Gain"]["do_step_latency_ms"]["p50"] >= 20
+
+
+def test_a_participant_that_starts_late_is_waited_for(
+    coupler: Coupler, ssd: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    port = free_port()
+    monkeypatch.setenv("GAIN_PORT", str(port))
+    started: list[Gain] = []
+    later(1.0, lambda: started.append(Gain(port)))
+    try:
+        outcome = coupler("run", ssd, "--out", tmp_path, "--step", "0.5")
+    finally:
+        time.sleep(0.1)
+        for process in started:
+            process.stop()
+    assert outcome.code == 0, outcome.err
+    assert summary(tmp_path)["status"] == "completed"
+
+
+def test_a_restarted_participant_serves_the_next_run(
+    coupler: Coupler, ssd: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    port = free_port()
+    with gain(monkeypatch, port=port):
+        assert coupler("run", ssd, "--out", tmp_path / "a", "--step", "0.5").code == 0
+    with gain(monkeypatch, port=port):
+        assert coupler("run", ssd, "--out", tmp_path / "b", "--step", "0.5").code == 0
+    assert rows(tmp_path / "a") == rows(tmp_path / "b")
+
+
+def orchestrator(ssd: Path, out: Path, *args: str) -> subprocess.Popen[str]:
+    return subprocess.Popen(
+        [sys.executable, "-m", "coupler_orchestrator", "run", str(ssd), "--out", str(out), *args],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+
+
+def wait_for_rows(out: Path, count: int, within: float = 20.0) -> None:
+    deadline = time.monotonic() + within
+    while time.monotonic() < deadline:
+        if (out / "results.csv").exists() and len(rows(out)) >= count:
+            return
+        time.sleep(0.05)
+    raise AssertionError(f"fewer than {count} rows in {out} after {within} s")
+
+
+def test_a_killed_orchestrator_leaves_a_summary_and_frees_its_participants(
+    coupler: Coupler, ssd: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """SIGKILL: no clean-up runs. summary.json (written at the start) and the flushed rows
+    remain; the participant ends the run with its broken step stream, so the next run starts
+    at once — long before the 600 s lease."""
+    with gain(monkeypatch):
+        killed = orchestrator(ssd, tmp_path / "killed", *RUN, "--realtime-factor", "5")
+        wait_for_rows(tmp_path / "killed", 6)
+        time.sleep(1.2)  # past a flush
+        killed.send_signal(signal.SIGKILL)
+        killed.communicate(timeout=10)
+        left = summary(tmp_path / "killed")
+        assert left["status"] == "running"
+        kept = rows(tmp_path / "killed")
+        assert len(kept) >= 6 and all(None not in row.values() for row in kept)
+        started = time.monotonic()
+        outcome = coupler("run", ssd, "--out", tmp_path / "next", "--step", "0.5", "--lease", "600")
+        assert outcome.code == 0, outcome.err
+        assert time.monotonic() - started < 30
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
+def test_an_interrupted_orchestrator_ends_cleanly(
+    coupler: Coupler, ssd: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, sig: int
+) -> None:
+    with gain(monkeypatch):
+        run = orchestrator(ssd, tmp_path / "o", *RUN, "--realtime-factor", "5")
+        wait_for_rows(tmp_path / "o", 4)
+        sent = time.monotonic()
+        run.send_signal(sig)
+        _, err = run.communicate(timeout=20)
+        assert time.monotonic() - sent < 5
+        assert run.returncode == 130, err
+        result = summary(tmp_path / "o")
+        assert (result["status"], result["reason"]) == ("aborted", "interrupted by the user")
+        assert_rows_kept(tmp_path / "o")
+        # Terminate reached the participant: the next run starts at once
+        assert coupler("run", ssd, "--out", tmp_path / "next", "--step", "0.5").code == 0
+
+
+def meddle(port: int, stop: threading.Event, refused: list[grpc.StatusCode]) -> None:
+    """Another process's client: DoStep (an invented and no run id), Terminate, Initialize."""
+    with grpc.insecure_channel(parse_address(f"grpc://127.0.0.1:{port}")) as channel:
+        stub = pb_grpc.GRPCComponentServiceStub(channel)
+        bad = [pb.VariableBinding(channel="u", real=5e9)]
+        calls = [
+            (stub.DoStep, pb.DoStepRequest(run_id="guess", step_size=0.1, inputs=bad)),
+            (stub.DoStep, pb.DoStepRequest(step_size=0.1, inputs=bad)),
+            (stub.Terminate, pb.TerminateRequest(run_id="guess")),
+        ]
+        while not stop.is_set():
+            for call, request in calls:
+                try:
+                    call(request, timeout=1)
+                except grpc.RpcError as exc:
+                    refused.append(exc.code())
+            time.sleep(0.01)
+
+
+def meddled_run(
+    coupler: Coupler, ssd: Path, out: Path, port: int, *options: str
+) -> tuple[int, list[grpc.StatusCode]]:
+    refused: list[grpc.StatusCode] = []
+    stop = threading.Event()
+    meddler = threading.Thread(target=meddle, args=(port, stop, refused), daemon=True)
+    meddler.start()
+    try:
+        outcome = coupler("run", ssd, "--out", out, *RUN, "--realtime-factor", "20", *options)
+    finally:
+        stop.set()
+        meddler.join(5)
+    return outcome.code, refused
+
+
+def test_calls_from_a_second_client_change_nothing(
+    coupler: Coupler, ssd: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Without the run's id, another client can neither step nor end the run: every call is
+    refused and the results equal an undisturbed run's."""
+    with gain(monkeypatch) as process:
+        code, refused = meddled_run(coupler, ssd, tmp_path / "meddled", process.port)
+        assert code == 0
+        assert coupler("run", ssd, "--out", tmp_path / "clean", *RUN).code == 0
+    assert refused and set(refused) == {grpc.StatusCode.FAILED_PRECONDITION}
+    assert (tmp_path / "meddled" / "results.csv").read_bytes() == (
+        tmp_path / "clean" / "results.csv"
+    ).read_bytes()
+
+
+def test_with_a_token_a_stranger_cannot_even_start_a_run(
+    coupler: Coupler, ssd: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A participant that requires a token refuses every call of a client without it —
+    including an Initialize that would hold the participant."""
+    token = tmp_path / "token"
+    token.write_text("s3cret-token")
+    with gain(monkeypatch, "--token-file", str(token)) as process:
+        channel = grpc.insecure_channel(parse_address(f"grpc://127.0.0.1:{process.port}"))
+        with channel:
+            stub = pb_grpc.GRPCComponentServiceStub(channel)
+            with pytest.raises(grpc.RpcError) as info:
+                stub.Initialize(pb.InitializeRequest(run_id="mine", step_size=0.1), timeout=2)
+            assert info.value.code() is grpc.StatusCode.UNAUTHENTICATED
+        code, refused = meddled_run(
+            coupler, ssd, tmp_path / "o", process.port, "--token-file", str(token)
+        )
+    assert code == 0
+    assert refused and set(refused) == {grpc.StatusCode.UNAUTHENTICATED}
+
+
+@pytest.mark.skipif(os.geteuid() != 0, reason="mounting a small tmpfs needs root")
+def test_a_full_disk_fails_the_run_keeping_whole_rows(
+    coupler: Coupler, ssd: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    full = tmp_path / "full"
+    full.mkdir()
+    mounted = subprocess.run(
+        ["mount", "-t", "tmpfs", "-o", "size=24k", "tmpfs", str(full)], capture_output=True
+    )
+    if mounted.returncode:
+        pytest.skip(f"cannot mount a tmpfs here: {mounted.stderr.decode().strip()}")
+    try:
+        with gain(monkeypatch):
+            outcome = coupler("run", ssd, "--out", full, "--step", "0.001", "--stop-time", "60")
+        assert outcome.code == 1
+        result = summary(full)
+        assert result["status"] == "failed"
+        assert "No space left on device" in result["reason"]
+        recorded = rows(full)
+        assert recorded and all(None not in row.values() for row in recorded)
+        assert all(float(row["Integ.x"]) >= 0 for row in recorded)
+    finally:
+        subprocess.run(["umount", str(full)], check=False)
