@@ -235,19 +235,11 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint,
     model_calculate(&inst->d, currentCommunicationPoint, false);
     model_step(&inst->d, currentCommunicationPoint, communicationStepSize);
     inst->time = currentCommunicationPoint + communicationStepSize;
-#ifdef MODEL_CAN_TERMINATE
-    {
-        double end;
-        if (model_ends(&inst->d, &end)) {
-            inst->time = end;
-            inst->terminated = true;
-            snprintf(inst->msg, sizeof inst->msg, "the model asks to end the simulation at t=%g",
-                     end);
-            logmsg(inst, fmi2OK, inst->msg); /* a request, not an error: logged when asked */
-            return fmi2Discard;
-        }
+    if (core_model_ends(&inst->d, &inst->time, inst->msg, sizeof inst->msg)) {
+        inst->terminated = true;
+        logmsg(inst, fmi2OK, inst->msg); /* a request, not an error: logged when asked */
+        return fmi2Discard;
     }
-#endif
     return fmi2OK;
 }
 

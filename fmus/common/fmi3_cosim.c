@@ -372,18 +372,10 @@ fmi3Status fmi3DoStep(fmi3Instance instance, fmi3Float64 currentCommunicationPoi
     model_calculate(&inst->d, currentCommunicationPoint, false);
     model_step(&inst->d, currentCommunicationPoint, communicationStepSize);
     inst->time = currentCommunicationPoint + communicationStepSize;
-#ifdef MODEL_CAN_TERMINATE
-    {
-        double end;
-        if (model_ends(&inst->d, &end)) {
-            inst->time = end;
-            inst->terminated = true;
-            snprintf(inst->msg, sizeof inst->msg, "the model asks to end the simulation at t=%g",
-                     end);
-            logmsg(inst, fmi3OK, inst->msg);
-        }
+    if (core_model_ends(&inst->d, &inst->time, inst->msg, sizeof inst->msg)) {
+        inst->terminated = true;
+        logmsg(inst, fmi3OK, inst->msg);
     }
-#endif
     if (eventHandlingNeeded) *eventHandlingNeeded = fmi3False;
     if (terminateSimulation) *terminateSimulation = inst->terminated ? fmi3True : fmi3False;
     if (earlyReturn) *earlyReturn = fmi3False;

@@ -20,8 +20,9 @@ import pytest
 
 from coupler.examples.gain import GainParticipant
 from coupler.fmu import FmuParticipant
+from coupler.participant import Participant
 
-from .conftest import Coupler, serving
+from .conftest import Coupler, Outcome, serving
 
 ALONE = """<?xml version="1.0" encoding="UTF-8"?>
 <ssd:SystemStructureDescription version="1.0" name="Stair"
@@ -40,28 +41,26 @@ REMOTE = """      <ssd:Component name="{name}" type="application/x-coupler-grpc"
                      source="grpc://127.0.0.1:{port}"/>"""
 
 
-class RecordingGain(GainParticipant):
-    """The example gain participant, remembering the reasons of its Terminate calls."""
+class RecordsTerminate(Participant):
+    """Mixed into a participant: remembers the reasons of its Terminate calls."""
 
+    terminated: list[str]
+
+    async def terminate(self, reason: str = "") -> None:
+        self.terminated.append(reason)
+        await super().terminate(reason)
+
+
+class RecordingGain(RecordsTerminate, GainParticipant):
     def __init__(self) -> None:
         super().__init__("Gain")
-        self.terminated: list[str] = []
-
-    async def terminate(self, reason: str = "") -> None:
-        self.terminated.append(reason)
-        await super().terminate(reason)
+        self.terminated = []
 
 
-class RecordingFmu(FmuParticipant):
-    """An FmuParticipant remembering the reasons of its Terminate calls."""
-
+class RecordingFmu(RecordsTerminate, FmuParticipant):
     def __init__(self, path: Path) -> None:
         super().__init__(path, name="Stair")
-        self.terminated: list[str] = []
-
-    async def terminate(self, reason: str = "") -> None:
-        self.terminated.append(reason)
-        await super().terminate(reason)
+        self.terminated = []
 
 
 def _write(tmp_path: Path, *elements: str) -> Path:
@@ -70,19 +69,24 @@ def _write(tmp_path: Path, *elements: str) -> Path:
     return ssd
 
 
+def _run_alone(coupler: Coupler, fmu: Path, out: Path, *, step: float) -> Outcome:
+    """``coupler run`` of the Stair FMU alone, 0 .. 20 s."""
+    return coupler(
+        "run",
+        _write(out.parent, FMU.format(name="Stair", source=fmu)),
+        "--out",
+        out,
+        "--step",
+        step,
+    )
+
+
 @pytest.mark.parametrize("fmu", ["Stair2", "Stair3"])
 def test_termination_request_ends_the_run_like_fmpy(
     fmu: str, fmus: Mapping[str, Path], coupler: Coupler, tmp_path: Path
 ) -> None:
     out = tmp_path / "out"
-    outcome = coupler(
-        "run",
-        _write(tmp_path, FMU.format(name="Stair", source=fmus[fmu])),
-        "--out",
-        out,
-        "--step",
-        0.5,
-    )
+    outcome = _run_alone(coupler, fmus[fmu], out, step=0.5)
     assert outcome.code == 0, outcome.err
     assert "Traceback" not in outcome.err
     summary = coupler.summary(out)
@@ -111,14 +115,7 @@ def test_stop_inside_a_step_is_named_in_the_reason(
     """Steps of 2 s: the FMU stops at t = 9 inside the step 8 -> 10; the row at the step's end
     holds the outputs at 9 (FMPy records FMI 2's at 9, FMI 3's at 10), and the reason says so."""
     out = tmp_path / "out"
-    outcome = coupler(
-        "run",
-        _write(tmp_path, FMU.format(name="Stair", source=fmus[fmu])),
-        "--out",
-        out,
-        "--step",
-        2,
-    )
+    outcome = _run_alone(coupler, fmus[fmu], out, step=2)
     assert outcome.code == 0, outcome.err
     summary = coupler.summary(out)
     assert summary["status"] == "terminated"
