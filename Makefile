@@ -5,14 +5,14 @@ PROTO_OUT := packages/coupler/src
 FMU_DIR := build/fmus
 RAILML := scenarios/railway/data/annaberg-schwarzenberg.railml
 
-.PHONY: setup sync proto proto-check lint test demo demo-example fmus track-fmu assets browser \
-        bench compose-check swarm-check k8s-check clean
+.PHONY: setup sync proto proto-check lint test demo demo-example fmus faulty-fmus track-fmu \
+        assets browser bench compose-check swarm-check k8s-check clean
 
 $(UV):
 	python3 -m venv .venv-uv && .venv-uv/bin/pip install --quiet uv
 
 # Everything a fresh machine needs: the workspace, the FMUs, the map's browser assets.
-setup: sync fmus track-fmu assets
+setup: sync fmus faulty-fmus track-fmu assets
 
 sync: $(UV)
 	$(UV) sync --frozen --quiet
@@ -32,6 +32,10 @@ proto-check: proto
 # Example FMUs and the railway driver from the project's own C sources (FMPy's headers, gcc).
 fmus: sync
 	$(UV) run --frozen python -m coupler.fmubuild fmus $(FMU_DIR)
+
+# FMUs that crash, hang or must be refused (fmus/README.md), for fault tests; not examples.
+faulty-fmus: sync
+	$(UV) run --frozen python -m coupler.fmubuild fmus/faulty build/faulty-fmus
 
 # The TrackBalises FMU: C source + track samples and balise table from the railML file;
 # rebuilt only when the railML file, the model or the FMI wrappers change.

@@ -20,7 +20,7 @@ typedef struct {
 } ModelData;
 
 static const VarInfo MODEL_VARS[] = {
-    {0, VT_REAL, VC_INDEPENDENT, 0, "time"},
+    {0, VT_REAL, VC_INDEPENDENT, 0, "time", 0},
     VAR(1, VT_REAL, VC_PARAMETER, target_speed),
     VAR(2, VT_REAL, VC_PARAMETER, stop_distance),
     VAR(3, VT_REAL, VC_PARAMETER, service_decel),

@@ -22,7 +22,7 @@ typedef struct {
 } ModelData;
 
 static const VarInfo MODEL_VARS[] = {
-    {0, VT_REAL, VC_INDEPENDENT, 0, "time"},
+    {0, VT_REAL, VC_INDEPENDENT, 0, "time", 0},
     VAR(1, VT_REAL, VC_PARAMETER, gain),
     VAR(2, VT_INTEGER, VC_PARAMETER, int_offset),
     VAR(3, VT_REAL, VC_INPUT, real_in),

@@ -17,6 +17,10 @@
 #include "resources.h"
 #endif
 
+#ifdef MODEL_CAN_TERMINATE
+#error "the FMI 1.0 wrapper does not support models that end the simulation (MODEL_CAN_TERMINATE)"
+#endif
+
 #ifndef MODEL_IDENTIFIER
 #error "MODEL_IDENTIFIER (the modelDescription modelIdentifier) must be defined by the build"
 #endif

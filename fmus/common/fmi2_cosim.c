@@ -1,6 +1,8 @@
 /* FMI 2.0 co-simulation wrapper over a model (see core.h). Included, not compiled alone.
  * Model exchange and the optional capabilities (FMU state, derivatives, asynchronous steps)
- * are not supported: those functions log an error and return fmi2Error. */
+ * are not supported: those functions log an error and return fmi2Error. A model that asks to
+ * end the simulation (MODEL_CAN_TERMINATE) makes fmi2DoStep return fmi2Discard; then
+ * fmi2GetBooleanStatus(fmi2Terminated) and fmi2GetRealStatus(fmi2LastSuccessfulTime) answer. */
 #include "fmi2Functions.h"
 #include "vars.h"
 #ifdef MODEL_USES_RESOURCES
@@ -15,6 +17,7 @@ typedef struct {
     ModelData d;
     double time;
     Mode mode;
+    bool terminated; /* the model asked to end the simulation (fmi2DoStep returned fmi2Discard) */
     char *name;
     fmi2CallbackFunctions cb;
     bool logging;
@@ -160,6 +163,7 @@ fmi2Status fmi2Reset(fmi2Component c) {
     model_defaults(&inst->d);
     inst->time = 0.0;
     inst->mode = MODE_INSTANTIATED;
+    inst->terminated = false;
     return fmi2OK;
 }
 
@@ -218,6 +222,11 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint,
     CHECK_INSTANCE(c);
     (void)noSetFMUStatePriorToCurrentPoint;
     REQUIRE_MODE(inst->mode == MODE_STEP, "fmi2DoStep");
+    if (inst->terminated) {
+        snprintf(inst->msg, sizeof inst->msg,
+                 "fmi2DoStep after the model asked to end the simulation at t=%g", inst->time);
+        return fail(inst, inst->msg);
+    }
     if (!(communicationStepSize > 0.0)) {
         snprintf(inst->msg, sizeof inst->msg, "communication step size %g is not positive",
                  communicationStepSize);
@@ -226,6 +235,11 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint,
     model_calculate(&inst->d, currentCommunicationPoint, false);
     model_step(&inst->d, currentCommunicationPoint, communicationStepSize);
     inst->time = currentCommunicationPoint + communicationStepSize;
+    if (core_model_ends(&inst->d, &inst->time, inst->msg, sizeof inst->msg)) {
+        inst->terminated = true;
+        logmsg(inst, fmi2OK, inst->msg); /* a request, not an error: logged when asked */
+        return fmi2Discard;
+    }
     return fmi2OK;
 }
 
@@ -298,9 +312,10 @@ fmi2Status fmi2GetStatus(fmi2Component c, const fmi2StatusKind s, fmi2Status *va
     return unsupported(c, "fmi2GetStatus");
 }
 fmi2Status fmi2GetRealStatus(fmi2Component c, const fmi2StatusKind s, fmi2Real *value) {
-    (void)s;
-    (void)value;
-    return unsupported(c, "fmi2GetRealStatus");
+    CHECK_INSTANCE(c);
+    if (s != fmi2LastSuccessfulTime || value == NULL) return unsupported(c, "fmi2GetRealStatus");
+    *value = inst->time;
+    return fmi2OK;
 }
 fmi2Status fmi2GetIntegerStatus(fmi2Component c, const fmi2StatusKind s, fmi2Integer *value) {
     (void)s;
@@ -308,9 +323,10 @@ fmi2Status fmi2GetIntegerStatus(fmi2Component c, const fmi2StatusKind s, fmi2Int
     return unsupported(c, "fmi2GetIntegerStatus");
 }
 fmi2Status fmi2GetBooleanStatus(fmi2Component c, const fmi2StatusKind s, fmi2Boolean *value) {
-    (void)s;
-    (void)value;
-    return unsupported(c, "fmi2GetBooleanStatus");
+    CHECK_INSTANCE(c);
+    if (s != fmi2Terminated || value == NULL) return unsupported(c, "fmi2GetBooleanStatus");
+    *value = inst->terminated ? fmi2True : fmi2False;
+    return fmi2OK;
 }
 fmi2Status fmi2GetStringStatus(fmi2Component c, const fmi2StatusKind s, fmi2String *value) {
     (void)s;

@@ -1,6 +1,9 @@
 /* FMI 3.0 co-simulation wrapper over a model (see core.h). Included, not compiled alone.
  * FMI 3.0 requires every function to be exported: model exchange, scheduled execution,
- * clocks, FMU state and derivatives are stubs that log an error and return fmi3Error. */
+ * clocks, FMU state and derivatives are stubs that log an error and return fmi3Error.
+ * Array variables (ARRAY in the model's table) are read and written element by element in
+ * row-major order; nValues counts elements. A model that asks to end the simulation
+ * (MODEL_CAN_TERMINATE) makes fmi3DoStep set terminateSimulation and lastSuccessfulTime. */
 #include "fmi3Functions.h"
 #include "vars.h"
 #ifdef MODEL_USES_RESOURCES
@@ -15,6 +18,7 @@ typedef struct {
     ModelData d;
     double time;
     Mode mode;
+    bool terminated; /* the model asked to end the simulation (terminateSimulation was set) */
     char *name;
     fmi3InstanceEnvironment env;
     fmi3LogMessageCallback log;
@@ -195,39 +199,60 @@ fmi3Status fmi3Reset(fmi3Instance instance) {
     model_defaults(&inst->d);
     inst->time = 0.0;
     inst->mode = MODE_INSTANTIATED;
+    inst->terminated = false;
     return fmi3OK;
 }
 
 #define CHECK_ARRAYS(nvr, nValues) \
     if (nvr > 0 && (valueReferences == NULL || values == NULL)) return fail(inst, "NULL argument"); \
-    if (nValues != nvr) { \
-        snprintf(inst->msg, sizeof inst->msg, "expected %zu values, got %zu", nvr, nValues); \
+    if (nValues < nvr) { \
+        snprintf(inst->msg, sizeof inst->msg, "expected at least %zu values, got %zu", nvr, \
+                 nValues); \
         return fail(inst, inst->msg); \
     }
+
+/* Whether the next n values, from index k on, fit into nValues; else a message. */
+static bool fits(Instance *inst, const VarInfo *v, size_t k, size_t nValues) {
+    if (k + core_count(v) <= nValues) return true;
+    snprintf(inst->msg, sizeof inst->msg, "nValues %zu is too small: %s has %zu element(s)",
+             nValues, v->name, core_count(v));
+    return false;
+}
+
+/* Whether exactly nValues values were used (k of them). */
+static bool used_all(Instance *inst, size_t k, size_t nValues) {
+    if (k == nValues) return true;
+    snprintf(inst->msg, sizeof inst->msg, "expected %zu values for these variables, got %zu", k,
+             nValues);
+    return false;
+}
 
 /* Getters: outputs are calculated from the current inputs, parameters, state and time. */
 #define DEFINE_GET(Name, CType, vtype, FieldT, INDEPENDENT) \
     fmi3Status fmi3Get##Name(fmi3Instance instance, const fmi3ValueReference valueReferences[], \
                              size_t nValueReferences, CType values[], size_t nValues) { \
-        size_t i; \
+        size_t i, j, k = 0; \
         CHECK_INSTANCE(instance); \
         CHECK_ARRAYS(nValueReferences, nValues); \
         model_calculate(&inst->d, inst->time, inst->mode == MODE_INITIALIZATION); \
         for (i = 0; i < nValueReferences; i++) { \
             const VarInfo *v = \
                 core_lookup(valueReferences[i], vtype, inst->msg, sizeof inst->msg); \
-            if (v == NULL) return fail(inst, inst->msg); \
+            if (v == NULL || !fits(inst, v, k, nValues)) return fail(inst, inst->msg); \
             if (v->causality == VC_INDEPENDENT) { \
                 INDEPENDENT; \
+                k++; \
             } else { \
-                values[i] = *FIELD(&inst->d, v, FieldT); \
+                for (j = 0; j < core_count(v); j++) values[k++] = FIELD(&inst->d, v, FieldT)[j]; \
             } \
         } \
+        if (!used_all(inst, k, nValues)) return fail(inst, inst->msg); \
         return fmi3OK; \
     }
 
-DEFINE_GET(Float64, fmi3Float64, VT_REAL, double, values[i] = inst->time)
+DEFINE_GET(Float64, fmi3Float64, VT_REAL, double, values[k] = inst->time)
 DEFINE_GET(Int32, fmi3Int32, VT_INTEGER, int, (void)0)
+DEFINE_GET(UInt64, fmi3UInt64, VT_UINT64, uint64_t, (void)0)
 DEFINE_GET(Boolean, fmi3Boolean, VT_BOOLEAN, bool, (void)0)
 DEFINE_GET(String, fmi3String, VT_STRING, char *, (void)0)
 
@@ -237,6 +262,7 @@ fmi3Status fmi3GetBinary(fmi3Instance instance, const fmi3ValueReference valueRe
     size_t i;
     CHECK_INSTANCE(instance);
     CHECK_ARRAYS(nValueReferences, nValues);
+    if (!used_all(inst, nValueReferences, nValues)) return fail(inst, inst->msg);
     if (nValueReferences > 0 && valueSizes == NULL) return fail(inst, "NULL argument");
     model_calculate(&inst->d, inst->time, inst->mode == MODE_INITIALIZATION);
     for (i = 0; i < nValueReferences; i++) {
@@ -248,27 +274,33 @@ fmi3Status fmi3GetBinary(fmi3Instance instance, const fmi3ValueReference valueRe
     return fmi3OK;
 }
 
+/* Setters: the values of every array element in order; strings are scalars only. */
 #define DEFINE_SET(Name, CType, vtype, ASSIGN) \
     fmi3Status fmi3Set##Name(fmi3Instance instance, const fmi3ValueReference valueReferences[], \
                              size_t nValueReferences, const CType values[], size_t nValues) { \
-        size_t i; \
+        size_t i, j, k = 0; \
         CHECK_INSTANCE(instance); \
         CHECK_ARRAYS(nValueReferences, nValues); \
         for (i = 0; i < nValueReferences; i++) { \
             const VarInfo *v = \
                 core_lookup(valueReferences[i], vtype, inst->msg, sizeof inst->msg); \
-            if (v == NULL || !core_can_set(v, inst->mode, inst->msg, sizeof inst->msg)) \
+            if (v == NULL || !core_can_set(v, inst->mode, inst->msg, sizeof inst->msg) || \
+                !fits(inst, v, k, nValues)) \
                 return fail(inst, inst->msg); \
-            ASSIGN; \
+            for (j = 0; j < core_count(v); j++, k++) { \
+                ASSIGN; \
+            } \
         } \
+        if (!used_all(inst, k, nValues)) return fail(inst, inst->msg); \
         return fmi3OK; \
     }
 
-DEFINE_SET(Float64, fmi3Float64, VT_REAL, *FIELD(&inst->d, v, double) = values[i])
-DEFINE_SET(Int32, fmi3Int32, VT_INTEGER, *FIELD(&inst->d, v, int) = values[i])
-DEFINE_SET(Boolean, fmi3Boolean, VT_BOOLEAN, *FIELD(&inst->d, v, bool) = values[i])
+DEFINE_SET(Float64, fmi3Float64, VT_REAL, FIELD(&inst->d, v, double)[j] = values[k])
+DEFINE_SET(Int32, fmi3Int32, VT_INTEGER, FIELD(&inst->d, v, int)[j] = values[k])
+DEFINE_SET(UInt64, fmi3UInt64, VT_UINT64, FIELD(&inst->d, v, uint64_t)[j] = values[k])
+DEFINE_SET(Boolean, fmi3Boolean, VT_BOOLEAN, FIELD(&inst->d, v, bool)[j] = values[k])
 DEFINE_SET(String, fmi3String, VT_STRING,
-           if (!core_set_string(FIELD(&inst->d, v, char *), values[i]))
+           if (!core_set_string(FIELD(&inst->d, v, char *), values[k]))
                return fail(inst, "out of memory"))
 
 fmi3Status fmi3SetBinary(fmi3Instance instance, const fmi3ValueReference valueReferences[],
@@ -277,6 +309,7 @@ fmi3Status fmi3SetBinary(fmi3Instance instance, const fmi3ValueReference valueRe
     size_t i;
     CHECK_INSTANCE(instance);
     CHECK_ARRAYS(nValueReferences, nValues);
+    if (!used_all(inst, nValueReferences, nValues)) return fail(inst, inst->msg);
     if (nValueReferences > 0 && valueSizes == NULL) return fail(inst, "NULL argument");
     for (i = 0; i < nValueReferences; i++) {
         const VarInfo *v = core_lookup(valueReferences[i], VT_BINARY, inst->msg, sizeof inst->msg);
@@ -317,7 +350,6 @@ DEFINE_NO_TYPE(Int16, fmi3Int16)
 DEFINE_NO_TYPE(UInt16, fmi3UInt16)
 DEFINE_NO_TYPE(UInt32, fmi3UInt32)
 DEFINE_NO_TYPE(Int64, fmi3Int64)
-DEFINE_NO_TYPE(UInt64, fmi3UInt64)
 
 fmi3Status fmi3DoStep(fmi3Instance instance, fmi3Float64 currentCommunicationPoint,
                       fmi3Float64 communicationStepSize,
@@ -327,6 +359,11 @@ fmi3Status fmi3DoStep(fmi3Instance instance, fmi3Float64 currentCommunicationPoi
     CHECK_INSTANCE(instance);
     (void)noSetFMUStatePriorToCurrentPoint;
     REQUIRE_MODE(inst->mode == MODE_STEP, "fmi3DoStep");
+    if (inst->terminated) {
+        snprintf(inst->msg, sizeof inst->msg,
+                 "fmi3DoStep after the model asked to end the simulation at t=%g", inst->time);
+        return fail(inst, inst->msg);
+    }
     if (!(communicationStepSize > 0.0)) {
         snprintf(inst->msg, sizeof inst->msg, "communication step size %g is not positive",
                  communicationStepSize);
@@ -335,8 +372,12 @@ fmi3Status fmi3DoStep(fmi3Instance instance, fmi3Float64 currentCommunicationPoi
     model_calculate(&inst->d, currentCommunicationPoint, false);
     model_step(&inst->d, currentCommunicationPoint, communicationStepSize);
     inst->time = currentCommunicationPoint + communicationStepSize;
+    if (core_model_ends(&inst->d, &inst->time, inst->msg, sizeof inst->msg)) {
+        inst->terminated = true;
+        logmsg(inst, fmi3OK, inst->msg);
+    }
     if (eventHandlingNeeded) *eventHandlingNeeded = fmi3False;
-    if (terminateSimulation) *terminateSimulation = fmi3False;
+    if (terminateSimulation) *terminateSimulation = inst->terminated ? fmi3True : fmi3False;
     if (earlyReturn) *earlyReturn = fmi3False;
     if (lastSuccessfulTime) *lastSuccessfulTime = inst->time;
     return fmi3OK;

@@ -14,7 +14,7 @@ typedef struct {
 } ModelData;
 
 static const VarInfo MODEL_VARS[] = {
-    {0, VT_REAL, VC_INDEPENDENT, 0, "time"},
+    {0, VT_REAL, VC_INDEPENDENT, 0, "time", 0},
     VAR(1, VT_REAL, VC_PARAMETER, x0),
     VAR(2, VT_REAL, VC_INPUT, u),
     VAR(3, VT_REAL, VC_OUTPUT, x),

@@ -54,4 +54,20 @@ static inline bool core_can_set(const VarInfo *v, Mode mode, char *msg, size_t m
     return ok;
 }
 
+/* Whether the model asked to end the simulation in the step just taken (MODEL_CAN_TERMINATE);
+ * then *time is where it stopped and msg says so. */
+static inline bool core_model_ends(const ModelData *d, double *time, char *msg, size_t msg_size) {
+#ifdef MODEL_CAN_TERMINATE
+    if (!model_ends(d, time)) return false;
+    snprintf(msg, msg_size, "the model asks to end the simulation at t=%g", *time);
+    return true;
+#else
+    (void)d;
+    (void)time;
+    (void)msg;
+    (void)msg_size;
+    return false;
+#endif
+}
+
 #endif

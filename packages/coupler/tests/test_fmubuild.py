@@ -2,17 +2,20 @@
 
 from __future__ import annotations
 
+import contextlib
 import math
 import os
 import shutil
 import zipfile
+from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import fmpy
 import numpy as np
 import pytest
 from fmpy.fmi1 import FMICallException
-from fmpy.fmi2 import FMU2Slave
+from fmpy.fmi2 import FMU2Slave, fmi2Discard, fmi2LastSuccessfulTime, fmi2Terminated
 from fmpy.fmi3 import FMU3Slave
 from fmpy.validation import validate_fmu
 
@@ -28,6 +31,25 @@ pytestmark = pytest.mark.skipif(shutil.which("gcc") is None, reason="gcc is not 
 def built(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     out = tmp_path_factory.mktemp("fmus")
     return {path.stem: path for path in build_all(FMUS, out)}
+
+
+@contextlib.contextmanager
+def _instance(
+    slave_class: type[FMU2Slave] | type[FMU3Slave], path: Path, tmp_path: Path
+) -> Iterator[tuple[Any, dict[str, int]]]:
+    """The FMU instantiated by FMPy's low-level class, with its value references by name."""
+    md = fmpy.read_model_description(str(path))
+    fmu = slave_class(
+        guid=md.guid,
+        unzipDirectory=fmpy.extract(str(path), str(tmp_path / "unzip")),
+        modelIdentifier=md.coSimulation.modelIdentifier,
+        instanceName=path.stem,
+    )
+    fmu.instantiate()
+    try:
+        yield fmu, {v.name: v.valueReference for v in md.modelVariables}
+    finally:
+        fmu.freeInstance()
 
 
 def test_every_example_is_built(built: dict[str, Path]) -> None:
@@ -82,17 +104,7 @@ def test_feedthrough_in_simulation(built: dict[str, Path], name: str) -> None:
 
 
 def test_feedthrough2_all_types_and_errors(built: dict[str, Path], tmp_path: Path) -> None:
-    path = str(built["Feedthrough2"])
-    md = fmpy.read_model_description(path)
-    vr = {v.name: v.valueReference for v in md.modelVariables}
-    fmu = FMU2Slave(
-        guid=md.guid,
-        unzipDirectory=fmpy.extract(path, str(tmp_path / "unzip")),
-        modelIdentifier="Feedthrough2",
-        instanceName="ft",
-    )
-    fmu.instantiate()
-    try:
+    with _instance(FMU2Slave, built["Feedthrough2"], tmp_path) as (fmu, vr):
         fmu.setupExperiment(startTime=0.0)
         fmu.enterInitializationMode()
         # Defaults: gain 2, int_offset 0, inputs at their start values.
@@ -119,22 +131,10 @@ def test_feedthrough2_all_types_and_errors(built: dict[str, Path], tmp_path: Pat
         with pytest.raises(FMICallException):
             fmu.setReal([vr["gain"]], [1.0])  # fixed parameter after initialization
         fmu.terminate()
-    finally:
-        fmu.freeInstance()
 
 
 def test_feedthrough3_all_types_and_binary(built: dict[str, Path], tmp_path: Path) -> None:
-    path = str(built["Feedthrough3"])
-    md = fmpy.read_model_description(path)
-    vr = {v.name: v.valueReference for v in md.modelVariables}
-    fmu = FMU3Slave(
-        guid=md.guid,
-        unzipDirectory=fmpy.extract(path, str(tmp_path / "unzip")),
-        modelIdentifier="Feedthrough3",
-        instanceName="ft",
-    )
-    fmu.instantiate()
-    try:
+    with _instance(FMU3Slave, built["Feedthrough3"], tmp_path) as (fmu, vr):
         fmu.setFloat64([vr["gain"]], [0.5])
         fmu.setInt32([vr["int_offset"]], [100])
         fmu.enterInitializationMode(startTime=1.0)
@@ -155,8 +155,6 @@ def test_feedthrough3_all_types_and_binary(built: dict[str, Path], tmp_path: Pat
         with pytest.raises(FMICallException):
             fmu.getFloat32([vr["real_out"]])
         fmu.terminate()
-    finally:
-        fmu.freeInstance()
 
 
 @pytest.mark.parametrize("name", [n for n in EXAMPLES if n.startswith("Integrator")])
@@ -240,3 +238,54 @@ def test_main_builds_everything(
     assert sorted(Path(p).name for p in printed) == sorted(f"{n}.fmu" for n in EXAMPLES)
     assert main([str(tmp_path), str(tmp_path / "out")]) == 1
     assert "no model folders" in capsys.readouterr().err
+
+
+def test_faulty_fmus_are_a_set_of_their_own(tmp_path: Path) -> None:
+    """fmus/faulty is not an example folder; built on its own, scheduled execution included."""
+    assert not any("faulty" in folder.parts for folder in find_model_folders(FMUS))
+    faulty = {folder.name for folder in find_model_folders(FMUS / "faulty")}
+    assert faulty == {"Faulty2", "CrashOnInstantiate2", "Clocks3", "Scheduled3"}
+    out = build_fmu(FMUS / "faulty" / "Scheduled3", tmp_path / "Scheduled3.fmu")
+    with zipfile.ZipFile(out) as fmu:
+        assert "binaries/x86_64-linux/Scheduled3.so" in fmu.namelist()
+
+
+def test_stair2_asks_to_terminate(built: dict[str, Path], tmp_path: Path) -> None:
+    """fmi2DoStep ending at terminate_at returns fmi2Discard; the status functions say why."""
+    with _instance(FMU2Slave, built["Stair2"], tmp_path) as (fmu, vr):
+        fmu.setReal([vr["terminate_at"]], [2.5])
+        fmu.setupExperiment(startTime=0.0)
+        fmu.enterInitializationMode()
+        fmu.exitInitializationMode()
+        fmu.doStep(currentCommunicationPoint=0.0, communicationStepSize=2.0)
+        assert fmu.getInteger([vr["counter"]]) == [3]
+        with pytest.raises(FMICallException) as discarded:
+            fmu.doStep(currentCommunicationPoint=2.0, communicationStepSize=2.0)
+        assert discarded.value.status == fmi2Discard
+        assert fmu.getBooleanStatus(fmi2Terminated)
+        assert fmu.getRealStatus(fmi2LastSuccessfulTime) == 2.5
+        assert fmu.getReal([vr["time"]]) == [2.5]
+        assert fmu.getInteger([vr["counter"]]) == [3]
+        with pytest.raises(FMICallException):
+            fmu.doStep(currentCommunicationPoint=2.5, communicationStepSize=1.0)
+        fmu.terminate()
+
+
+def test_statespace3_arrays_row_major(built: dict[str, Path], tmp_path: Path) -> None:
+    with _instance(FMU3Slave, built["StateSpace3"], tmp_path) as (fmu, vr):
+        assert fmu.getUInt64([vr["nx"], vr["nu"]]) == [2, 3]
+        assert fmu.getFloat64([vr["B"]], 6) == [1.0, 0.0, 0.0, 0.0, 1.0, 0.5]
+        fmu.setFloat64([vr["x0"], vr["u"]], [2.0, -1.0, 1.0, 2.0, 4.0])
+        fmu.enterInitializationMode(startTime=0.0)
+        fmu.exitInitializationMode()
+        # y = C x + D u: C = [[1, 0], [0.5, 1]], D[2,3] = 1
+        assert fmu.getFloat64([vr["y"], vr["x"]], 4) == [2.0, 4.0, 2.0, -1.0]
+        fmu.doStep(currentCommunicationPoint=0.0, communicationStepSize=0.5)
+        # x += h (A x + B u): A = [[0, 1], [-2, -0.5]], B = [[1, 0, 0], [0, 1, 0.5]]
+        # dx = (-1 + 1, -4 + 0.5 + 2 + 2) = (0, 0.5)
+        assert fmu.getFloat64([vr["x"]], 2) == [2.0, -0.75]
+        with pytest.raises(FMICallException):
+            fmu.getFloat64([vr["y"]], 3)  # y has 2 elements
+        with pytest.raises(FMICallException):
+            fmu.setFloat64([vr["u"]], [1.0, 2.0])  # u has 3
+        fmu.terminate()

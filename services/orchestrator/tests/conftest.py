@@ -43,6 +43,14 @@ def built_fmus(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     return {path.stem: path for path in build_all(REPO / "fmus", out)}
 
 
+@pytest.fixture(scope="session")
+def faulty_fmus(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+    """``{"Faulty2": path, "Clocks3": path, ...}``: the FMUs of fmus/faulty (crash, hang, or
+    must be refused; fmus/faulty/README.md), built for this session."""
+    out = tmp_path_factory.mktemp("faulty-fmus")
+    return {path.stem: path for path in build_all(REPO / "fmus" / "faulty", out)}
+
+
 @pytest.fixture
 def fmus(built_fmus: dict[str, Path], monkeypatch: pytest.MonkeyPatch) -> dict[str, Path]:
     """The built FMUs; ``${COUPLER_FMU_DIR}`` in the SSDs of data/ names their folder."""

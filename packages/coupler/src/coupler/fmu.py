@@ -1,8 +1,14 @@
 """``FmuParticipant``: an FMU (FMI 1.0, 2.0 or 3.0 co-simulation) run in-process through FMPy.
 
 Blocking FMI calls run on one worker thread per FMU, off the event loop. A failing FMI call
-becomes a ``ParticipantError`` carrying the FMU, the call and the FMI status (``_fmi_call``, the
-one place FMPy's errors are translated).
+becomes a ``ParticipantError`` carrying the FMU, the call and the FMI status (``_fmi``, the
+one place FMPy's errors are translated). Which variables are channels (FMI 3.0 arrays as one
+channel per element) and which FMUs are refused is ``coupler.fmuchannels``' concern.
+
+An FMU that asks to end the simulation -- FMI 2.0: fmi2DoStep returns fmi2Discard and
+fmi2GetBooleanStatus(fmi2Terminated) is true; FMI 3.0: fmi3DoStep sets terminateSimulation --
+makes ``do_step`` raise ``EndRun`` with its outputs at the time reached, so the run ends as
+``terminated``.
 """
 
 from __future__ import annotations
@@ -21,47 +27,23 @@ from typing import Any, TypeVar
 
 import fmpy
 from fmpy.fmi1 import FMICallException
+from fmpy.fmi2 import fmi2LastSuccessfulTime, fmi2Terminated
 from fmpy.model_description import ModelDescription, ScalarVariable
 
-from coupler.channels import (
-    Capabilities,
-    Causality,
-    Channel,
-    Description,
-    RunSetup,
-    Value,
-    ValueType,
-)
+from coupler.channels import Capabilities, Description, RunSetup, Value
 from coupler.errors import ParticipantError, ScenarioError
-from coupler.participant import Participant, Values
+from coupler.fmuchannels import (
+    VALUE_TYPES,
+    ArrayInputs,
+    Layout,
+    check_supported,
+    unsized_array,
+)
+from coupler.participant import EndRun, Participant, Values
 from coupler.values import coerce
 
 T = TypeVar("T")
 
-_VALUE_TYPES = {
-    "Real": ValueType.REAL,
-    "Float64": ValueType.REAL,
-    "Float32": ValueType.REAL,
-    "Integer": ValueType.INTEGER,
-    "Int8": ValueType.INTEGER,
-    "UInt8": ValueType.INTEGER,
-    "Int16": ValueType.INTEGER,
-    "UInt16": ValueType.INTEGER,
-    "Int32": ValueType.INTEGER,
-    "UInt32": ValueType.INTEGER,
-    "Int64": ValueType.INTEGER,
-    "UInt64": ValueType.INTEGER,
-    "Boolean": ValueType.BOOLEAN,
-    "String": ValueType.STRING,
-    "Binary": ValueType.BINARY,
-    "Enumeration": ValueType.ENUMERATION,
-}
-_CAUSALITIES = {
-    "input": Causality.INPUT,
-    "output": Causality.OUTPUT,
-    "parameter": Causality.PARAMETER,
-    "structuralParameter": Causality.PARAMETER,
-}
 _STATUS = ["OK", "Warning", "Discard", "Error", "Fatal", "Pending"]
 
 #: FMPy 0.3.32 declares these FMI 1.0 co-simulation functions as returning fmiString, not
@@ -84,13 +66,22 @@ _FMI1_STATUS_FUNCTIONS = (
 _LOAD_LOCK = threading.Lock()
 
 
+#: Times closer than this (relative) are the same time reached.
+_TIME_TOLERANCE = 1e-9
+
+
 @dataclass(frozen=True)
 class _Group:
-    """Variables of one FMI type, read or written with one call."""
+    """Variables of one FMI type, read or written with one call.
+
+    ``count`` is the number of values when arrays make it differ from the number of refs
+    (FMI 3.0 only), else None.
+    """
 
     fmi_type: str
     names: tuple[str, ...]
     refs: tuple[int, ...]
+    count: int | None = None
 
 
 def _accessor(fmi_version: str, fmi_type: str) -> str:
@@ -98,26 +89,6 @@ def _accessor(fmi_version: str, fmi_type: str) -> str:
     if fmi_version == "3.0":
         return "Int64" if fmi_type == "Enumeration" else fmi_type
     return "Integer" if fmi_type == "Enumeration" else fmi_type
-
-
-def _parse_start(fmi_type: str, text: str | None) -> Value | None:
-    if text is None:
-        return None
-    value_type = _VALUE_TYPES[fmi_type]
-    if value_type is ValueType.REAL:
-        return float(text)
-    if value_type in (ValueType.INTEGER, ValueType.ENUMERATION):
-        return int(text)
-    if value_type is ValueType.BOOLEAN:
-        return text.strip().lower() in ("true", "1")
-    if value_type is ValueType.BINARY:
-        return bytes.fromhex(text)
-    return text
-
-
-def _unit(variable: ScalarVariable) -> str:
-    unit = variable.unit or (variable.declaredType.unit if variable.declaredType else None)
-    return unit or ""
 
 
 class FmuParticipant(Participant):
@@ -130,7 +101,10 @@ class FmuParticipant(Participant):
         self._unzipdir: str | None = None
         self._executor: ThreadPoolExecutor | None = None
         self._slave: Any = None
+        self._layout = Layout(exposed=(), fixed={})
         self._variables: dict[str, ScalarVariable] = {}
+        self._elements: dict[str, int] = {}
+        self._arrays: ArrayInputs | None = None
         self._outputs: list[_Group] = []
         self._group_cache: dict[tuple[str, ...], list[_Group]] = {}
 
@@ -143,27 +117,26 @@ class FmuParticipant(Participant):
             return
         if not self.path.is_file():
             raise ScenarioError(f"FMU not found: {self.path} (check the component's source)")
+        unsized = unsized_array(self.path)
+        if unsized is not None:
+            raise ScenarioError(f"{self.path}: {unsized}")
         try:
             md = fmpy.read_model_description(str(self.path), validate=False)
         except Exception as exc:
             raise ScenarioError(f"{self.path}: not a readable FMU: {exc}") from exc
-        if md.coSimulation is None:
-            raise ScenarioError(
-                f"{self.path}: FMU '{md.modelName}' has no co-simulation interface "
-                f"(Coupler runs co-simulation FMUs; export it for co-simulation)"
-            )
+        check_supported(md, self.path)
+        self._layout = Layout.of(md, self.path)
         self._md = md
         self._unzipdir = fmpy.extract(
             str(self.path), unzipdir=tempfile.mkdtemp(prefix="coupler-fmu-")
         )
         self._executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix=f"fmu-{md.modelName}")
-        self._variables = {
-            v.name: v
-            for v in md.modelVariables
-            if v.causality in _CAUSALITIES and v.type in _VALUE_TYPES
-        }
+        self._variables = self._layout.variables()
+        self._elements = self._layout.element_index()
+        settable = self._layout.arrays("input", "parameter", "structuralParameter")
+        self._arrays = ArrayInputs(settable) if settable else None
         self._outputs = self._groups(
-            v.name for v in self._variables.values() if v.causality == "output"
+            name for name, v in self._variables.items() if v.causality == "output"
         )
 
     async def close(self) -> None:
@@ -193,17 +166,7 @@ class FmuParticipant(Participant):
                 streaming=True,
                 variable_step_size=bool(md.coSimulation.canHandleVariableCommunicationStepSize),
             ),
-            channels=tuple(
-                Channel(
-                    name=v.name,
-                    causality=_CAUSALITIES[v.causality],
-                    type=_VALUE_TYPES[v.type],
-                    unit=_unit(v),
-                    start=_parse_start(v.type, v.start),
-                    description=v.description or "",
-                )
-                for v in self._variables.values()
-            ),
+            channels=self._layout.channels(),
         )
 
     async def initialize(self, setup: RunSetup) -> Values:
@@ -212,6 +175,10 @@ class FmuParticipant(Participant):
         md = self.model_description
         version = md.fmiVersion
         start, stop = setup.start_time, setup.stop_time
+        if self._layout.fixed:
+            self._layout.check_parameters(setup.parameters, self.name)
+        if self._arrays is not None:
+            self._arrays.reset()
 
         def init() -> Values:
             with _LOAD_LOCK:
@@ -249,19 +216,19 @@ class FmuParticipant(Participant):
         def step_fmu() -> Values:
             self._require_instance("DoStep")
             self._set(inputs)
-            result = self._fmi(
-                f"{_prefix(version)}DoStep",
-                lambda: self._slave.doStep(
-                    currentCommunicationPoint=time, communicationStepSize=step
-                ),
-            )
-            if version == "3.0" and result[1]:
-                raise ParticipantError(
-                    f"FMU requested to terminate the simulation at t={time + step:g}",
-                    participant=self.name,
-                    call="fmi3DoStep",
-                    status="terminateSimulation",
+            try:
+                result = self._fmi(
+                    f"{_prefix(version)}DoStep",
+                    lambda: self._slave.doStep(
+                        currentCommunicationPoint=time, communicationStepSize=step
+                    ),
                 )
+            except ParticipantError as exc:
+                if exc.status == "fmi2Discard":
+                    raise self._fmi2_discarded(time, step, exc) from exc
+                raise
+            if version == "3.0" and result[1]:
+                raise self._fmi3_terminated(time, step, result[3])
             return self._get_outputs()
 
         return await self._run(step_fmu)
@@ -269,17 +236,48 @@ class FmuParticipant(Participant):
     async def terminate(self, reason: str = "") -> None:
         await self._free(terminate=True)
 
+    # --- an FMU ending the run, run on the worker thread -------------------------------------
+
+    def _fmi2_discarded(self, time: float, step: float, discard: ParticipantError) -> Exception:
+        """fmi2DoStep returned fmi2Discard: EndRun if the FMU asks to terminate, else the error."""
+        try:
+            terminated = self._fmi(
+                "fmi2GetBooleanStatus", lambda: self._slave.getBooleanStatus(fmi2Terminated)
+            )
+        except ParticipantError:
+            return discard  # no answer: a step that failed
+        if not terminated:
+            return discard
+        reached = self._fmi(
+            "fmi2GetRealStatus", lambda: self._slave.getRealStatus(fmi2LastSuccessfulTime)
+        )
+        return EndRun(
+            _termination("fmi2DoStep returned fmi2Discard, fmi2Terminated", reached, time, step),
+            self._get_outputs(),
+        )
+
+    def _fmi3_terminated(self, time: float, step: float, last_successful_time: float) -> EndRun:
+        """fmi3DoStep set terminateSimulation: EndRun with the outputs at the time reached."""
+        return EndRun(
+            _termination("fmi3DoStep set terminateSimulation", last_successful_time, time, step),
+            self._get_outputs(),
+        )
+
     # --- FMI plumbing, run on the worker thread ----------------------------------------------
 
     def _groups(self, names: Iterable[str]) -> list[_Group]:
-        by_type: dict[str, list[ScalarVariable]] = {}
+        """One group per FMI type; an array's elements (complete, in order) share its ref."""
+        by_type: dict[str, list[str]] = {}
         for name in names:
-            variable = self._variables[name]
-            by_type.setdefault(variable.type, []).append(variable)
-        return [
-            _Group(t, tuple(v.name for v in vs), tuple(v.valueReference for v in vs))
-            for t, vs in by_type.items()
-        ]
+            by_type.setdefault(self._variables[name].type, []).append(name)
+        groups = []
+        for fmi_type, members in by_type.items():
+            refs = tuple(
+                self._variables[n].valueReference for n in members if self._elements.get(n, 0) == 0
+            )
+            count = len(members) if len(refs) != len(members) else None
+            groups.append(_Group(fmi_type, tuple(members), refs, count))
+        return groups
 
     def _input_groups(self, names: tuple[str, ...]) -> list[_Group]:
         """Groups for a set of names; the step loop asks for the same set every step."""
@@ -294,9 +292,11 @@ class FmuParticipant(Participant):
             raise ScenarioError(
                 f"FMU '{self.name}' has no input or parameter {', '.join(map(repr, unknown))}"
             )
+        if self._arrays is not None:
+            values = self._arrays.complete(values)
         version = self.model_description.fmiVersion
         for group in self._input_groups(tuple(values)):
-            converted = [coerce(_VALUE_TYPES[group.fmi_type], values[n]) for n in group.names]
+            converted = [coerce(VALUE_TYPES[group.fmi_type], values[n]) for n in group.names]
             accessor = _accessor(version, group.fmi_type)
             setter = getattr(self._slave, f"set{accessor}")
             self._fmi(
@@ -309,9 +309,13 @@ class FmuParticipant(Participant):
         for group in self._outputs:
             accessor = _accessor(version, group.fmi_type)
             getter = getattr(self._slave, f"get{accessor}")
-            raw = self._fmi(f"{_prefix(version)}Get{accessor}", partial(getter, list(group.refs)))
+            if group.count is None:
+                call = partial(getter, list(group.refs))
+            else:
+                call = partial(getter, list(group.refs), group.count)
+            raw = self._fmi(f"{_prefix(version)}Get{accessor}", call)
             for name, value in zip(group.names, raw, strict=True):
-                outputs[name] = coerce(_VALUE_TYPES[group.fmi_type], value)
+                outputs[name] = coerce(VALUE_TYPES[group.fmi_type], value)
         return outputs
 
     def _fmi(self, call: str, function: Callable[[], T]) -> T:
@@ -370,6 +374,20 @@ class FmuParticipant(Participant):
                 slave.freeInstance()
 
         await self._run(free)
+
+
+def _termination(how: str, reached: float, time: float, step: float) -> str:
+    """The reason of an FMU's request to end the run; says so when it stopped inside the step
+    (a last successful time before the step's end; one outside the step is not believed)."""
+    end = time + step
+    reason = f"the FMU requested to terminate the simulation ({how})"
+    tolerance = _TIME_TOLERANCE * max(1.0, abs(end))
+    if time - tolerance <= reached < end - tolerance:
+        reason += (
+            f"; it stopped at t={reached:g} s, before the step's end t={end:g} s, so the row "
+            f"at t={end:g} s holds its outputs at t={reached:g} s"
+        )
+    return reason
 
 
 def _prefix(version: str) -> str:

@@ -13,8 +13,10 @@ instantiationToken as a C string literal) so the C code can check what it is ins
 An FMU newer than all its inputs (the model folder, the headers it includes by relative path,
 its resources) is not rebuilt.
 
-Command line: ``python -m coupler.fmubuild SRC_ROOT OUT_DIR`` builds every model folder under
-SRC_ROOT into ``OUT_DIR/<folder name>.fmu`` and prints their paths.
+Command line: ``python -m coupler.fmubuild SRC_ROOT OUT_DIR`` builds every model folder of
+SRC_ROOT (SRC_ROOT itself or its direct subfolders) into ``OUT_DIR/<folder name>.fmu`` and
+prints their paths. Deeper folders are sets of their own: ``fmus`` holds the examples,
+``fmus/faulty`` the FMUs that crash, hang or must be refused (built on their own).
 """
 
 from __future__ import annotations
@@ -76,10 +78,16 @@ def _read_description(path: Path) -> _Description:
         if root.find("Implementation/CoSimulation_StandAlone") is None:
             raise FmuBuildError(f"{path}: only FMI 1.0 co-simulation stand-alone is supported")
     else:
-        cosim = root.find("CoSimulation")
-        if cosim is None:
-            raise FmuBuildError(f"{path}: no <CoSimulation> element (co-simulation only)")
-        identifier = cosim.get("modelIdentifier")
+        # FMI 3.0 Scheduled Execution is built too: test FMUs that Coupler must refuse.
+        interface = root.find("CoSimulation")
+        if interface is None and version == "3.0":
+            interface = root.find("ScheduledExecution")
+        if interface is None:
+            raise FmuBuildError(
+                f"{path}: no <CoSimulation> element (co-simulation, or FMI 3.0 scheduled "
+                f"execution, only)"
+            )
+        identifier = interface.get("modelIdentifier")
         token = root.get("guid" if version == "2.0" else "instantiationToken")
     if not identifier or not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", identifier):
         raise FmuBuildError(f"{path}: modelIdentifier {identifier!r} is not a C identifier")
@@ -185,8 +193,13 @@ def build_fmu(source_dir: Path, out_path: Path, *, resources: Path | None = None
 
 
 def find_model_folders(src_root: Path) -> list[Path]:
-    """Every folder under src_root (itself included) that holds a modelDescription.xml."""
-    return sorted(p.parent for p in Path(src_root).rglob("modelDescription.xml"))
+    """src_root and its direct subfolders that hold a modelDescription.xml (not deeper ones)."""
+    root = Path(src_root)
+    return sorted(
+        p.parent
+        for p in (root / "modelDescription.xml", *root.glob("*/modelDescription.xml"))
+        if p.is_file()
+    )
 
 
 def build_all(src_root: Path, out_dir: Path) -> list[Path]:

@@ -54,7 +54,7 @@ typedef struct {
 } ModelData;
 
 static const VarInfo MODEL_VARS[] = {
-    {0, VT_REAL, VC_INDEPENDENT, 0, "time"},
+    {0, VT_REAL, VC_INDEPENDENT, 0, "time", 0},
     VAR(1, VT_REAL, VC_PARAMETER, antenna_offset),
     VAR(2, VT_REAL, VC_INPUT, position),
     VAR(3, VT_INTEGER, VC_OUTPUT, last_balise_id),
