@@ -1,14 +1,15 @@
 """``FmuParticipant``: an FMU (FMI 1.0, 2.0 or 3.0 co-simulation) run in-process through FMPy.
 
-Blocking FMI calls run on one worker thread per FMU, off the event loop. A failing FMI call
-becomes a ``ParticipantError`` carrying the FMU, the call and the FMI status (``_fmi``, the
-one place FMPy's errors are translated). Which variables are channels (FMI 3.0 arrays as one
-channel per element) and which FMUs are refused is ``coupler.fmuchannels``' concern.
-
-An FMU that asks to end the simulation -- FMI 2.0: fmi2DoStep returns fmi2Discard and
-fmi2GetBooleanStatus(fmi2Terminated) is true; FMI 3.0: fmi3DoStep sets terminateSimulation --
-makes ``do_step`` raise ``EndRun`` with its outputs at the time reached, so the run ends as
-``terminated``.
+Steps run on the caller's thread, through FMI calls prepared once per instance
+(``coupler.fmicalls``): no thread hop, no per-call allocation. What is slow and rare — reading
+and unpacking the FMU, instantiating and initializing it, terminating and freeing it — runs in
+a daemon thread off the event loop, so a caller's deadline can give up on an FMU that hangs
+there (the FMU is then left alone: "wedged"), and a hung FMU never keeps the process from
+exiting. A step that hangs blocks its thread; the orchestrator's watchdog deals with that.
+A failing FMI call becomes a ``ParticipantError`` carrying the FMU, the call and the FMI status
+(``_fmi`` and ``_failed``, the places FMPy's and the prepared calls' errors are translated).
+Which variables are channels (FMI 3.0 arrays as one channel per element) and which FMUs are
+refused is ``coupler.fmuchannels``' concern.
 """
 
 from __future__ import annotations
@@ -19,7 +20,6 @@ import shutil
 import tempfile
 import threading
 from collections.abc import Callable, Iterable, Mapping
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from functools import partial
 from pathlib import Path
@@ -30,8 +30,10 @@ from fmpy.fmi1 import FMICallException
 from fmpy.fmi2 import fmi2LastSuccessfulTime, fmi2Terminated
 from fmpy.model_description import ModelDescription, ScalarVariable
 
+from coupler.archives import Budget, extract
 from coupler.channels import Capabilities, Description, RunSetup, Value
 from coupler.errors import ParticipantError, ScenarioError
+from coupler.fmicalls import CallFailed, Calls, prepare, status_name
 from coupler.fmuchannels import (
     VALUE_TYPES,
     ArrayInputs,
@@ -39,7 +41,7 @@ from coupler.fmuchannels import (
     check_supported,
     unsized_array,
 )
-from coupler.participant import EndRun, Participant, Values
+from coupler.participant import EndRun, Participant, StepNow, Values
 from coupler.values import coerce
 
 T = TypeVar("T")
@@ -94,13 +96,19 @@ def _accessor(fmi_version: str, fmi_type: str) -> str:
 class FmuParticipant(Participant):
     """An FMU as a participant. ``path`` is the .fmu file; ``name`` defaults to its model name."""
 
-    def __init__(self, path: str | Path, *, name: str | None = None) -> None:
+    def __init__(
+        self, path: str | Path, *, name: str | None = None, budget: Budget | None = None
+    ) -> None:
         self.path = Path(path)
         self._name = name
+        self._budget = budget
         self._md: ModelDescription | None = None
         self._unzipdir: str | None = None
-        self._executor: ThreadPoolExecutor | None = None
         self._slave: Any = None
+        self._calls: Calls | None = None
+        self._input_types: dict[str, tuple[str, int]] = {}
+        self._wedged: str | None = None
+        """The call the FMU hangs in, once a caller gave up on it: never call it again."""
         self._layout = Layout(exposed=(), fixed={})
         self._variables: dict[str, ScalarVariable] = {}
         self._elements: dict[str, int] = {}
@@ -113,6 +121,11 @@ class FmuParticipant(Participant):
         return self._name or (self._md.modelName if self._md else self.path.stem)
 
     async def open(self) -> None:
+        """Read and unpack the FMU, off the event loop."""
+        if self._md is None:
+            await asyncio.to_thread(self._open)
+
+    def _open(self) -> None:
         if self._md is not None:
             return
         if not self.path.is_file():
@@ -126,11 +139,14 @@ class FmuParticipant(Participant):
             raise ScenarioError(f"{self.path}: not a readable FMU: {exc}") from exc
         check_supported(md, self.path)
         self._layout = Layout.of(md, self.path)
+        unzipdir = tempfile.mkdtemp(prefix="coupler-fmu-")
+        try:
+            extract(self.path, Path(unzipdir), budget=self._budget)
+        except BaseException:
+            shutil.rmtree(unzipdir, ignore_errors=True)
+            raise
         self._md = md
-        self._unzipdir = fmpy.extract(
-            str(self.path), unzipdir=tempfile.mkdtemp(prefix="coupler-fmu-")
-        )
-        self._executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix=f"fmu-{md.modelName}")
+        self._unzipdir = unzipdir
         self._variables = self._layout.variables()
         self._elements = self._layout.element_index()
         settable = self._layout.arrays("input", "parameter", "structuralParameter")
@@ -141,9 +157,6 @@ class FmuParticipant(Participant):
 
     async def close(self) -> None:
         await self._free()
-        if self._executor is not None:
-            self._executor.shutdown(wait=True)
-            self._executor = None
         if self._unzipdir is not None:
             shutil.rmtree(self._unzipdir, ignore_errors=True)
             self._unzipdir = None
@@ -206,35 +219,92 @@ class FmuParticipant(Participant):
                     lambda: self._slave.enterInitializationMode(startTime=start, stopTime=stop),
                 )
                 self._fmi("fmi3ExitInitializationMode", self._slave.exitInitializationMode)
+            self._prepare(version)
             return self._get_outputs()
 
-        return await self._run(init)
+        return await self._run("Initialize", init)
 
     async def do_step(self, time: float, step: float, inputs: Mapping[str, Value]) -> Values:
+        return self.step_now(time, step, inputs)
+
+    def synchronous(self) -> StepNow | None:
+        return self.step_now
+
+    def step_now(self, time: float, step: float, inputs: Mapping[str, Value]) -> Values:
+        """One step, on this thread: set the inputs, step, read the outputs."""
+        calls = self._calls
+        if calls is None:
+            return self._step_through_fmpy(time, step, inputs)
+        try:
+            if inputs:
+                names = tuple(inputs)
+                if names not in self._checked_inputs:
+                    self._check_inputs(names)
+                calls.set(calls.setters_for(names, self._input_types), inputs)
+            terminate, reached = calls.do_step(time, step)
+            if terminate:
+                raise self._fmi3_terminated(time, step, reached)
+            return calls.get()
+        except CallFailed as exc:
+            raise self._failed(exc, time, step) from exc
+
+    def _step_through_fmpy(self, time: float, step: float, inputs: Mapping[str, Value]) -> Values:
+        """A step through FMPy's calls: FMI 1.0, arrays, strings and the rarer types."""
         version = self.model_description.fmiVersion
-
-        def step_fmu() -> Values:
-            self._require_instance("DoStep")
-            self._set(inputs)
-            try:
-                result = self._fmi(
-                    f"{_prefix(version)}DoStep",
-                    lambda: self._slave.doStep(
-                        currentCommunicationPoint=time, communicationStepSize=step
-                    ),
-                )
-            except ParticipantError as exc:
-                if exc.status == "fmi2Discard":
-                    raise self._fmi2_discarded(time, step, exc) from exc
-                raise
-            if version == "3.0" and result[1]:
-                raise self._fmi3_terminated(time, step, result[3])
-            return self._get_outputs()
-
-        return await self._run(step_fmu)
+        self._require_instance("DoStep")
+        self._set(inputs)
+        try:
+            result = self._fmi(
+                f"{_prefix(version)}DoStep",
+                lambda: self._slave.doStep(
+                    currentCommunicationPoint=time, communicationStepSize=step
+                ),
+            )
+        except ParticipantError as exc:
+            if exc.status == "fmi2Discard":
+                raise self._fmi2_discarded(time, step, exc) from exc
+            raise
+        if version == "3.0" and result[1]:
+            raise self._fmi3_terminated(time, step, result[3])
+        return self._get_outputs()
 
     async def terminate(self, reason: str = "") -> None:
         await self._free(terminate=True)
+
+    def _prepare(self, version: str) -> None:
+        """The prepared calls of the new instance, when every variable allows them."""
+        self._calls = None
+        self._checked_inputs: set[tuple[str, ...]] = set()
+        if self._elements or self._arrays is not None:
+            return  # arrays keep FMPy's calls (coupler.fmuchannels completes them)
+        variables = self._variables
+        outputs = [
+            (n, v.type, v.valueReference) for n, v in variables.items() if v.causality == "output"
+        ]
+        inputs = [
+            (n, v.type, v.valueReference) for n, v in variables.items() if v.causality == "input"
+        ]
+        self._input_types = {n: (t, r) for n, t, r in inputs}
+        self._calls = prepare(self._slave, version, outputs, inputs)
+
+    def _check_inputs(self, names: tuple[str, ...]) -> None:
+        unknown = [n for n in names if n not in self._input_types]
+        if unknown:
+            raise ScenarioError(f"FMU '{self.name}' has no input {', '.join(map(repr, unknown))}")
+        self._checked_inputs.add(names)
+
+    def _failed(self, failed: CallFailed, time: float, step: float) -> Exception:
+        """A prepared call's failure as the participant's error (or its request to end)."""
+        version = self.model_description.fmiVersion
+        error = ParticipantError(
+            f"{failed.call} returned {status_name(failed.status)}",
+            participant=self.name,
+            call=failed.call,
+            status=f"{_prefix(version)}{status_name(failed.status)}",
+        )
+        if failed.call == "fmi2DoStep" and failed.status == 2:
+            return self._fmi2_discarded(time, step, error)
+        return error
 
     # --- an FMU ending the run, run on the worker thread -------------------------------------
 
@@ -355,15 +425,27 @@ class FmuParticipant(Participant):
         if self._slave is None:
             raise ParticipantError("no run: Initialize first", participant=self.name, call=call)
 
-    async def _run(self, function: Callable[[], T]) -> T:
-        if self._executor is None:
-            raise ParticipantError("FMU not opened", participant=self.name, call="run")
-        return await asyncio.get_running_loop().run_in_executor(self._executor, function)
+    async def _run(self, call: str, function: Callable[[], T]) -> T:
+        """``function`` in a daemon thread; if the caller gives up (a deadline, an interrupt)
+        while it runs, the FMU is wedged in ``call`` and never called again."""
+        if self._wedged is not None:
+            raise ParticipantError(
+                f"the FMU did not return from {self._wedged} and is left alone",
+                participant=self.name,
+                call=call,
+            )
+        try:
+            return await in_daemon_thread(function, name=f"fmu-{self.name}")
+        except asyncio.CancelledError:
+            self._wedged = call
+            raise
 
     async def _free(self, *, terminate: bool = False) -> None:
-        if self._slave is None or self._executor is None:
+        if self._slave is None:
             return
-        slave, self._slave = self._slave, None
+        slave, self._slave, self._calls = self._slave, None, None
+        if self._wedged is not None:
+            return  # an instance hung in a call is never called again; the process ends it
         version = self.model_description.fmiVersion
 
         def free() -> None:
@@ -373,7 +455,30 @@ class FmuParticipant(Participant):
             finally:
                 slave.freeInstance()
 
-        await self._run(free)
+        await self._run("Terminate" if terminate else "FreeInstance", free)
+
+
+async def in_daemon_thread(function: Callable[[], T], *, name: str) -> T:
+    """``function()`` in a new daemon thread, awaited: a call that never returns neither blocks
+    the event loop nor keeps the process from exiting (a thread pool's workers would)."""
+    loop = asyncio.get_running_loop()
+    future: asyncio.Future[T] = loop.create_future()
+
+    def settle(outcome: Callable[[], None]) -> None:
+        if not future.done():
+            outcome()
+
+    def run() -> None:
+        try:
+            result = function()
+        except BaseException as exc:  # delivered to the awaiting coroutine
+            error = exc
+            loop.call_soon_threadsafe(settle, lambda: future.set_exception(error))
+        else:
+            loop.call_soon_threadsafe(settle, lambda: future.set_result(result))
+
+    threading.Thread(target=run, name=name, daemon=True).start()
+    return await future
 
 
 def _termination(how: str, reached: float, time: float, step: float) -> str:

@@ -13,6 +13,8 @@ from collections.abc import Awaitable, Callable, Mapping
 from coupler.channels import Description, RunSetup, Value
 
 Values = dict[str, Value]
+StepNow = Callable[[float, float, Mapping[str, Value]], Values]
+"""A step taken on the caller's thread: (time, step, inputs) -> outputs."""
 HealthReport = Callable[[str | None], Awaitable[None]]
 """``await report(None)``: ready for a run (SERVING); ``await report(reason)``: not
 (NOT_SERVING), with a reason a person can act on, carried by the health answers."""
@@ -55,6 +57,12 @@ class Participant(ABC):
     @abstractmethod
     async def terminate(self, reason: str = "") -> None:
         """End the run and free its resources; the participant may be initialized again."""
+
+    def synchronous(self) -> StepNow | None:
+        """A way to step without awaiting, for participants that compute in this process on
+        the caller's thread (an FMU in-process); None for everyone else. A master may call it
+        instead of ``do_step``, with the same meaning and the same errors."""
+        return None
 
     async def open(self) -> None:  # noqa: B027 - optional hook, nothing to do by default
         """Get ready to serve: connect to the wrapped simulator, load files. Before describe."""

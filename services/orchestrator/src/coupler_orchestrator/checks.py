@@ -93,6 +93,8 @@ class Member:
     """Steps every ``multiple`` base steps (per-component deltaTime = multiple x h)."""
     step: float
     """The step size it receives, exactly as configured: its deltaTime, else h [s]."""
+    deadline: float = 30.0
+    """Deadline of each of its calls [s]: its callTimeout setting, else --call-timeout."""
     parameters: Mapping[str, Value] = field(default_factory=dict)
     """Parameter values sent with Initialize, typed."""
     start_inputs: Mapping[str, Value] = field(default_factory=dict)
@@ -505,6 +507,7 @@ class _Checker:
             outputs=description.of(Causality.OUTPUT),
             multiple=multiple,
             step=step,
+            deadline=component.settings.call_timeout or self.options.call_timeout,
             parameters=parameters,
             start_inputs=start_inputs,
         )

@@ -4,6 +4,10 @@ Each base step reads like FMPy's SSP loop: gather inputs from the outputs they a
 to, step the members that are due, store their outputs, record. Jacobi steps all due members
 concurrently on the outputs of the previous communication point; Gauss-Seidel steps them one
 after another in the plan's order, each seeing what its predecessors just produced.
+
+Members that compute in this process (in-process FMUs, ``Participant.synchronous``) step on
+this thread without awaiting — while the remote members' steps are in flight — under the eye
+of a ``Watchdog`` that ends the run when such a step outlives its deadline.
 t_k = t_0 + k*h; each member steps from t_k by exactly its configured step (its deltaTime,
 else h), never by a difference of two communication points.
 """
@@ -11,6 +15,7 @@ else h), never by a difference of two communication points.
 from __future__ import annotations
 
 import asyncio
+import os
 import time as wallclock
 from collections import defaultdict
 from collections.abc import Mapping, Sequence
@@ -19,12 +24,13 @@ from dataclasses import dataclass, field
 import structlog
 
 from coupler.channels import RunSetup, Value
-from coupler.errors import CouplerError, ParticipantError
-from coupler.participant import EndRun, Values
+from coupler.errors import CouplerError, ParticipantError, ParticipantTimeout
+from coupler.participant import EndRun, StepNow, Values
 from coupler_orchestrator.checks import Member
 from coupler_orchestrator.observer import Column, Observer, RunEnd, RunInfo
 from coupler_orchestrator.options import Algorithm
 from coupler_orchestrator.plan import Plan
+from coupler_orchestrator.watchdog import Watchdog
 from coupler_orchestrator.wiring import Converter
 
 log = structlog.get_logger("coupler.master")
@@ -82,12 +88,18 @@ class Master:
         self.completed_steps = 0
         self._ended: str | None = None
         """Why a participant asked to end the run, once one did."""
+        self._local: dict[str, StepNow] = {}
+        """Members stepping on this thread (after Initialize), by name."""
+        self._watchdog: Watchdog | None = None
+        self._wall_start = 0.0
+        self._abandoned = False
+        """The watchdog ended the run from its thread: nothing more is told to observers."""
 
     async def run(self) -> RunEnd:
         """Initialize, step to the end, terminate; never raises for a participant's failure
         (the run ends ``failed``); re-raises an interruption after ending the run ``aborted``."""
         plan, grid = self.plan, self.plan.grid
-        wall_start = wallclock.perf_counter()
+        wall_start = self._wall_start = wallclock.perf_counter()
         status, reason = "completed", ""
         initialized: list[Member] = []  # every member Initialize was sent to
         log.info(
@@ -101,6 +113,7 @@ class Master:
             for observer in self.observers:
                 observer.started(self.info)
             await self._initialize(initialized)
+            self._watch_local_members()
             self._record(grid.start)
             pending: dict[int, list[tuple[Member, Values]]] = defaultdict(list)
             held: dict[str, Values] = {}
@@ -127,7 +140,11 @@ class Master:
             log.warning("run_aborted", run_id=plan.run_id, time=self._time_reached())
             raise
         finally:
-            await self._terminate(initialized, reason or "run completed")
+            if self._watchdog is not None:
+                self._watchdog.stop()
+            await self._terminate(
+                initialized, reason or "run completed", aborted=status != "completed"
+            )
             end = RunEnd(
                 status=status,
                 reason=reason,
@@ -143,6 +160,8 @@ class Master:
 
     def _finish(self, end: RunEnd) -> None:
         """Tell every observer, even if one of them fails (its failure is logged)."""
+        if self._abandoned:
+            return
         for observer in self.observers:
             try:
                 observer.finished(end)
@@ -170,7 +189,15 @@ class Master:
                 lease=self.plan.lease,
             )
             initialized.append(m)  # Terminated on every path, even if its answer is refused
-            return await m.participant.initialize(setup)
+            try:
+                return await asyncio.wait_for(m.participant.initialize(setup), m.deadline)
+            except TimeoutError as exc:
+                raise ParticipantTimeout(
+                    f"no answer within {m.deadline:g} s",
+                    participant=m.name,
+                    call="Initialize",
+                    status="DEADLINE_EXCEEDED",
+                ) from exc
 
         members = self.plan.order
         results = await asyncio.gather(*(init(m) for m in members), return_exceptions=True)
@@ -179,27 +206,101 @@ class Master:
                 raise result
             self._store(m, result, "Initialize", grid.start)
 
-    async def _step(self, m: Member, k: int) -> Values:
+    def _watch_local_members(self) -> None:
+        """Find the members that step on this thread; watch them while they do."""
+        for m in self.plan.order:
+            stepper = m.participant.synchronous()
+            if stepper is not None:
+                self._local[m.name] = stepper
+        if self._local:
+            self._watchdog = Watchdog(self._abandon)
+            self._watchdog.start()
+
+    def _abandon(self, status: str, reason: str) -> None:
+        """End the run from the watchdog's thread: this thread is stuck in a participant."""
         grid = self.plan.grid
-        inputs = self.feeds[m.name].gather(self.store) if m.name in self.feeds else {}
+        end = RunEnd(
+            status=status,
+            reason=reason,
+            steps=self.completed_steps,
+            end_time=self._time_reached(),
+            wall_time=wallclock.perf_counter() - self._wall_start,
+        )
+        self._finish(end)
+        self._abandoned = True
+        log.error(
+            "run_abandoned",
+            run_id=self.plan.run_id,
+            reason=reason,
+            time=grid.time(self.completed_steps),
+        )
+        if self.plan.exit_when_stuck:
+            os._exit(130 if status == "aborted" else 1)
+
+    def _inputs(self, m: Member) -> Values:
+        feed = self.feeds.get(m.name)
+        return feed.gather(self.store) if feed is not None else {}
+
+    def _ask_to_end(self, m: Member, k: int, end: EndRun) -> Values:
+        if self._ended is None:
+            reached = self.plan.grid.time(k + m.multiple)
+            self._ended = f"{m.name} asked to end the run at t={reached:g} s: {end.reason}"
+        return end.outputs
+
+    async def _step(self, m: Member, k: int) -> Values:
+        """One step of a member that is awaited (a remote participant)."""
+        time = self.plan.grid.time(k)
+        inputs = self._inputs(m)
         started = wallclock.perf_counter()
         try:
-            outputs = await m.participant.do_step(grid.time(k), m.step, inputs)
+            outputs = await m.participant.do_step(time, m.step, inputs)
         except EndRun as end:
-            outputs = end.outputs
-            if self._ended is None:
-                reached = grid.time(k + m.multiple)
-                self._ended = f"{m.name} asked to end the run at t={reached:g} s: {end.reason}"
+            outputs = self._ask_to_end(m, k, end)
         self._timing[self._slot[m.name]] = wallclock.perf_counter() - started
         return outputs
 
+    def _step_here(self, m: Member, stepper: StepNow, k: int) -> Values:
+        """One step of a member computing on this thread, watched against its deadline."""
+        time = self.plan.grid.time(k)
+        inputs = self._inputs(m)
+        watchdog = self._watchdog
+        assert watchdog is not None
+        started = wallclock.perf_counter()
+        watchdog.arm(f"{m.name}.DoStep", time, m.deadline)
+        try:
+            outputs = stepper(time, m.step, inputs)
+        except EndRun as end:
+            outputs = self._ask_to_end(m, k, end)
+        finally:
+            watchdog.disarm()
+        self._timing[self._slot[m.name]] = wallclock.perf_counter() - started
+        if self._abandoned:  # it came back after the watchdog had ended the run
+            raise asyncio.CancelledError
+        return outputs
+
     async def _jacobi_step(self, k: int, pending: dict[int, list[tuple[Member, Values]]]) -> None:
-        due = [m for m in self.plan.order if k % m.multiple == 0]
-        results = await asyncio.gather(*(self._step(m, k) for m in due), return_exceptions=True)
-        for m, result in zip(due, results, strict=True):
-            if isinstance(result, BaseException):
-                raise result
-            pending[k + m.multiple].append((m, result))
+        """Every due member on the outputs of t_k: the remote ones in flight while the local
+        ones compute here; everyone's outputs stored for the time they reach."""
+        local: list[Member] = []
+        remote: list[Member] = []
+        for m in self.plan.order:
+            if k % m.multiple == 0:
+                (local if m.name in self._local else remote).append(m)
+        if len(remote) == 1 and not local:
+            pending[k + remote[0].multiple].append((remote[0], await self._step(remote[0], k)))
+        else:
+            flying = [asyncio.ensure_future(self._step(m, k)) for m in remote]
+            if flying:
+                await asyncio.sleep(0)  # let the requests leave before computing here
+            try:
+                for m in local:
+                    pending[k + m.multiple].append((m, self._step_here(m, self._local[m.name], k)))
+            finally:
+                results = await asyncio.gather(*flying, return_exceptions=True)
+            for m, result in zip(remote, results, strict=True):
+                if isinstance(result, BaseException):
+                    raise result
+                pending[k + m.multiple].append((m, result))
         for m, outputs in pending.pop(k + 1, []):
             self._store(m, outputs, "DoStep", self.plan.grid.time(k + 1))
 
@@ -208,7 +309,11 @@ class Master:
         ends at t_{k+m}, so successors see them then and no row shows a value from later."""
         for m in self.plan.order:
             if k % m.multiple == 0:
-                held[m.name] = await self._step(m, k)
+                stepper = self._local.get(m.name)
+                if stepper is not None:
+                    held[m.name] = self._step_here(m, stepper, k)
+                else:
+                    held[m.name] = await self._step(m, k)
             if (k + 1) % m.multiple == 0 and m.name in held:
                 self._store(m, held.pop(m.name), "DoStep", self.plan.grid.time(k + 1))
 
@@ -245,10 +350,21 @@ class Master:
         if ahead > 0:
             await asyncio.sleep(ahead)
 
-    async def _terminate(self, members: Sequence[Member], reason: str) -> None:
-        results = await asyncio.gather(
-            *(m.participant.terminate(reason) for m in members), return_exceptions=True
-        )
+    async def _terminate(
+        self, members: Sequence[Member], reason: str, *, aborted: bool = False
+    ) -> None:
+        """Terminate every member; after a failure or an interrupt each gets a short deadline,
+        so that ending never takes longer than a few seconds."""
+        deadline = 3.0 if aborted else None
+
+        async def terminate(m: Member) -> None:
+            await asyncio.wait_for(m.participant.terminate(reason), deadline or m.deadline)
+
+        results = await asyncio.gather(*(terminate(m) for m in members), return_exceptions=True)
         for m, result in zip(members, results, strict=True):
             if isinstance(result, Exception):
-                log.warning("terminate_failed", participant=m.name, error=str(result))
+                log.warning(
+                    "terminate_failed",
+                    participant=m.name,
+                    error=str(result) or type(result).__name__,
+                )

@@ -46,6 +46,10 @@ class RunOptions:
     call_timeout: float = 30.0
     """Deadline of each call to a participant [s]; per component: the SSD annotation
     ``org.coupler.component callTimeout``."""
+    exit_when_stuck: bool = False
+    """When an in-process FMU hangs on the master's thread past its deadline (or through an
+    interrupt), end the process after the run's results are written (the command line does;
+    a library caller keeps its process and is told the run failed)."""
     isolate_fmus: bool = False
     """Run every FMU in a child process (per component: ``org.coupler.component isolate``)."""
     output_interval: float | None = None

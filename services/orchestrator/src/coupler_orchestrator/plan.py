@@ -32,6 +32,8 @@ class Plan:
     call."""
     realtime_factor: float | None = None
     """Pace simulated time at this multiple of wall time; None runs as fast as possible."""
+    exit_when_stuck: bool = False
+    """End the process when an in-process call hangs (``RunOptions.exit_when_stuck``)."""
 
 
 def build_plan(checked: Checked, links: tuple[Link, ...], options: RunOptions) -> Plan:
@@ -47,6 +49,7 @@ def build_plan(checked: Checked, links: tuple[Link, ...], options: RunOptions) -
         run_id=options.run_id,
         lease=lease_of(options, checked),
         realtime_factor=options.realtime_factor or None,
+        exit_when_stuck=options.exit_when_stuck,
     )
 
 
