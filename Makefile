@@ -60,12 +60,13 @@ test: setup browser
 	$(UV) run --frozen pytest
 
 # The railway scenario end to end on local processes (no Docker). ARGS=--exit to not wait.
+# Ctrl-C (exit 130) is the way to stop it, not an error of make's.
 demo: setup
-	$(UV) run --frozen coupler fleet scenarios/railway/fleet.toml $(ARGS)
+	$(UV) run --frozen coupler fleet scenarios/railway/fleet.toml $(ARGS) || [ $$? -eq 130 ]
 
 # The smallest scenario: two FMUs and the example gRPC participant.
 demo-example: setup
-	$(UV) run --frozen coupler fleet examples/ramp-gain/fleet.toml $(ARGS)
+	$(UV) run --frozen coupler fleet examples/ramp-gain/fleet.toml $(ARGS) || [ $$? -eq 130 ]
 
 bench: setup
 	$(UV) run --frozen python benchmarks/step_overhead.py

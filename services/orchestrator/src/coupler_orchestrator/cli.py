@@ -373,7 +373,10 @@ async def _fleet(args: argparse.Namespace, out: TextIO, session: _Session) -> in
         run_argv += ["--realtime-factor", str(args.realtime_factor)]
     run_args = parser().parse_args(run_argv)
     async with Fleet(spec, health_timeout=args.health_timeout) as fleet:
-        print(f"fleet: {len(spec.services)} services healthy (logs in {fleet.logs})", file=out)
+        print(
+            f"fleet: {len(spec.services)} services healthy (logs in {_shown(fleet.logs)})",
+            file=out,
+        )
         for name, url in spec.urls.items():
             print(f"{name}: {url}", file=out)
         out.flush()
