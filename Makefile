@@ -42,10 +42,13 @@ track-fmu: sync $(FMU_DIR)/TrackBalises.fmu
 $(FMU_DIR)/TrackBalises.fmu: $(TRACK_FMU_INPUTS)
 	$(UV) run --frozen python -m balise_fmu.build --railml $(RAILML) --out $@
 
-# Leaflet from npm into the map server's static files (no CDN at run time).
+# Leaflet (the map) and uPlot (`coupler plot -o FILE.html`) from npm into static files (no CDN
+# at run time).
 assets:
 	cd services/mapserver && npm ci --no-audit --no-fund --loglevel=error
 	$(UV) run --frozen python -m mapserver.assets
+	cd services/orchestrator && npm ci --no-audit --no-fund --loglevel=error
+	$(UV) run --frozen python -m coupler_orchestrator.assets
 
 # Debian's Chromium for the browser test (root only; the test skips without it).
 browser:

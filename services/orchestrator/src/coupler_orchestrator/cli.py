@@ -28,6 +28,7 @@ from coupler.security import ClientSecurity
 from coupler_orchestrator.fleet import Fleet, FleetSpec
 from coupler_orchestrator.observer import Observer, RunEnd, RunInfo
 from coupler_orchestrator.options import Algorithm, RunOptions
+from coupler_orchestrator.plot import plot
 from coupler_orchestrator.progress import ProgressBar, ProgressLines
 from coupler_orchestrator.runner import run_scenario, validate_scenario
 
@@ -97,6 +98,16 @@ def parser() -> argparse.ArgumentParser:
         "--realtime-factor", type=float, help="override the fleet file's pacing; 0 = unpaced"
     )
     fleet.add_argument("--health-timeout", type=float, default=60.0, help="[s] per service")
+
+    plot = commands.add_parser(
+        "plot",
+        help="draw channels of one or more runs into a PNG or a self-contained HTML page",
+        description="RESULTS are results directories or results.csv files (several are "
+        "overlaid); CHANNELS are names or globs (default: every numeric channel).",
+    )
+    plot.add_argument("inputs", nargs="+", metavar="RESULTS|CHANNEL", help="runs, then channels")
+    plot.add_argument("-o", "--output", type=Path, required=True, help="FILE.png or FILE.html")
+    plot.add_argument("--title", default="", help="default: the runs' directories")
 
     describe = commands.add_parser("describe", help="print a participant's channels")
     describe.add_argument("target", help="grpc://HOST:PORT, grpcs://HOST:PORT or an .fmu file")
@@ -327,6 +338,8 @@ async def _dispatch(args: argparse.Namespace, out: TextIO, session: _Session) ->
         return await _describe(args.target, args.timeout, security_of(args), out=out)
     if args.command == "fleet":
         return await _fleet(args, out, session)
+    if args.command == "plot":
+        return _plot(args, out)
     options = replace(options_of(args), on_waiting=session.waiting)
     if args.command == "validate":
         validation = await validate_scenario(args.ssp, options)
@@ -386,6 +399,22 @@ async def _fleet(args: argparse.Namespace, out: TextIO, session: _Session) -> in
             print("services stay up; Ctrl-C stops them", file=out, flush=True)
             await asyncio.Event().wait()
     return code
+
+
+def _plot(args: argparse.Namespace, out: TextIO) -> int:
+    """The leading arguments that exist on disk are runs, the rest channels."""
+    count = next((i for i, a in enumerate(args.inputs) if not Path(a).exists()), len(args.inputs))
+    runs, channels = [Path(a) for a in args.inputs[:count]], args.inputs[count:]
+    looks_like_path = [c for c in channels if "/" in c or c.endswith(".csv")]
+    if not runs or looks_like_path:
+        missing = looks_like_path[0] if looks_like_path else args.inputs[0]
+        raise CouplerError(
+            f"coupler plot: {missing}: no such results directory or results.csv (give the runs "
+            f"first, then channel names or globs)"
+        )
+    written = plot(runs, channels, args.output, title=args.title)
+    print(f"plot: {written}", file=out)
+    return EXIT_OK
 
 
 async def _describe(
