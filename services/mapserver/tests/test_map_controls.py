@@ -1,6 +1,6 @@
 """The map's optional basemap, scale bar and follow-the-train toggle in Debian's Chromium.
 
-    tile server (aiohttp, port 0) <--tiles-- Chromium --page, SSE--> map server <--gRPC-- Run
+tile server (aiohttp, port 0) <--tiles-- Chromium --page, SSE--> map server <--gRPC-- Run
 """
 
 from __future__ import annotations
@@ -8,7 +8,6 @@ from __future__ import annotations
 import io
 import re
 from collections.abc import AsyncIterator
-from pathlib import Path
 
 import pytest
 from aiohttp import web

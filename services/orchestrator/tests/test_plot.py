@@ -50,7 +50,9 @@ def test_png_of_two_runs(coupler: Coupler, runs: tuple[Path, Path], tmp_path: Pa
     assert white < 0.97 * width * height, "the picture is (almost) blank"
 
     def near(target: tuple[int, int, int]) -> int:
-        return sum(n for n, c in colours if sum(abs(a - b) for a, b in zip(c, target)) < 60)
+        return sum(
+            n for n, c in colours if sum(abs(a - b) for a, b in zip(c, target, strict=True)) < 60
+        )
 
     # the first two series' palette colours are drawn (lines, not just their legend swatches)
     assert near((0x1F, 0x77, 0xB4)) > 300
@@ -78,9 +80,7 @@ async def test_html_renders_in_chromium(runs: tuple[Path, Path], tmp_path: Path)
 
     out = plot(list(runs), ["Integ.x", "Source.*"], tmp_path / "plot.html", title="chain")
     async with async_playwright() as playwright:
-        browser = await playwright.chromium.launch(
-            executable_path=str(CHROMIUM), args=BROWSER_ARGS
-        )
+        browser = await playwright.chromium.launch(executable_path=str(CHROMIUM), args=BROWSER_ARGS)
         try:
             page = await browser.new_page(viewport={"width": 1100, "height": 800})
             errors: list[str] = []
@@ -118,7 +118,10 @@ async def test_html_renders_in_chromium(runs: tuple[Path, Path], tmp_path: Path)
 @pytest.mark.parametrize(
     ("args", "message"),
     [
-        (["Nope.*"], "no channel matches 'Nope.*'; the results have: Feed.binary_out, Feed.bool_out"),
+        (
+            ["Nope.*"],
+            "no channel matches 'Nope.*'; the results have: Feed.binary_out, Feed.bool_out",
+        ),
         (["-o", "x.svg"], "write FILE.png (a picture) or FILE.html (interactive)"),
         (["no/such/run"], "no/such/run: no such results directory or results.csv"),
     ],

@@ -211,9 +211,9 @@ def options_of(args: argparse.Namespace) -> RunOptions:
 def main(argv: Sequence[str] | None = None, *, stdout: TextIO | None = None) -> int:
     out = stdout or sys.stdout
     args = parser().parse_args(argv)
-    configure_logging(args.log_level, json={"auto": None, "console": False, "json": True}[
-        args.log_format
-    ])
+    configure_logging(
+        args.log_level, json={"auto": None, "console": False, "json": True}[args.log_format]
+    )
     session = _Session()
     try:
         return asyncio.run(_interruptible(_dispatch(args, out, session)))

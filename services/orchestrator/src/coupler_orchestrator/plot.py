@@ -90,7 +90,9 @@ def read_run(path: Path) -> Run:
                 units[column["name"]] = column.get("unit", "")
                 types[column["name"]] = column.get("type", "")
         except (OSError, ValueError, TypeError, KeyError, AttributeError) as exc:
-            raise PlotError(f"{summary}: unreadable ({exc}); move it away to plot without units")
+            raise PlotError(
+                f"{summary}: unreadable ({exc}); move it away to plot without units"
+            ) from exc
     return Run(
         label=csv_path.parent.name or str(csv_path.parent),
         csv=csv_path,
@@ -322,12 +324,14 @@ _APP = """
       axes: [{ label: "time [s]" }, { label: chart.axis, size: 70 }],
       series: [
         { label: "t [s]" },
-        ...chart.series.map((s) => ({ label: s.label, stroke: s.color, width: 1.5, spanGaps: true })),
+        ...chart.series.map((s) => (
+          { label: s.label, stroke: s.color, width: 1.5, spanGaps: true })),
       ],
     }, data, element));
   }
-  window.addEventListener("resize", () => view.charts.forEach((c) => c.setSize({ width: width(), height: 300 })));
+  window.addEventListener("resize", () => {
+    for (const chart of view.charts) chart.setSize({ width: width(), height: 300 });
+  });
   view.ready = true;
 })();
 """
-
