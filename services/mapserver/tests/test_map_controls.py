@@ -8,6 +8,7 @@ from __future__ import annotations
 import io
 import re
 from collections.abc import AsyncIterator
+from typing import Any
 
 import pytest
 from aiohttp import web
@@ -15,8 +16,7 @@ from PIL import Image
 
 from mapserver.config import MapServerSettings
 
-from .conftest import REPO, TEST_LINE, MapService, Run
-from .test_browser import ARGS, CHROMIUM
+from .conftest import CHROMIUM, REPO, TEST_LINE, MapService, Run, page_errors
 
 ARTIFACT = REPO / "test-artifacts" / "mapserver-controls.png"
 
@@ -68,56 +68,48 @@ def settings(tiles: TileServer) -> MapServerSettings:
 
 
 async def test_basemap_scale_bar_and_following(
-    service: MapService, run: Run, tiles: TileServer
+    service: MapService, run: Run, tiles: TileServer, browser: Any
 ) -> None:
-    from playwright.async_api import async_playwright
+    page = await browser.new_page(viewport={"width": 1280, "height": 760})
+    errors = page_errors(page)
+    await page.goto(service.url)
+    await page.wait_for_function("window.coupler && window.coupler.ready")
 
-    async with async_playwright() as playwright:
-        browser = await playwright.chromium.launch(executable_path=str(CHROMIUM), args=ARGS)
-        try:
-            page = await browser.new_page(viewport={"width": 1280, "height": 760})
-            errors: list[str] = []
-            page.on("pageerror", lambda exc: errors.append(str(exc)))
-            await page.goto(service.url)
-            await page.wait_for_function("window.coupler && window.coupler.ready")
+    # the basemap from the settings' tile URL
+    await page.wait_for_selector("img.leaflet-tile-loaded")
+    assert tiles.requests and all(p.startswith("/tiles/") for p in tiles.requests)
+    assert await page.locator("#map.no-tiles").count() == 0
+    assert "Test tiles" in (await page.locator(".leaflet-control-attribution").inner_text())
 
-            # the basemap from the settings' tile URL
-            await page.wait_for_selector("img.leaflet-tile-loaded")
-            assert tiles.requests and all(p.startswith("/tiles/") for p in tiles.requests)
-            assert await page.locator("#map.no-tiles").count() == 0
-            assert "Test tiles" in (await page.locator(".leaflet-control-attribution").inner_text())
+    # a metric scale bar
+    scale = await page.locator(".leaflet-control-scale-line").inner_text()
+    assert re.fullmatch(r"\d+ (m|km)", scale.strip()), scale
 
-            # a metric scale bar
-            scale = await page.locator(".leaflet-control-scale-line").inner_text()
-            assert re.fullmatch(r"\d+ (m|km)", scale.strip()), scale
+    # following: the train stays in the middle while it moves
+    await run.start()
+    await run.steps(2)
+    await page.wait_for_selector("#train")
+    assert not await page.evaluate("window.coupler.following()")
+    await page.evaluate("window.coupler.map.setZoom(17, {animate: false})")
+    await page.check("#follow")
+    await run.steps(12, pace_s=0.02)
+    await page.wait_for_function("window.coupler.train.distance_m >= 14 * 25")
+    on_screen = await page.evaluate("window.coupler.trainOnScreen()")
+    assert abs(on_screen["x"] - on_screen["width"] / 2) < 3, on_screen
+    assert abs(on_screen["y"] - on_screen["height"] / 2) < 3, on_screen
+    ARTIFACT.parent.mkdir(parents=True, exist_ok=True)
+    await page.screenshot(path=str(ARTIFACT))
 
-            # following: the train stays in the middle while it moves
-            await run.start()
-            await run.steps(2)
-            await page.wait_for_selector("#train")
-            assert not await page.evaluate("window.coupler.following()")
-            await page.evaluate("window.coupler.map.setZoom(17, {animate: false})")
-            await page.check("#follow")
-            await run.steps(12, pace_s=0.02)
-            await page.wait_for_function("window.coupler.train.distance_m >= 14 * 25")
-            on_screen = await page.evaluate("window.coupler.trainOnScreen()")
-            assert abs(on_screen["x"] - on_screen["width"] / 2) < 3, on_screen
-            assert abs(on_screen["y"] - on_screen["height"] / 2) < 3, on_screen
-            ARTIFACT.parent.mkdir(parents=True, exist_ok=True)
-            await page.screenshot(path=str(ARTIFACT))
-
-            # dragging the map ends following; the train then moves away from the middle
-            box = await page.locator("#map").bounding_box()
-            assert box is not None
-            await page.mouse.move(box["x"] + 200, box["y"] + 200)
-            await page.mouse.down()
-            await page.mouse.move(box["x"] + 260, box["y"] + 240, steps=5)
-            await page.mouse.up()
-            assert not await page.evaluate("window.coupler.following()")
-            await run.steps(12, pace_s=0.02)
-            await page.wait_for_function("window.coupler.train.distance_m >= 26 * 25")
-            moved = await page.evaluate("window.coupler.trainOnScreen()")
-            assert abs(moved["x"] - moved["width"] / 2) + abs(moved["y"] - moved["height"] / 2) > 50
-            assert errors == []
-        finally:
-            await browser.close()
+    # dragging the map ends following; the train then moves away from the middle
+    box = await page.locator("#map").bounding_box()
+    assert box is not None
+    await page.mouse.move(box["x"] + 200, box["y"] + 200)
+    await page.mouse.down()
+    await page.mouse.move(box["x"] + 260, box["y"] + 240, steps=5)
+    await page.mouse.up()
+    assert not await page.evaluate("window.coupler.following()")
+    await run.steps(12, pace_s=0.02)
+    await page.wait_for_function("window.coupler.train.distance_m >= 26 * 25")
+    moved = await page.evaluate("window.coupler.trainOnScreen()")
+    assert abs(moved["x"] - moved["width"] / 2) + abs(moved["y"] - moved["height"] / 2) > 50
+    assert errors == []

@@ -123,6 +123,19 @@ def consoles() -> Iterator[list[Console]]:
         console.stop()
 
 
+def coupler(args: list[str], cwd: Path, env: dict[str, str]) -> subprocess.CompletedProcess[str]:
+    """``coupler ARGS`` run to its end."""
+    return subprocess.run(
+        [sys.executable, "-m", "coupler_orchestrator", *args],
+        cwd=cwd,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=60,
+        check=False,
+    )
+
+
 def children_of(pid: int) -> list[int]:
     text = Path(f"/proc/{pid}/task/{pid}/children").read_text()
     return [int(p) for p in text.split()]
@@ -160,15 +173,7 @@ def test_a_second_fleet_is_refused_and_the_first_is_untouched(
     before = files_of(fleet_dir)
     assert json.loads((fleet_dir / "out" / "summary.json").read_text())["status"] == "completed"
 
-    second = subprocess.run(
-        [sys.executable, "-m", "coupler_orchestrator", "fleet", "fleet.toml"],
-        cwd=fleet_dir,
-        env=env,
-        capture_output=True,
-        text=True,
-        timeout=60,
-        check=False,
-    )
+    second = coupler(["fleet", "fleet.toml"], fleet_dir, env)
     assert second.returncode == 1
     assert "Traceback" not in second.stderr
     assert f"port {port} (gain) is in use by pid {gain_pid} (" in second.stderr
@@ -200,15 +205,7 @@ def test_results_directory_of_a_running_fleet_is_refused(
     consoles.append(first)
     first.wait_for(first.out, r"services stay up")
     moved = {**env, "GAIN_PORT": str(free_port())}  # free ports, same results directory
-    second = subprocess.run(
-        [sys.executable, "-m", "coupler_orchestrator", "fleet", "fleet.toml"],
-        cwd=fleet_dir,
-        env=moved,
-        capture_output=True,
-        text=True,
-        timeout=60,
-        check=False,
-    )
+    second = coupler(["fleet", "fleet.toml"], fleet_dir, moved)
     assert second.returncode == 1
     assert f"is being written by another fleet (pid {first.process.pid})" in second.stderr
     assert "--out" in second.stderr
@@ -258,25 +255,13 @@ def test_waiting_for_a_participant_is_said_at_once(
 
 
 def test_a_participant_not_running_ends_with_how_to_start_it(env: dict[str, str]) -> None:
-    result = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "coupler_orchestrator",
-            "run",
-            "examples/ramp-gain/SystemStructure.ssd",
-            "--out",
-            str(Path(env.get("TMPDIR", "/tmp")) / f"coupler-hint-{os.getpid()}"),
-            "--connect-timeout",
-            "0.5",
-        ],
-        cwd=REPO,
-        env=env,
-        capture_output=True,
-        text=True,
-        timeout=60,
-        check=False,
-    )
+    out = Path(env.get("TMPDIR", "/tmp")) / f"coupler-hint-{os.getpid()}"
+    result = coupler(
+        ["run", "examples/ramp-gain/SystemStructure.ssd", "--out", str(out), "--connect-timeout",
+         "0.5"],
+        REPO,
+        env,
+    )  # fmt: skip
     assert result.returncode == 1
     lines = result.stderr.splitlines()
     assert lines[0].startswith(f"waiting for Gain at grpc://127.0.0.1:{env['GAIN_PORT']} (")

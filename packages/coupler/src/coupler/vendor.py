@@ -8,8 +8,10 @@ time (they must work offline). ``npm ci`` in a service folder installs the pinne
 
 from __future__ import annotations
 
+import argparse
 import shutil
-from collections.abc import Sequence
+import sys
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 
@@ -32,3 +34,18 @@ def copy(dist: Path, names: Sequence[str], vendor: Path) -> Path:
         else:
             shutil.copy2(source, target)
     return vendor
+
+
+def command(
+    prog: str, what: str, copy_from: Callable[[Path], Path], default: Path, argv: list[str] | None
+) -> None:
+    """The body of a service's ``python -m <package>.assets``: ``copy_from(node_modules)``,
+    exit with the reason when ``npm ci`` has not run."""
+    parser = argparse.ArgumentParser(prog=prog, description=f"copy {what} out of node_modules")
+    parser.add_argument("--node-modules", type=Path, default=default)
+    args = parser.parse_args(argv)
+    try:
+        target = copy_from(args.node_modules)
+    except FileNotFoundError as exc:
+        sys.exit(f"{prog}: {exc}")
+    print(f"{what} copied to {target}")

@@ -6,8 +6,6 @@ The page loads Leaflet from the server's own static files, never from a CDN. ``n
 
 from __future__ import annotations
 
-import argparse
-import sys
 from pathlib import Path
 
 from coupler import vendor as vendor_files
@@ -34,14 +32,7 @@ def copy_leaflet(node_modules: Path = NODE_MODULES, vendor: Path = VENDOR) -> Pa
 
 
 def main(argv: list[str] | None = None) -> None:
-    parser = argparse.ArgumentParser(prog="python -m mapserver.assets", description=__doc__)
-    parser.add_argument("--node-modules", type=Path, default=NODE_MODULES)
-    args = parser.parse_args(argv)
-    try:
-        target = copy_leaflet(args.node_modules)
-    except FileNotFoundError as exc:
-        sys.exit(f"mapserver.assets: {exc}")
-    print(f"Leaflet copied to {target}")
+    vendor_files.command("python -m mapserver.assets", "Leaflet", copy_leaflet, NODE_MODULES, argv)
 
 
 if __name__ == "__main__":

@@ -6,8 +6,6 @@
 
 from __future__ import annotations
 
-import argparse
-import sys
 from pathlib import Path
 
 from coupler import vendor as vendor_files
@@ -28,16 +26,9 @@ def copy_uplot(node_modules: Path = NODE_MODULES, vendor: Path = VENDOR) -> Path
 
 
 def main(argv: list[str] | None = None) -> None:
-    parser = argparse.ArgumentParser(
-        prog="python -m coupler_orchestrator.assets", description=__doc__
+    vendor_files.command(
+        "python -m coupler_orchestrator.assets", "uPlot", copy_uplot, NODE_MODULES, argv
     )
-    parser.add_argument("--node-modules", type=Path, default=NODE_MODULES)
-    args = parser.parse_args(argv)
-    try:
-        target = copy_uplot(args.node_modules)
-    except FileNotFoundError as exc:
-        sys.exit(f"coupler_orchestrator.assets: {exc}")
-    print(f"uPlot copied to {target}")
 
 
 if __name__ == "__main__":
