@@ -15,7 +15,9 @@ import asyncio
 import csv
 import json
 import socket
+import sys
 from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
 from pathlib import Path
 from typing import Any
 
@@ -62,8 +64,11 @@ def ports() -> dict[str, int]:
     return {name: free_port() for name in ("mock", "bridge", "balise", "map_grpc", "map_http")}
 
 
-@pytest.fixture
-async def fleet(ports: dict[str, int], monkeypatch: pytest.MonkeyPatch) -> AsyncIterator[Fleet]:
+@asynccontextmanager
+async def railway_fleet(
+    ports: dict[str, int], monkeypatch: pytest.MonkeyPatch, *mock_options: str
+) -> AsyncIterator[Fleet]:
+    """The railway fleet on ``ports``; ``mock_options`` go to the OpenRails mock."""
     for fmu in ("Driver2.fmu", "TrackBalises.fmu"):
         if not (FMUS / fmu).exists():
             pytest.fail(f"{FMUS / fmu} is missing: run 'make setup' (make test does)")
@@ -89,6 +94,7 @@ async def fleet(ports: dict[str, int], monkeypatch: pytest.MonkeyPatch) -> Async
                     "lockstep",
                     "--railml",
                     str(RAILML),
+                    *mock_options,
                 ),
                 health=f"http://127.0.0.1:{p['mock']}/API/READY",
             ),
@@ -138,6 +144,12 @@ async def fleet(ports: dict[str, int], monkeypatch: pytest.MonkeyPatch) -> Async
         ),
     )
     async with Fleet(spec, health_timeout=60) as running:
+        yield running
+
+
+@pytest.fixture
+async def fleet(ports: dict[str, int], monkeypatch: pytest.MonkeyPatch) -> AsyncIterator[Fleet]:
+    async with railway_fleet(ports, monkeypatch) as running:
         yield running
 
 
@@ -233,3 +245,58 @@ async def watch_in_chromium(url: str, run: asyncio.Future[RunOutcome]) -> None:
             await browser.close()
     assert (early["lat"], early["lng"]) != (late["lat"], late["lng"])
     assert [int(i) for i in shown] == expected
+
+
+async def coupler_run(out: Path, *options: str) -> tuple[int, str]:
+    """``coupler run`` of the railway scenario as its own process: exit code and stderr."""
+    process = await asyncio.create_subprocess_exec(
+        sys.executable,
+        "-m",
+        "coupler_orchestrator",
+        "run",
+        str(SCENARIO / "SystemStructure.ssd"),
+        "--out",
+        str(out),
+        "--no-progress",
+        *options,
+        stdout=asyncio.subprocess.DEVNULL,
+        stderr=asyncio.subprocess.PIPE,
+    )
+    _, err = await process.communicate()
+    assert process.returncode is not None
+    return process.returncode, err.decode()
+
+
+async def test_two_runs_against_one_fleet_are_identical(fleet: Fleet, tmp_path: Path) -> None:
+    """The bridge resets OpenRails at Initialize: a second ``coupler run`` against the fleet
+    that is still up starts from the scenario's start again, and records the same bytes."""
+    for name in ("first", "second"):
+        code, stderr = await coupler_run(tmp_path / name)
+        assert code == 0, stderr
+    first = (tmp_path / "first" / "results.csv").read_bytes()
+    second = (tmp_path / "second" / "results.csv").read_bytes()
+    rows = read_rows(tmp_path / "second" / "results.csv")
+    assert len(rows) == 1801
+    assert float(rows[1]["OpenRails.distance"]) < 1.0  # at the start, not at the buffer stop
+    assert int(rows[1]["TrackBalises.balises_passed"]) == 0
+    assert second == first
+
+
+async def test_without_reset_the_second_run_is_refused(
+    ports: dict[str, int], monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
+    """A simulator that cannot reset (the mock with --no-reset, as OpenRails' builds): the
+    second run fails at Initialize with what to do, instead of starting mid-track."""
+    async with railway_fleet(ports, monkeypatch, "--no-reset"):
+        code, stderr = await coupler_run(tmp_path / "first", "--stop-time", "20")
+        assert code == 0, stderr
+        code, stderr = await coupler_run(tmp_path / "second", "--stop-time", "20")
+    assert code != 0
+    url = f"http://127.0.0.1:{ports['mock']}"
+    assert f"OpenRails at {url} cannot reset its simulation (POST /API/RESET answered 404)" in (
+        stderr
+    )
+    assert "Restart OpenRails" in stderr
+    assert "Traceback" not in stderr
+    summary = json.loads((tmp_path / "second" / "summary.json").read_text())
+    assert summary["status"] == "failed" and "Restart OpenRails" in summary["reason"]

@@ -17,7 +17,7 @@ from coupler.channels import Description, RunSetup, Value
 from coupler.client import RemoteParticipant, parse_address
 from coupler.errors import ParticipantError, ParticipantUnavailable, ScenarioError
 from coupler.examples.gain import GainParticipant
-from coupler.participant import EndRun, Values
+from coupler.participant import EndRun, HealthReport, Values
 from coupler.server import ParticipantServer
 from coupler.v1 import component_pb2 as pb
 from coupler.v1 import component_pb2_grpc as pb_grpc
@@ -196,6 +196,34 @@ async def test_health_follows_the_participant() -> None:
         health_pb2.HealthCheckResponse.SERVING,
         health_pb2.HealthCheckResponse.NOT_SERVING,
     ]
+
+
+class WrapsASimulator(GainParticipant):
+    """Says through ``watch_health`` whether its (imagined) simulator is up."""
+
+    async def watch_health(self, report: HealthReport) -> None:
+        self.report = report
+        await report("simulator at http://sim:1 is down")
+
+
+async def test_health_carries_the_participants_reason() -> None:
+    participant = WrapsASimulator()
+    server = ParticipantServer(participant)
+    await server.start()
+    try:
+        remote = RemoteParticipant(server.address, connect_timeout=0.3)
+        with pytest.raises(ParticipantUnavailable) as waiting:
+            await remote.open()
+        with pytest.raises(ParticipantUnavailable) as probed:
+            await remote.wait_until_serving_once()
+        await remote.close()
+        await participant.report(None)
+        async with RemoteParticipant(server.address, connect_timeout=2.0) as remote:
+            assert (await remote.initialize(setup(gain=2.0)))["y"] == 0.0
+    finally:
+        await server.stop(grace=0.1)
+    reason = "health is NOT_SERVING: simulator at http://sim:1 is down"
+    assert reason in str(waiting.value) and reason in str(probed.value)
 
 
 async def test_unreachable_participant_is_unavailable_within_deadline() -> None:

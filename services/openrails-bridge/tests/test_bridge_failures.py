@@ -1,4 +1,5 @@
-"""OpenRails down, failing or hanging: UNAVAILABLE naming the URL, within the request timeout.
+"""OpenRails down, failing or hanging: UNAVAILABLE naming the URL, within the request timeout;
+health NOT_SERVING with the reason while OpenRails cannot be reached.
 
     RemoteParticipant --gRPC--> bridge --HTTP--> closed port / openrails_mock (stopped)
                                              \\-> tiny OpenRails: 503 or a POST that never answers
@@ -16,51 +17,24 @@ import pytest
 from aiohttp import web
 
 from coupler.channels import RunSetup
+from coupler.client import RemoteParticipant
 from coupler.errors import ParticipantError, ParticipantUnavailable
 from coupler.server import ParticipantServer
 from openrails_bridge.__main__ import build
 from openrails_bridge.config import BridgeSettings
 
-from .conftest import Bridge, Mock, serve_app
-
-RANGES = [
-    {"TypeName": name, "MinValue": lo, "MaxValue": hi, "RangeFraction": 0.0}
-    for name, lo, hi in [
-        ("THROTTLE", 0.0, 1.0),
-        ("TRAIN_BRAKE", 0.0, 1.0),
-        ("DYNAMIC_BRAKE", 0.0, 1.0),
-        ("DIRECTION", -1.0, 1.0),
-    ]
-]
+from .conftest import Bridge, Handler, Mock, serve_app, tiny_openrails
 
 
-def tiny_openrails(post: str, release: asyncio.Event) -> web.Application:
-    """READY, the GETs the bridge reads, and a POST /API/CABCONTROLS that fails as told."""
-
-    async def ready(request: web.Request) -> web.Response:
-        return web.Response(status=200)
-
-    async def cabcontrols(request: web.Request) -> web.Response:
-        return web.json_response(RANGES)
-
-    async def map_(request: web.Request) -> web.Response:
-        return web.json_response({"LatLon": {"Lat": 50.5, "Lon": 13.0}, "DirectionDeg": 90.0})
-
-    async def display(request: web.Request) -> web.Response:
-        return web.json_response([{"FirstCol": "Speed", "LastCol": "0.0 km/h"}])
+def failing_step(how: str, release: asyncio.Event) -> Handler:
+    """A POST /API/CABCONTROLS that answers 503, or hangs until ``release`` first."""
 
     async def step(request: web.Request) -> web.Response:
-        if post == "hang":
+        if how == "hang":
             await release.wait()
         return web.Response(status=503, text="Service Unavailable: simulator paused")
 
-    app = web.Application()
-    app.router.add_get("/API/READY", ready)
-    app.router.add_get("/API/CABCONTROLS", cabcontrols)
-    app.router.add_post("/API/CABCONTROLS", step)
-    app.router.add_get("/API/MAP", map_)
-    app.router.add_get("/API/TRAINDRIVINGDISPLAY", display)
-    return app
+    return step
 
 
 @pytest.fixture
@@ -91,24 +65,64 @@ async def test_openrails_down_at_step(mock: Mock, bridge: Bridge) -> None:
     assert f"OpenRails at {url}/API/CABCONTROLS" in str(caught.value)
 
 
-async def test_openrails_not_running_at_start(closed_port: int) -> None:
+async def test_openrails_down_at_start_then_up(mock: Mock, closed_port: int) -> None:
+    """The bridge starts without OpenRails: health NOT_SERVING naming the URL, Initialize
+    UNAVAILABLE naming it; once OpenRails answers, SERVING and runs go."""
     url = f"http://127.0.0.1:{closed_port}"
-    server = ParticipantServer(
-        build(BridgeSettings(openrails_url=url, ready_timeout_s=0.5, request_timeout_s=0.2))
-    )
+    settings = BridgeSettings(openrails_url=url, ready_timeout_s=0.5, request_timeout_s=0.5)
+    server = ParticipantServer(build(settings))
     started = time.monotonic()
+    await server.start()  # does not wait for OpenRails
     try:
-        with pytest.raises(ParticipantUnavailable) as caught:
-            await server.start()
+        assert time.monotonic() - started < 2.0
+        with pytest.raises(ParticipantUnavailable) as waiting:
+            async with RemoteParticipant(server.address, name="OpenRails", connect_timeout=0.5):
+                pass
+        with pytest.raises(ParticipantUnavailable) as initializing:
+            await server.participant.initialize(RunSetup(run_id="t", start_time=0, step_size=0.2))
+        async with (
+            mock(port=closed_port),
+            RemoteParticipant(server.address, name="OpenRails", connect_timeout=5.0) as remote,
+        ):
+            await remote.initialize(RunSetup(run_id="t", start_time=0.0, step_size=0.2))
+            moving = await remote.do_step(0.0, 0.2, {"throttle": 1.0})
     finally:
         await server.stop(grace=0.1)
-    assert time.monotonic() - started < 3.0
-    assert f"OpenRails at {url}/API/READY not ready within 0.5 s" in str(caught.value)
-    assert "ClientConnectorError" in str(caught.value)
+    health = str(waiting.value)
+    assert "health is NOT_SERVING: cannot reach OpenRails at " in health
+    assert f"{url}/API/READY: ClientConnectorError" in health
+    assert f"OpenRails at {url} is not ready (cannot reach OpenRails at {url}/API/READY" in str(
+        initializing.value
+    )
+    assert moving["speed"] > 0.0
+
+
+async def test_openrails_gone_before_initialize(mock: Mock, bridge: Bridge) -> None:
+    """OpenRails went away while the bridge was idle: Initialize is UNAVAILABLE naming the URL,
+    health turns NOT_SERVING with the reason."""
+    cm = mock()
+    url = await cm.__aenter__()
+    try:
+        async with bridge(url) as remote:
+            await cm.__aexit__(None, None, None)
+            cm = None
+            with pytest.raises(ParticipantUnavailable) as caught:
+                await remote.initialize(RunSetup(run_id="t", start_time=0.0, step_size=0.2))
+            with pytest.raises(ParticipantUnavailable) as health:
+                await remote.wait_until_serving_once()
+    finally:
+        if cm is not None:
+            await cm.__aexit__(None, None, None)
+    assert caught.value.status == "UNAVAILABLE"
+    assert f"cannot reach OpenRails at {url}/API/RESET" in str(caught.value)
+    assert f"health is NOT_SERVING: cannot reach OpenRails at {url}/API/READY" in str(health.value)
 
 
 async def test_error_answer_is_unavailable(release: asyncio.Event, bridge: Bridge) -> None:
-    async with serve_app(tiny_openrails("503", release)) as url, bridge(url) as remote:
+    async with (
+        serve_app(tiny_openrails(step=failing_step("503", release))) as url,
+        bridge(url) as remote,
+    ):
         await remote.initialize(RunSetup(run_id="t", start_time=0.0, step_size=0.2))
         with pytest.raises(ParticipantUnavailable) as caught:
             await remote.do_step(0.0, 0.2, {"throttle": 0.5})
@@ -119,7 +133,7 @@ async def test_error_answer_is_unavailable(release: asyncio.Event, bridge: Bridg
 
 async def test_hanging_openrails_times_out(release: asyncio.Event, bridge: Bridge) -> None:
     """POST /API/CABCONTROLS never answers: DoStep fails after the 0.5 s request timeout."""
-    async with serve_app(tiny_openrails("hang", release)) as url:
+    async with serve_app(tiny_openrails(step=failing_step("hang", release))) as url:
         async with bridge(url, request_timeout_s=0.5) as remote:
             await remote.initialize(RunSetup(run_id="t", start_time=0.0, step_size=0.2))
             started = time.monotonic()

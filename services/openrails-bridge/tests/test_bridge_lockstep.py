@@ -8,10 +8,12 @@ Each test starts its own mock and bridge on free ports.
 from __future__ import annotations
 
 import time
+from typing import Any
 
 import pytest
 
 from coupler.channels import Causality, RunSetup
+from coupler.client import RemoteParticipant
 from coupler.errors import ParticipantError
 from coupler.messages import decode_message
 from coupler_railway.messages import TRAIN_STATE
@@ -131,16 +133,58 @@ async def test_connect_waits_for_ready(mock: Mock, bridge: Bridge) -> None:
     assert outputs["speed"] > 0.0
 
 
-async def test_second_run_after_terminate(mock: Mock, bridge: Bridge) -> None:
-    async with mock() as url, bridge(url) as remote:
+async def run_once(remote: RemoteParticipant, run_id: str) -> list[dict[str, Any]]:
+    """Away in reverse, then forward with the brake half on: every control moved."""
+    trace = [
         await remote.initialize(
-            RunSetup(run_id="1", start_time=0.0, step_size=1.0, inputs={"throttle": 1.0})
+            RunSetup(run_id=run_id, start_time=0.0, step_size=1.0, inputs={"throttle": 0.6})
         )
-        first = await remote.do_step(0.0, 1.0, {})
-        await remote.terminate()
-        again = await remote.initialize(RunSetup(run_id="2", start_time=0.0, step_size=1.0))
-        second = await remote.do_step(0.0, 1.0, {})
-    # the train is where the first run left it; OpenRails has no reset
-    assert again["distance"] == pytest.approx(first["distance"])
-    assert again["track_offset"] == pytest.approx(first["track_offset"])
-    assert second["distance"] > first["distance"]
+    ]
+    for k, inputs in enumerate([{"direction": -1}, {}, {}, {"direction": 1, "brake": 0.5}, {}]):
+        trace.append(await remote.do_step(float(k), 1.0, inputs))
+    await remote.terminate()
+    return trace
+
+
+async def test_each_run_starts_from_the_scenario_start(mock: Mock, bridge: Bridge) -> None:
+    """The mock resets at every Initialize: a second run repeats the first bit for bit."""
+    async with mock(start_distance_m=2000.0) as url, bridge(url) as remote:
+        first = await run_once(remote, "1")
+        second = await run_once(remote, "2")
+    assert first[2]["speed"] < 0.0 and first[-1]["distance"] > 0.0  # it went somewhere
+    assert second == first
+    assert second[0]["distance"] == 0.0 and second[0]["direction_state"] == 1
+
+
+async def test_without_reset_a_moved_train_fails_initialize(mock: Mock, bridge: Bridge) -> None:
+    """A simulator that cannot reset (404, as OpenRails' builds): the first run starts where
+    the train stands; the next one is refused, naming the URL and the fix."""
+    async with mock(reset=False, start_distance_m=2000.0) as url, bridge(url) as remote:
+        first = await run_once(remote, "1")
+        with pytest.raises(ParticipantError) as caught:
+            await remote.initialize(RunSetup(run_id="2", start_time=0.0, step_size=1.0))
+        message = str(caught.value)
+    assert caught.value.status == "UNAVAILABLE"
+    assert f"OpenRails at {url} cannot reset its simulation (POST /API/RESET answered 404)" in (
+        message
+    )
+    assert "Restart OpenRails" in message
+    assert first[-1]["distance"] > 1.0
+
+
+async def test_without_reset_a_restarted_openrails_runs_again(
+    mock: Mock, bridge: Bridge, closed_port: int
+) -> None:
+    """... and once OpenRails is restarted (a new one on the same port), runs go again."""
+    cm = mock(port=closed_port, reset=False)
+    url = await cm.__aenter__()
+    try:
+        async with bridge(url) as remote:
+            first = await run_once(remote, "1")
+            await cm.__aexit__(None, None, None)
+            cm = mock(port=closed_port, reset=False)  # OpenRails restarted: back at the start
+            await cm.__aenter__()
+            again = await run_once(remote, "2")
+    finally:
+        await cm.__aexit__(None, None, None)
+    assert again == first

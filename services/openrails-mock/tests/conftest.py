@@ -5,6 +5,7 @@ from __future__ import annotations
 import time
 from collections.abc import AsyncIterator, Callable
 from contextlib import AbstractAsyncContextManager, asynccontextmanager
+from typing import Any
 
 import aiohttp
 import pytest
@@ -15,6 +16,18 @@ from openrails_mock.config import MockConfig
 from openrails_mock.route import Route
 
 Serve = Callable[..., AbstractAsyncContextManager[aiohttp.ClientSession]]
+
+
+def body(**controls: float) -> dict[str, Any]:
+    """A lockstep POST /API/CABCONTROLS body setting ``controls`` of the PLAYER train."""
+    return {
+        "Controls": [
+            {"LocomotiveName": "PLAYER", "TypeName": name, "ControlIndex": 1, "Value": value}
+            for name, value in controls.items()
+        ],
+        "Commands": [],
+        "SwitchCommands": {},
+    }
 
 
 class FakeClock:

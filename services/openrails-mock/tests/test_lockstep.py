@@ -16,7 +16,7 @@ import aiohttp
 from openrails_mock.config import ConsistOverrides, MockConfig
 from openrails_mock.route import StraightRoute
 
-from .conftest import FakeClock, Serve
+from .conftest import FakeClock, Serve, body
 
 G = 9.80665
 
@@ -48,17 +48,6 @@ def config(**changes: Any) -> MockConfig:
 
 def flat_route() -> StraightRoute:
     return StraightRoute(length_m=10_000.0, section_length_m=500.0)
-
-
-def body(**controls: float) -> dict[str, Any]:
-    return {
-        "Controls": [
-            {"LocomotiveName": "PLAYER", "TypeName": name, "ControlIndex": 1, "Value": value}
-            for name, value in controls.items()
-        ],
-        "Commands": [],
-        "SwitchCommands": {},
-    }
 
 
 async def step(session: aiohttp.ClientSession, **controls: float) -> dict[str, Any]:
@@ -168,28 +157,19 @@ async def test_step_reply_has_openrails_shape_and_track_mapping(serve: Serve) ->
     route = StraightRoute(length_m=3000.0, section_length_m=500.0, heading_deg=90.0)
     async with serve(config(start_distance_m=520.0), route=route) as session:
         train = await step(session)
-    assert set(train) == {
-        "location",
-        "trackLocation",
-        "rearTrackLocation",
-        "rotation",
-        "locomotiveState",
-        "trainLength",
-    }
-    assert set(train["location"]) == {"x", "y", "z"}
-    assert set(train["locomotiveState"]) == {"v", "a", "distance", "wheelslip", "wheelskid"}
     # Front at 520 m: section 1 (node 2), 20 m in. Rear at 475 m: section 0 (node 1).
     assert train["trackLocation"] == {
         "trackNodeIndex": 2,
         "trackNodeLength": 500.0,
         "trackNodeOffset": 20.0,
         "trackVectorSectionIndex": 0,
-        "movementDirection": 1,
+        "movementDirection": "Forward",
     }
     assert train["rearTrackLocation"]["trackNodeIndex"] == 1
     assert math.isclose(train["rearTrackLocation"]["trackNodeOffset"], 475.0)
     assert math.isclose(train["rotation"], math.pi / 2)
-    assert math.isclose(train["location"]["x"], 520.0)
+    # two cars of 22.5 m: the lead locomotive's centre is 11.25 m behind the front, due east
+    assert train["location"] == {"tileX": -5354, "tileZ": 14849, "x": 508.75, "y": 0.0, "z": 0.0}
     assert train["trainLength"] == {"length": 45.0}
     assert train["locomotiveState"]["v"] == 0.0  # no throttle: standstill stays standstill
 
@@ -221,7 +201,7 @@ async def test_uphill_start_with_weak_throttle_stays_put_then_rolls_back(serve: 
         for _ in range(20):
             rolled = await step(session)
         assert rolled["locomotiveState"]["v"] < 0.0
-        assert rolled["trackLocation"]["movementDirection"] == 0
+        assert rolled["trackLocation"]["movementDirection"] == "Forward"  # still faces uphill
         assert rolled["locomotiveState"]["distance"] > 0.0  # the odometer counts both ways
         # Braking stops the rollback but never drives the train uphill.
         for _ in range(100):

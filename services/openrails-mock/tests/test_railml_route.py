@@ -14,22 +14,11 @@ from coupler.errors import ScenarioError
 from coupler_railway import load_infrastructure
 from openrails_mock.config import MockConfig
 
-from .conftest import Serve
+from .conftest import Serve, body
 
 ROOT = Path(__file__).resolve().parents[3]
 TEST_LINE = ROOT / "packages/railway/tests/data/test-line.railml"
 SCENARIO = ROOT / "scenarios/railway/data/annaberg-schwarzenberg.railml"
-
-
-def body(**controls: float) -> dict[str, object]:
-    return {
-        "Controls": [
-            {"LocomotiveName": "PLAYER", "TypeName": k, "ControlIndex": 1, "Value": v}
-            for k, v in controls.items()
-        ],
-        "Commands": [],
-        "SwitchCommands": {},
-    }
 
 
 async def test_test_line_track_nodes_follow_the_railml_tracks(serve: Serve) -> None:
@@ -54,7 +43,10 @@ async def test_test_line_track_nodes_follow_the_railml_tracks(serve: Serve) -> N
     assert math.isclose(position["LatLon"]["Lon"], point.longitude_deg, abs_tol=1e-9)
     assert math.isclose(position["DirectionDeg"], point.heading_deg, abs_tol=1e-9)
     assert math.isclose(train["rotation"], math.radians(point.heading_deg), abs_tol=1e-9)
-    assert math.isclose(train["location"]["x"], point.x_m, abs_tol=1e-6)
+    # location: the lead car's centre (two cars of 20.85 m), east in its 2048 m tile
+    lead = model.position(front - 41.7 / 4)
+    assert math.isclose(train["location"]["x"], lead.x_m, abs_tol=1e-6)
+    assert math.isclose(train["location"]["z"], lead.y_m, abs_tol=1e-6)
 
 
 async def test_scenario_route_drives_from_annaberg(serve: Serve) -> None:
@@ -68,7 +60,7 @@ async def test_scenario_route_drives_from_annaberg(serve: Serve) -> None:
     state = train["locomotiveState"]
     assert state["v"] > 10.0 and state["distance"] > 300.0
     assert train["trackLocation"]["trackNodeIndex"] >= 1
-    assert train["location"]["z"] != 0.0  # the line climbs or falls: elevation from gradients
+    assert train["location"]["y"] != 0.0  # the line climbs or falls: elevation from gradients
 
 
 def test_missing_railml_names_the_file(tmp_path: Path) -> None:

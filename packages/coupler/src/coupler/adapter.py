@@ -43,7 +43,7 @@ from coupler.channels import (
     ValueType,
 )
 from coupler.errors import ParticipantError, ScenarioError
-from coupler.participant import Participant, Values
+from coupler.participant import HealthReport, Participant, Values
 from coupler.values import coerce
 
 
@@ -75,6 +75,10 @@ class Adapter(ABC):
     @abstractmethod
     async def shutdown(self) -> None:
         """Release the connection to the simulator."""
+
+    async def watch_health(self, report: HealthReport) -> None:
+        """Whether the simulator can take a run; see ``Participant.watch_health``."""
+        await report(None)
 
 
 class ChannelMap(BaseModel):
@@ -161,6 +165,9 @@ class AdapterParticipant(Participant):
 
     async def close(self) -> None:
         await self.adapter.shutdown()
+
+    async def watch_health(self, report: HealthReport) -> None:
+        await self.adapter.watch_health(report)
 
     async def describe(self) -> Description:
         fixed = self.config.fixed_step_size

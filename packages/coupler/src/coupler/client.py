@@ -26,7 +26,7 @@ from coupler.errors import (
     ParticipantUnavailable,
     ScenarioError,
 )
-from coupler.participant import EndRun, Participant, Values
+from coupler.participant import HEALTH_REASON, EndRun, Participant, Values
 from coupler.security import ClientSecurity
 from coupler.v1 import component_pb2_grpc as pb_grpc
 
@@ -136,16 +136,12 @@ class RemoteParticipant(Participant):
         while True:
             remaining = deadline - time.monotonic()
             try:
-                reply = await health_stub.Check(
-                    health_pb2.HealthCheckRequest(service=""),
-                    timeout=max(0.1, min(2.0, remaining)),
-                    metadata=self._metadata,
+                why = await _not_serving(
+                    health_stub, deadline_s=max(0.1, min(2.0, remaining)), metadata=self._metadata
                 )
-                if reply.status == health_pb2.HealthCheckResponse.SERVING:
+                if why is None:
                     return
-                last = (
-                    f"health is {health_pb2.HealthCheckResponse.ServingStatus.Name(reply.status)}"
-                )
+                last = why
             except grpc.aio.AioRpcError as exc:
                 tls = tls_problem(exc.details() or "", self.address, self.security)
                 if tls is not None:
@@ -175,8 +171,8 @@ class RemoteParticipant(Participant):
         self._ensure_channel()
         assert self._channel is not None
         try:
-            reply = await health_pb2_grpc.HealthStub(self._channel).Check(
-                health_pb2.HealthCheckRequest(service=""), timeout=self.connect_timeout
+            why = await _not_serving(
+                health_pb2_grpc.HealthStub(self._channel), deadline_s=self.connect_timeout
             )
         except grpc.aio.AioRpcError as exc:
             raise _translate(
@@ -186,12 +182,9 @@ class RemoteParticipant(Participant):
                 call="health",
                 address=self.address,
             ) from exc
-        if reply.status != health_pb2.HealthCheckResponse.SERVING:
+        if why is not None:
             raise ParticipantUnavailable(
-                f"health is {health_pb2.HealthCheckResponse.ServingStatus.Name(reply.status)}",
-                participant=self.name,
-                call="health",
-                status="UNAVAILABLE",
+                why, participant=self.name, call="health", status="UNAVAILABLE"
             )
 
     def _ensure_channel(self) -> None:
@@ -343,6 +336,25 @@ def _translate(
     if code is grpc.StatusCode.DEADLINE_EXCEEDED:
         return ParticipantTimeout(details, participant=participant, call=call, status=code.name)
     return ParticipantError(details, participant=participant, call=call, status=code.name)
+
+
+async def _not_serving(
+    stub: health_pb2_grpc.HealthStub,
+    *,
+    deadline_s: float,
+    metadata: tuple[tuple[str, str], ...] | None = None,
+) -> str | None:
+    """None when the health service says SERVING, else what it says, with the participant's
+    reason (trailing metadata ``coupler-health-reason``) when it gives one."""
+    request = health_pb2.HealthCheckRequest(service="")
+    call = stub.Check(request, timeout=deadline_s, metadata=metadata)
+    reply = await call
+    if reply.status == health_pb2.HealthCheckResponse.SERVING:
+        return None
+    status = health_pb2.HealthCheckResponse.ServingStatus.Name(reply.status)
+    trailing = await call.trailing_metadata()
+    reasons = [str(v) for k, v in trailing or () if k == HEALTH_REASON]
+    return f"health is {status}" + "".join(f": {r}" for r in reasons[:1])
 
 
 def _why_unreachable(exc: grpc.aio.AioRpcError) -> str:

@@ -55,6 +55,8 @@ class ParticipantError(CouplerError):
         self.participant = participant
         self.call = call
         self.status = status
+        self.detail = message
+        """The message without the ``participant.call [status]`` prefix."""
         prefix = f"{participant}.{call}"
         if status:
             prefix += f" [{status}]"

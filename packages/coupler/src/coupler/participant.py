@@ -8,11 +8,16 @@ and a simulator wrapped by an adapter (``coupler.adapter.AdapterParticipant``) l
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from collections.abc import Mapping
+from collections.abc import Awaitable, Callable, Mapping
 
 from coupler.channels import Description, RunSetup, Value
 
 Values = dict[str, Value]
+HealthReport = Callable[[str | None], Awaitable[None]]
+"""``await report(None)``: ready for a run (SERVING); ``await report(reason)``: not
+(NOT_SERVING), with a reason a person can act on, carried by the health answers."""
+HEALTH_REASON = "coupler-health-reason"
+"""Trailing metadata of a NOT_SERVING health answer: the reason given to ``HealthReport``."""
 
 
 class EndRun(Exception):
@@ -56,3 +61,9 @@ class Participant(ABC):
 
     async def close(self) -> None:  # noqa: B027 - optional hook, nothing to do by default
         """Release what the participant holds beyond a run (connections, processes)."""
+
+    async def watch_health(self, report: HealthReport) -> None:
+        """Called once open and described: say whether a run can start. A participant whose
+        readiness changes (a wrapped simulator that is down, then up) keeps ``report`` and calls
+        it again on every change. Default: ready."""
+        await report(None)

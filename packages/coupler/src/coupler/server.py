@@ -34,7 +34,7 @@ from grpc_reflection.v1alpha import reflection
 from coupler import wire
 from coupler.channels import Description
 from coupler.errors import ChannelValueError, ParticipantUnavailable, ScenarioError
-from coupler.participant import EndRun, Participant
+from coupler.participant import HEALTH_REASON, EndRun, Participant
 from coupler.security import ServerSecurity
 from coupler.v1 import component_pb2_grpc as pb_grpc
 
@@ -267,8 +267,8 @@ async def _guard(context: grpc.aio.ServicerContext, call: Callable[[], T | Await
         await _abort(context, grpc.StatusCode.UNAVAILABLE, "participant is starting; not ready yet")
     except (ChannelValueError, ScenarioError) as exc:
         await _abort(context, grpc.StatusCode.INVALID_ARGUMENT, str(exc))
-    except ParticipantUnavailable as exc:
-        await _abort(context, grpc.StatusCode.UNAVAILABLE, str(exc))
+    except ParticipantUnavailable as exc:  # the caller names the participant and the call
+        await _abort(context, grpc.StatusCode.UNAVAILABLE, exc.detail)
     except (asyncio.CancelledError, EndRun):
         raise
     except Exception as exc:  # the participant's own failure: report it, keep serving
@@ -281,6 +281,22 @@ async def _abort(
 ) -> NoReturn:
     await context.abort(code, message)
     raise AssertionError("unreachable")  # context.abort raises
+
+
+class _Health(health.aio.HealthServicer):
+    """The standard health service; a NOT_SERVING answer carries ``reason`` as trailing
+    metadata (``HEALTH_REASON``), so probes can say why."""
+
+    reason = ""
+
+    async def Check(
+        self, request: health_pb2.HealthCheckRequest, context: grpc.aio.ServicerContext
+    ) -> health_pb2.HealthCheckResponse:
+        response: health_pb2.HealthCheckResponse = await super().Check(request, context)
+        if self.reason and response.status != health_pb2.HealthCheckResponse.SERVING:
+            ascii_reason = self.reason.encode("ascii", "backslashreplace").decode()
+            context.set_trailing_metadata(((HEALTH_REASON, ascii_reason),))
+        return response
 
 
 class ParticipantServer:
@@ -305,7 +321,10 @@ class ParticipantServer:
         self.port = 0
         self.health_port: int | None = None
         """Port of the plaintext health-only server, when ``security.health_port`` asks for one."""
-        self.health = health.aio.HealthServicer()
+        self.health = _Health()
+        self._stopping = False
+        self._reported = False
+        self._name = ""
         self._server: grpc.aio.Server | None = None
         self._health_server: grpc.aio.Server | None = None
         self._servicer: _Servicer | None = None
@@ -319,7 +338,8 @@ class ParticipantServer:
         return f"{scheme}://{self.host}:{self.port}"
 
     async def start(self) -> int:
-        """Bind, open the participant, describe it, then report SERVING. Returns the port."""
+        """Bind, open the participant, describe it, then report its health (SERVING unless
+        ``Participant.watch_health`` says otherwise). Returns the port."""
         # a unix socket stays on this machine, protected by its file permissions
         warning = self.security.check("localhost" if self.unix_socket else self.host)
         if warning:
@@ -348,12 +368,14 @@ class ParticipantServer:
         await self.participant.open()
         description = await self.participant.describe()
         self._servicer.ready(description)
-        await self._set_health(health_pb2.HealthCheckResponse.SERVING)
-        log.info("participant_serving", participant=description.name, address=self.address)
+        self._name = description.name
+        await self.participant.watch_health(self._report_health)
         return self.port
 
     async def stop(self, grace: float = 2.0) -> None:
         """NOT_SERVING, end the active run, stop the server, close the participant."""
+        self._stopping = True
+        self.health.reason = "the participant is shutting down"
         await self._set_health(health_pb2.HealthCheckResponse.NOT_SERVING)
         if self._servicer is not None:
             self._servicer.stopping = True
@@ -371,6 +393,21 @@ class ParticipantServer:
     async def wait(self) -> None:
         if self._server is not None:
             await self._server.wait_for_termination()
+
+    async def _report_health(self, reason: str | None) -> None:
+        """The participant's word on whether it can take a run (``Participant.watch_health``)."""
+        if self._stopping or (self._reported and reason == (self.health.reason or None)):
+            return
+        self._reported = True
+        self.health.reason = reason or ""
+        serving = health_pb2.HealthCheckResponse
+        await self._set_health(serving.NOT_SERVING if reason else serving.SERVING)
+        if reason:
+            log.warning(
+                "participant_not_serving", participant=self._name, address=self.address, why=reason
+            )
+        else:
+            log.info("participant_serving", participant=self._name, address=self.address)
 
     async def _start_health_server(self, port: int) -> None:
         """The health service alone, plaintext: it tells whether this participant serves and

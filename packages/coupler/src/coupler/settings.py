@@ -3,7 +3,8 @@
 Every participant process reads ``ParticipantSettings`` (bind address, port, logging, and the
 security of its gRPC server); services subclass it with their own prefix, so the bridge reads
 ``OPENRAILS_BRIDGE_PORT``, ``OPENRAILS_BRIDGE_TLS_CERT``, ... and command-line options override
-them (``add_security_arguments``).
+them (``add_security_arguments``). The base prefix, ``COUPLER_EXAMPLE_`` (the example
+participants), never collides with the orchestrator's client settings (``COUPLER_TLS_CA``, ...).
 """
 
 from __future__ import annotations
@@ -19,7 +20,7 @@ from coupler.security import ServerSecurity
 class SecuritySettings(BaseSettings):
     """How a participant's gRPC server is secured (docs/security.md)."""
 
-    model_config = SettingsConfigDict(env_prefix="COUPLER_", extra="ignore", frozen=True)
+    model_config = SettingsConfigDict(env_prefix="COUPLER_EXAMPLE_", extra="ignore", frozen=True)
 
     tls_cert: Path | None = None
     """Server certificate chain (PEM); with ``tls_key`` it turns TLS on."""

@@ -30,7 +30,12 @@ def _parse(argv: list[str] | None) -> BridgeSettings:
     parser.add_argument("--sim-step", type=float, dest="sim_step_s", help="lockstep step [s]")
     parser.add_argument("--speedup", type=float, help="stock: simulated s per wall-clock s")
     parser.add_argument("--request-timeout", type=float, dest="request_timeout_s")
-    parser.add_argument("--ready-timeout", type=float, dest="ready_timeout_s")
+    parser.add_argument(
+        "--ready-timeout", type=float, dest="ready_timeout_s", help="Initialize's wait [s]"
+    )
+    parser.add_argument(
+        "--max-body-bytes", type=int, dest="max_body_bytes", help="largest answer read"
+    )
     parser.add_argument("--channels", type=Path, help="channel mapping TOML")
     parser.add_argument("--locomotive", help="lockstep LocomotiveName (default PLAYER)")
     parser.add_argument("--host", help="gRPC bind address (default 127.0.0.1)")
@@ -68,8 +73,9 @@ def main(argv: list[str] | None = None) -> None:
 
     def announce(server: ParticipantServer) -> None:
         print(
-            f"openrails-bridge serving at {server.address} "
-            f"(OpenRails {settings.openrails_url}, {settings.mode})",
+            f"openrails-bridge listening at {server.address} "
+            f"(OpenRails {settings.openrails_url}, {settings.mode}; health SERVING while "
+            f"OpenRails answers)",
             flush=True,
         )
 

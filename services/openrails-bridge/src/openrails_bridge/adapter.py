@@ -1,9 +1,8 @@
-"""``OpenRailsAdapter``: OpenRails' web API as a Coupler ``Adapter``, over ONE aiohttp session.
+"""``OpenRailsAdapter``: OpenRails' web API as a Coupler ``Adapter`` (requests: ``client``).
 
 Two modes (``BridgeSettings.mode``):
 
-- lockstep (OpenRails' build for simulation): ``connect`` polls GET /API/READY (425 until the
-  route is loaded) with exponential backoff; a step of ``h`` posts POST /API/CABCONTROLS
+- lockstep (OpenRails' build for simulation): a step of ``h`` posts POST /API/CABCONTROLS
   ``h / sim_step_s`` times, each applying every control and advancing one fixed step, and
   keeps the train record of the last reply. The reply has no lat/lon, so GET /API/MAP is read
   ONCE per step, after the last post: outputs exist only at communication points, and the
@@ -15,34 +14,56 @@ Two modes (``BridgeSettings.mode``):
   acceleration is its difference quotient, distance its integral since Initialize; the
   track location is not published by stock OpenRails and stays 0.
 
+Readiness: ``connect`` never waits. A watcher polls GET /API/READY (lockstep; GET
+/API/CABCONTROLS in stock mode) with backoff until OpenRails answers, reads the control ranges
+and tells health SERVING; until then health is NOT_SERVING with the reason, naming the URL. A
+request that cannot reach OpenRails starts the watcher again. Initialize waits for readiness
+at most ``ready_timeout_s``, then is UNAVAILABLE naming the URL.
+
+Each run starts from the scenario's start: Initialize posts POST /API/RESET (the mock's
+extension). A simulator without it (404/405, as OpenRails' builds) is used as it stands if its
+train stands where this bridge first found it, else Initialize fails saying to restart
+OpenRails.
+
 ``get_state()`` has the lockstep reply's fields (``locomotiveState.v``, ``trackLocation...``)
 in both modes, plus ``MAP`` (raw) and the derived ``latitude``, ``longitude``, ``heading``,
 ``direction`` (reverser: 1, 0, -1), ``time`` and ``train_state`` (a serialized
-``coupler.v1.TrainState``). aiohttp errors, timeouts and non-2xx answers become
-``ParticipantUnavailable`` naming the URL in ONE place, ``_send``/``_check``.
+``coupler.v1.TrainState``).
 """
 
 from __future__ import annotations
 
 import asyncio
-import json
 import math
 import re
 import time as wallclock
 from collections.abc import Mapping
-from dataclasses import dataclass
 from typing import Any
 
-import aiohttp
 import structlog
 
 from coupler.adapter import Adapter
 from coupler.channels import RunSetup, Value
 from coupler.errors import ChannelValueError, ParticipantUnavailable, ScenarioError
 from coupler.messages import encode_message
+from coupler.participant import HealthReport
 from coupler_railway.messages import TRAIN_STATE
 
+from .client import OpenRailsClient
 from .config import BridgeSettings
+from .replies import (
+    CONTROLS,
+    DISPLAY,
+    ControlValue,
+    DisplayRow,
+    LatLonDirection,
+    LocomotiveState,
+    StepReply,
+    TrackLocation,
+    Train,
+    TrainLength,
+    WorldPosition,
+)
 
 log = structlog.get_logger("openrails_bridge")
 
@@ -50,24 +71,24 @@ STEP_TOLERANCE = 1e-9
 """Relative tolerance of "a whole multiple of the sim step"."""
 RANGE_TOLERANCE = 1e-9
 """Values this far outside a control's range are clamped, not refused."""
+START_PLACE_TOLERANCE_M = 1.0
+"""Without reset: how far from where it was first found the train may stand at Initialize."""
+STANDSTILL_MPS = 0.01
+"""Without reset: a train slower than this stands."""
+EARTH_RADIUS_M = 6_371_008.8
+NO_RESET = (404, 405)
+"""Answers to POST /API/RESET of a simulator that has no reset."""
 _SPEED = re.compile(r"(-?\d+(?:\.\d+)?)\s*(km/h|mph|m/s)", re.IGNORECASE)
 _SPEED_UNITS = {"km/h": 1 / 3.6, "mph": 0.44704, "m/s": 1.0}
 _REVERSER = {"forward": 1, "reverse": -1, "n": 0, "neutral": 0}
-
-
-@dataclass(frozen=True)
-class _Answer:
-    status: int
-    text: str
-
-
-@dataclass(frozen=True)
-class ControlRange:
-    """A cab control as GET /API/CABCONTROLS lists it."""
-
-    type_name: str
-    min_value: float
-    max_value: float
+_NO_TRACK = TrackLocation(
+    trackNodeIndex=0,
+    trackNodeLength=0.0,
+    trackNodeOffset=0.0,
+    trackVectorSectionIndex=0,
+    movementDirection="Forward",
+)
+_NOWHERE = WorldPosition(x=0.0, y=0.0, z=0.0)
 
 
 class OpenRailsAdapter(Adapter):
@@ -85,15 +106,27 @@ class OpenRailsAdapter(Adapter):
         self.name = name
         self.base_url = _base_url(settings.openrails_url)
         self.channel_names = dict(channel_names or {})
-        self.ranges: dict[str, ControlRange] = {}
-        self._timeout = aiohttp.ClientTimeout(total=settings.request_timeout_s)
-        self._session: aiohttp.ClientSession | None = None
+        self.ranges: dict[str, ControlValue] = {}
+        self.client = OpenRailsClient(
+            self.base_url,
+            participant=name,
+            request_timeout_s=settings.request_timeout_s,
+            max_body_bytes=settings.max_body_bytes,
+            on_unreachable=self._lost,
+        )
         self._controls: dict[str, float] = {}
-        self._train: dict[str, Any] | None = None
-        self._map: dict[str, Any] | None = None
+        self._train: Train | None = None
+        self._map: LatLonDirection | None = None
         self._reverser: int = 1
         self._time = 0.0
         self._stale = True
+        # readiness: why OpenRails cannot take a run (None: it can), and who to tell
+        self._reason: str | None = f"connecting to OpenRails at {self.base_url}"
+        self._ready = asyncio.Event()
+        self._report: HealthReport | None = None
+        self._watcher: asyncio.Task[None] | None = None
+        # without reset: where the train stood when this bridge first found it (lat, lon)
+        self._start_place: tuple[float, float] | None = None
         # stock mode: the wall-clock schedule and the last poll (monotonic s, v, odometer)
         self._wall_start = 0.0
         self._sim_start = 0.0
@@ -102,18 +135,18 @@ class OpenRailsAdapter(Adapter):
     # --- the Adapter interface ---------------------------------------------------------------
 
     async def connect(self) -> None:
-        if self._session is None:
-            self._session = aiohttp.ClientSession(timeout=self._timeout)
-        await self._wait_ready()
-        self.ranges = await self._read_ranges()
-        log.info(
-            "openrails_connected",
-            url=self.base_url,
-            mode=self.settings.mode,
-            controls=sorted(self.ranges),
-        )
+        """One look at OpenRails; if it is not ready, the watcher keeps looking."""
+        await self.client.open()
+        await self._set_reason(await self._probe())
+        if self._reason is not None:
+            self._watch()
+
+    async def watch_health(self, report: HealthReport) -> None:
+        self._report = report
+        await report(self._reason)
 
     async def start(self, setup: RunSetup, parameters: Mapping[str, Value]) -> None:
+        await self._until_ready()
         if self.settings.mode == "lockstep":
             self._steps(setup.step_size)
         self._controls = {}  # the run's start values follow in apply_inputs
@@ -122,6 +155,7 @@ class OpenRailsAdapter(Adapter):
         self._wall_start = wallclock.monotonic()
         self._last_poll = None
         self._stale = True
+        await self._reset()
 
     async def apply_inputs(self, inputs: Mapping[str, Value]) -> None:
         checked = {field: self._checked_control(field, value) for field, value in inputs.items()}
@@ -132,13 +166,14 @@ class OpenRailsAdapter(Adapter):
     async def advance(self, time: float, step: float) -> None:
         if self.settings.mode == "lockstep":
             for _ in range(self._steps(step)):
-                self._train = self._train_of(await self._post_lockstep())
+                self._train = await self._post_lockstep()
             self._map = await self._get_map()
             self._stale = False
         else:
-            await self._check(
+            answer = await self.client.send(
                 "POST", "/API/CABCONTROLS", body=[self._control(t) for t in self._controls]
             )
+            self.client.check(answer, "POST", "/API/CABCONTROLS")
             wall_end = self._wall_start + (time + step - self._sim_start) / self.settings.speedup
             await asyncio.sleep(max(0.0, wall_end - wallclock.monotonic()))
             await self._poll()
@@ -148,29 +183,27 @@ class OpenRailsAdapter(Adapter):
         if self._stale or self._train is None or self._map is None:
             await self._poll()
         assert self._train is not None and self._map is not None
-        latlon = self._map.get("LatLon") or {}
-        latitude = float(latlon.get("Lat", 0.0))
-        longitude = float(latlon.get("Lon", 0.0))
-        heading = float(self._map.get("DirectionDeg", 0.0))
-        loco = self._train["locomotiveState"]
-        track = self._train["trackLocation"]
+        train, where = self._train, self._map
+        latitude, longitude = where.LatLon.Lat, where.LatLon.Lon
+        heading = where.DirectionDeg
+        loco, track = train.locomotiveState, train.trackLocation
         train_state = encode_message(
             TRAIN_STATE,
             {
                 "time_s": self._time,
                 "position": {"latitude_deg": latitude, "longitude_deg": longitude},
                 "heading_deg": heading,
-                "distance_m": float(loco["distance"]),
-                "speed_mps": float(loco["v"]),
-                "acceleration_mps2": float(loco["a"]),
-                "track_node": int(track["trackNodeIndex"]),
-                "track_offset_m": float(track["trackNodeOffset"]),
+                "distance_m": loco.distance,
+                "speed_mps": loco.v,
+                "acceleration_mps2": loco.a,
+                "track_node": track.trackNodeIndex,
+                "track_offset_m": track.trackNodeOffset,
                 "direction": self._reverser,
             },
         )
         return {
-            **self._train,
-            "MAP": self._map,
+            **train.model_dump(),
+            "MAP": where.model_dump(),
             "controls": dict(self._controls),
             "latitude": latitude,
             "longitude": longitude,
@@ -181,9 +214,125 @@ class OpenRailsAdapter(Adapter):
         }
 
     async def shutdown(self) -> None:
-        session, self._session = self._session, None
-        if session is not None:
-            await session.close()
+        watcher, self._watcher = self._watcher, None
+        if watcher is not None:
+            watcher.cancel()
+        await self.client.close()
+
+    # --- readiness ---------------------------------------------------------------------------
+
+    def _watch(self) -> None:
+        """Start the watcher unless it runs."""
+        if self._watcher is None or self._watcher.done():
+            self._watcher = asyncio.get_running_loop().create_task(
+                self._watch_until_ready(), name="openrails-watcher"
+            )
+
+    async def _watch_until_ready(self) -> None:
+        """Probe with backoff (0.05 s doubling to 1 s) until OpenRails is ready."""
+        delay = 0.05
+        while True:
+            await self._set_reason(await self._probe())
+            if self._reason is None:
+                return
+            await asyncio.sleep(delay)
+            delay = min(delay * 2, 1.0)
+
+    def _lost(self, reason: str) -> None:
+        """A request could not reach OpenRails: not ready until the watcher finds it again
+        (its first probe reports why)."""
+        self._ready.clear()
+        self._watch()
+
+    async def _probe(self) -> str | None:
+        """None when OpenRails can take a run (the control ranges read), else why not.
+
+        Lockstep: GET /API/READY answers 200. Stock OpenRails has no READY: GET
+        /API/CABCONTROLS answering 200 means a train is loaded.
+        """
+        path = "/API/READY" if self.settings.mode == "lockstep" else "/API/CABCONTROLS"
+        try:
+            answer = await self.client.send("GET", path, call="connect")
+            if answer.status == 425:
+                return f"OpenRails at {self.base_url}{path} answered 425: still loading the route"
+            self.client.check(answer, "GET", path, call="connect")
+            self.ranges = await self._read_ranges()
+        except ParticipantUnavailable as exc:
+            return exc.detail
+        return None
+
+    async def _set_reason(self, reason: str | None) -> None:
+        """Readiness found by a probe, told to health (which logs a NOT_SERVING reason)."""
+        if reason is None and self._reason is not None:
+            log.info("openrails_ready", url=self.base_url, controls=sorted(self.ranges))
+        self._reason = reason
+        if reason is None:
+            self._ready.set()
+        else:
+            self._ready.clear()
+        if self._report is not None:
+            await self._report(reason)
+
+    async def _until_ready(self) -> None:
+        """Wait for readiness at most ``ready_timeout_s``; UNAVAILABLE naming the URL after."""
+        if self._ready.is_set():
+            return
+        self._watch()
+        limit = self.settings.ready_timeout_s
+        try:
+            await asyncio.wait_for(self._ready.wait(), limit)
+        except TimeoutError:
+            raise self.client.error(
+                f"OpenRails at {self.base_url} is not ready ({self._reason}; waited {limit:g} s, "
+                f"OPENRAILS_BRIDGE_READY_TIMEOUT_S): is OpenRails running with its web server "
+                f"on, and is OPENRAILS_BRIDGE_OPENRAILS_URL right?",
+                call="initialize",
+            ) from None
+
+    # --- each run from the scenario's start --------------------------------------------------
+
+    async def _reset(self) -> None:
+        """POST /API/RESET; without it, make sure the train stands where the run starts."""
+        answer = await self.client.send("POST", "/API/RESET", call="initialize")
+        if answer.status in NO_RESET:
+            await self._check_at_start(answer.status)
+            return
+        self.client.check(answer, "POST", "/API/RESET", call="initialize")
+        self._reverser = 1
+        self._train = None
+        if self.settings.mode == "lockstep" and answer.body.strip():
+            reply = self.client.parse(answer, "/API/RESET", StepReply, call="initialize")
+            self._train = self._train_of(reply, "/API/RESET")
+            self._map = await self._get_map()
+            self._stale = False
+
+    async def _check_at_start(self, status: int) -> None:
+        """No reset: the run starts where the train stands, which must be where this bridge
+        first found it, standing; ParticipantUnavailable saying to restart OpenRails if not.
+        The odometer and track location are unknown until the first step: 0."""
+        self._train = None
+        await self._poll()
+        assert self._train is not None and self._map is not None
+        here = (self._map.LatLon.Lat, self._map.LatLon.Lon)
+        speed = abs(self._train.locomotiveState.v)
+        if self._start_place is None:
+            self._start_place = here
+            log.warning(
+                "openrails_cannot_reset",
+                url=self.base_url,
+                detail="each run starts where the train stands; restart OpenRails between runs",
+            )
+        away = _metres_between(here, self._start_place)
+        if away > START_PLACE_TOLERANCE_M or speed > STANDSTILL_MPS:
+            raise self.client.error(
+                f"OpenRails at {self.base_url} cannot reset its simulation (POST /API/RESET "
+                f"answered {status}) and its train is not at the scenario's start ({away:.0f} m "
+                f"from where this bridge first found it, at {speed:.1f} m/s): the run would "
+                f"start where the last one ended. Restart OpenRails so that it loads the "
+                f"scenario afresh, then run again (or use a simulator that answers POST "
+                f"/API/RESET, as services/openrails-mock does)",
+                call="initialize",
+            )
 
     # --- modes -------------------------------------------------------------------------------
 
@@ -198,7 +347,7 @@ class OpenRailsAdapter(Adapter):
             )
         return n
 
-    async def _post_lockstep(self) -> Any:
+    async def _post_lockstep(self) -> Train:
         body = {
             "Controls": [
                 {"LocomotiveName": self.settings.locomotive, **self._control(t)}
@@ -207,48 +356,41 @@ class OpenRailsAdapter(Adapter):
             "Commands": [],
             "SwitchCommands": {},
         }
-        return await self._get_json("/API/CABCONTROLS", method="POST", body=body)
+        reply = await self.client.fetch("POST", "/API/CABCONTROLS", StepReply, body=body)
+        return self._train_of(reply, "/API/CABCONTROLS")
 
-    def _train_of(self, reply: Any) -> dict[str, Any]:
-        url = f"{self.base_url}/API/CABCONTROLS"
-        trains = reply.get("trains") if isinstance(reply, dict) else None
+    def _train_of(self, reply: StepReply, path: str) -> Train:
         loco = self.settings.locomotive
-        if not isinstance(trains, dict) or not isinstance(trains.get(loco), dict):
-            names = sorted(trains) if isinstance(trains, dict) else []
-            raise self._unavailable(
-                f"OpenRails at {url} answered without train '{self.settings.locomotive}' "
-                f"(trains: {names}); set OPENRAILS_BRIDGE_LOCOMOTIVE to the player train's name"
+        train = reply.trains.get(loco)
+        if train is None:
+            raise self.client.error(
+                f"OpenRails at {self.base_url}{path} answered without train '{loco}' "
+                f"(trains: {sorted(reply.trains)}); set OPENRAILS_BRIDGE_LOCOMOTIVE to the "
+                f"player train's name"
             )
-        train: dict[str, Any] = trains[self.settings.locomotive]
-        for key in ("locomotiveState", "trackLocation"):
-            if not isinstance(train.get(key), dict):
-                raise self._unavailable(f"OpenRails at {url} answered a train without '{key}'")
         return train
 
-    async def _get_map(self) -> dict[str, Any]:
-        answer = await self._get_json("/API/MAP")
-        if not isinstance(answer, dict):
-            raise self._unavailable(
-                f"OpenRails at {self.base_url}/API/MAP answered {answer!r:.80}, not an object"
-            )
-        return answer
+    async def _get_map(self) -> LatLonDirection:
+        return await self.client.fetch("GET", "/API/MAP", LatLonDirection)
 
     async def _poll(self) -> None:
         """State from the GET endpoints: stock mode, and lockstep before the first step."""
-        self._map, display = await asyncio.gather(
-            self._get_map(), self._get_json("/API/TRAINDRIVINGDISPLAY?normalText=true")
+        where, rows = await asyncio.gather(
+            self._get_map(),
+            self.client.fetch("GET", "/API/TRAINDRIVINGDISPLAY?normalText=true", DISPLAY),
         )
-        speed, reverser = _read_display(display)
+        self._map = where
+        speed, reverser = _read_display(rows)
         if reverser is not None:
             self._reverser = reverser
         v = math.copysign(speed, -1.0 if self._reverser < 0 else 1.0)
         now = wallclock.monotonic()
-        previous = self._train or {}
+        previous = self._train
         if self.settings.mode == "lockstep":
             # OpenRails reports the odometer and track location only in step replies
-            odometer = float(previous.get("locomotiveState", {}).get("distance", 0.0))
+            odometer = previous.locomotiveState.distance if previous else 0.0
             a = 0.0
-            track = previous.get("trackLocation") or _no_track()
+            track = previous.trackLocation if previous else _NO_TRACK
         else:
             a, odometer = 0.0, 0.0
             if self._last_poll is not None:
@@ -257,20 +399,18 @@ class OpenRailsAdapter(Adapter):
                 if dt > 0:
                     a = (v - v0) / dt
                     odometer += 0.5 * (abs(v0) + abs(v)) * dt
-            track = _no_track()
+            track = _NO_TRACK
         self._last_poll = (now, v, odometer)
-        heading = float(self._map.get("DirectionDeg", 0.0))
-        self._train = {
-            **previous,
-            "rotation": math.radians(heading),
-            "locomotiveState": {
-                **previous.get("locomotiveState", {}),
-                "v": v,
-                "a": a,
-                "distance": odometer,
-            },
-            "trackLocation": track,
-        }
+        self._train = Train(
+            location=previous.location if previous else _NOWHERE,
+            trackLocation=track,
+            rearTrackLocation=previous.rearTrackLocation if previous else track,
+            rotation=math.radians(where.DirectionDeg),
+            locomotiveState=LocomotiveState(
+                v=v, a=a, distance=odometer, wheelslip=False, wheelskid=False
+            ),
+            trainLength=previous.trainLength if previous else TrainLength(length=0.0),
+        )
         self._stale = False
 
     # --- controls ----------------------------------------------------------------------------
@@ -288,7 +428,7 @@ class OpenRailsAdapter(Adapter):
                 f"(it has {', '.join(sorted(self.ranges)) or 'none'})",
                 channel=channel,
             )
-        lo, hi = spec.min_value, spec.max_value
+        lo, hi = spec.MinValue, spec.MaxValue
         slack = RANGE_TOLERANCE * max(1.0, hi - lo)
         if not lo - slack <= number <= hi + slack:
             raise ChannelValueError(
@@ -305,104 +445,12 @@ class OpenRailsAdapter(Adapter):
             "Value": self._controls[type_name],
         }
 
-    async def _read_ranges(self) -> dict[str, ControlRange]:
-        listed = await self._get_json("/API/CABCONTROLS")
-        ranges: dict[str, ControlRange] = {}
-        try:
-            for item in listed:
-                name = str(item["TypeName"])
-                ranges.setdefault(
-                    name, ControlRange(name, float(item["MinValue"]), float(item["MaxValue"]))
-                )
-        except (TypeError, KeyError, ValueError) as exc:
-            raise self._unavailable(
-                f"OpenRails at {self.base_url}/API/CABCONTROLS answered a list that is not "
-                f"[{{TypeName, MinValue, MaxValue}}]: {listed!r:.120}"
-            ) from exc
+    async def _read_ranges(self) -> dict[str, ControlValue]:
+        listed = await self.client.fetch("GET", "/API/CABCONTROLS", CONTROLS, call="connect")
+        ranges: dict[str, ControlValue] = {}
+        for item in listed:
+            ranges.setdefault(item.TypeName, item)
         return ranges
-
-    # --- start-up ----------------------------------------------------------------------------
-
-    async def _wait_ready(self) -> None:
-        """Poll until OpenRails is ready, backing off 0.05 s -> 1 s, for ``ready_timeout_s``.
-
-        Lockstep: GET /API/READY answers 200. Stock OpenRails has no READY: GET
-        /API/CABCONTROLS answering 200 means a train is loaded.
-        """
-        path = "/API/READY" if self.settings.mode == "lockstep" else "/API/CABCONTROLS"
-        deadline = wallclock.monotonic() + self.settings.ready_timeout_s
-        delay, last = 0.05, "no answer"
-        while True:
-            remaining = deadline - wallclock.monotonic()
-            try:
-                limit = max(0.05, min(remaining, self.settings.request_timeout_s))
-                answer = await self._send("GET", path, deadline_s=limit)
-                if 200 <= answer.status < 300:
-                    return
-                last = f"answered {answer.status}"
-            except ParticipantUnavailable as exc:
-                cause = exc.__cause__
-                last = f"{type(cause).__name__}: {cause}" if cause and str(cause) else "no answer"
-            if wallclock.monotonic() + delay > deadline:
-                log.warning("openrails_not_ready", url=self.base_url, last=last)
-                raise self._unavailable(
-                    f"OpenRails at {self.base_url}{path} not ready within "
-                    f"{self.settings.ready_timeout_s:g} s ({last}); is OpenRails running with "
-                    f"its web server on, and is OPENRAILS_BRIDGE_OPENRAILS_URL right?",
-                    call="connect",
-                )
-            await asyncio.sleep(delay)
-            delay = min(delay * 2, 1.0)
-
-    # --- HTTP: the one place aiohttp errors and bad answers are translated ---------------------
-
-    async def _get_json(self, path: str, *, method: str = "GET", body: Any = None) -> Any:
-        answer = await self._check(method, path, body=body)
-        try:
-            return json.loads(answer.text)
-        except ValueError as exc:
-            raise self._unavailable(
-                f"OpenRails at {self.base_url}{path} answered {answer.status} with a body that "
-                f"is not JSON: {answer.text!r:.120}"
-            ) from exc
-
-    async def _check(self, method: str, path: str, *, body: Any = None) -> _Answer:
-        """The answer if 2xx; ParticipantUnavailable naming the URL otherwise."""
-        answer = await self._send(method, path, body=body)
-        if not 200 <= answer.status < 300:
-            log.warning("openrails_error", url=self.base_url, path=path, status=answer.status)
-            raise self._unavailable(
-                f"OpenRails at {self.base_url}{path} answered {answer.status} to {method}: "
-                f"{answer.text.strip()[:300] or '(no body)'}"
-            )
-        return answer
-
-    async def _send(
-        self, method: str, path: str, *, body: Any = None, deadline_s: float | None = None
-    ) -> _Answer:
-        """One request with a deadline; transport failures become ParticipantUnavailable."""
-        url = f"{self.base_url}{path}"
-        if self._session is None:
-            raise self._unavailable(f"not connected to OpenRails at {url}; connect() first")
-        limit = self._timeout if deadline_s is None else aiohttp.ClientTimeout(total=deadline_s)
-        try:
-            async with self._session.request(method, url, json=body, timeout=limit) as response:
-                return _Answer(response.status, await response.text())
-        except TimeoutError as exc:
-            total = limit.total if limit.total is not None else 0.0
-            raise self._unavailable(
-                f"OpenRails at {url} did not answer {method} within {total:g} s "
-                f"(OPENRAILS_BRIDGE_REQUEST_TIMEOUT_S)"
-            ) from exc
-        except aiohttp.ClientError as exc:
-            raise self._unavailable(
-                f"cannot reach OpenRails at {url}: {type(exc).__name__}: {exc}"
-            ) from exc
-
-    def _unavailable(self, message: str, *, call: str = "step") -> ParticipantUnavailable:
-        return ParticipantUnavailable(
-            message, participant=self.name, call=call, status="UNAVAILABLE"
-        )
 
 
 def _base_url(url: str) -> str:
@@ -411,24 +459,20 @@ def _base_url(url: str) -> str:
     return url[: -len("/API")] if url.endswith("/API") else url
 
 
-def _no_track() -> dict[str, Any]:
-    return {
-        "trackNodeIndex": 0,
-        "trackNodeLength": 0.0,
-        "trackNodeOffset": 0.0,
-        "trackVectorSectionIndex": 0,
-        "movementDirection": 1,
-    }
+def _metres_between(a: tuple[float, float], b: tuple[float, float]) -> float:
+    """Great-circle distance between two (lat, lon) in degrees."""
+    (lat1, lon1), (lat2, lon2) = (tuple(map(math.radians, p)) for p in (a, b))
+    h = math.sin((lat2 - lat1) / 2) ** 2
+    h += math.cos(lat1) * math.cos(lat2) * math.sin((lon2 - lon1) / 2) ** 2
+    return 2 * EARTH_RADIUS_M * math.asin(min(1.0, math.sqrt(h)))
 
 
-def _read_display(rows: Any) -> tuple[float, int | None]:
+def _read_display(rows: list[DisplayRow]) -> tuple[float, int | None]:
     """|speed| [m/s] and the reverser (1, 0, -1 or None) from TRAINDRIVINGDISPLAY rows."""
     speed, reverser = 0.0, None
-    for row in rows if isinstance(rows, list) else []:
-        if not isinstance(row, dict):
-            continue
-        label = str(row.get("FirstCol", "")).strip().lower()
-        text = str(row.get("LastCol", ""))
+    for row in rows:
+        label = row.FirstCol.strip().lower()
+        text = row.LastCol
         if label in ("speed", "sped") and (match := _SPEED.search(text)):
             speed = abs(float(match.group(1))) * _SPEED_UNITS[match.group(2).lower()]
         elif label in ("direction", "dirc"):

@@ -31,8 +31,11 @@ class BridgeSettings(ParticipantSettings):
     """Stock: simulated seconds per wall-clock second of the OpenRails run."""
     request_timeout_s: float = Field(default=5.0, gt=0)
     """Deadline of every HTTP request to OpenRails [s]."""
-    ready_timeout_s: float = Field(default=60.0, ge=0)
-    """How long start-up waits for OpenRails to be ready [s]."""
+    ready_timeout_s: float = Field(default=10.0, ge=0)
+    """How long Initialize waits for OpenRails to be ready before UNAVAILABLE [s]; the
+    bridge itself starts at once and reports OpenRails' state through health."""
+    max_body_bytes: int = Field(default=1024 * 1024, ge=1024)
+    """Largest answer read from OpenRails; a bigger one is refused without reading the rest."""
     channels: Path | None = None
     """Channel mapping (TOML); unset: the packaged ``channels.toml``."""
     locomotive: str = "PLAYER"

@@ -31,6 +31,13 @@ def _parse(argv: list[str] | None) -> MockConfig:
     parser.add_argument("--railml", type=Path)
     parser.add_argument("--loading-delay-s", type=float, dest="loading_delay_s")
     parser.add_argument("--start-time-s", type=float, dest="start_time_s")
+    parser.add_argument(
+        "--no-reset",
+        action="store_false",
+        dest="reset",
+        default=None,
+        help="answer POST /API/RESET with 404, as OpenRails' builds do",
+    )
     args = parser.parse_args(argv)
     overrides: dict[str, Any] = {k: v for k, v in vars(args).items() if v is not None}
     return MockConfig(**overrides)

@@ -3,12 +3,15 @@
 Lockstep mode (OpenRails' build for simulation): GET /API/READY gates start-up, and each
 POST /API/CABCONTROLS applies the controls, advances one fixed step and returns the trains.
 Stock mode (upstream OpenRails): POST /API/CABCONTROLS takes a plain list and returns no body;
-the simulation follows the wall clock times ``speedup``. Every request the mock cannot take
-gets 400 with ``{"error": "..."}`` and leaves the simulation as it was.
+the simulation follows the wall clock times ``speedup``. POST /API/RESET (the mock's own
+extension, both modes) puts the simulation back to the scenario's start. The JSON shapes are
+the simulation build's (README: "Endpoints"). Every request the mock cannot take gets 400 with
+``{"error": "..."}`` and leaves the simulation as it was.
 """
 
 from __future__ import annotations
 
+import itertools
 import json
 import math
 import time
@@ -26,6 +29,7 @@ from .simulation import (
     Simulation,
     Snapshot,
     TrackLocation,
+    WorldPosition,
 )
 
 Clock = Callable[[], float]
@@ -93,6 +97,8 @@ def create_app(
         start_time_s=config.start_time_s,
         start_distance_m=config.start_distance_m,
         train_name=config.train_name,
+        origin_tile=(config.origin_tile_x, config.origin_tile_z),
+        track_nodes_reversed=config.track_nodes_reversed,
     )
     server = MockServer(config, simulation, clock)
     app = web.Application(middlewares=[_errors, _pacing])
@@ -107,9 +113,12 @@ def create_app(
         app.router.add_post("/API/CABCONTROLS", post_cabcontrols_lockstep)
     else:
         app.router.add_post("/API/CABCONTROLS", post_cabcontrols_stock)
+    if config.reset:
+        app.router.add_post("/API/RESET", post_reset)
     app.router.add_get("/API/CABCONTROLS", get_cabcontrols)
     app.router.add_get("/API/TIME", get_time)
     app.router.add_get("/API/MAP", get_map)
+    app.router.add_get("/API/MAP/INIT", get_map_init)
     app.router.add_get("/API/TRAININFO", get_traininfo)
     app.router.add_get("/API/TRAINDRIVINGDISPLAY", get_traindrivingdisplay)
     return app
@@ -172,7 +181,21 @@ async def post_cabcontrols_lockstep(request: web.Request) -> web.Response:
     simulation = server.simulation
     simulation.apply(posts)
     simulation.advance(float(step_ms) / 1000.0)
-    return web.json_response({"trains": {simulation.train_name: _train(simulation.snapshot())}})
+    return web.json_response(_state(simulation))
+
+
+async def post_reset(request: web.Request) -> web.Response:
+    """A mock extension: back to the scenario's initial state; answers like a step would.
+
+    The body is empty or ``{}``. In stock mode the wall clock restarts from now.
+    """
+    server = request.app[SERVER]
+    text = await request.text()
+    if text.strip() and await _json_body(request) != {}:
+        raise BadRequest("POST /API/RESET takes no options: send no body or {}")
+    server.simulation.reset()
+    server.last_wall_s = server.clock()
+    return web.json_response(_state(server.simulation))
 
 
 async def post_cabcontrols_stock(request: web.Request) -> web.Response:
@@ -210,6 +233,45 @@ async def get_map(request: web.Request) -> web.Response:
         {
             "LatLon": {"Lat": snap.latitude_deg, "Lon": snap.longitude_deg},
             "DirectionDeg": snap.heading_deg,
+        }
+    )
+
+
+TYPE_OF_LOCOMOTIVE = "diesel"
+"""MAP/INIT's locomotive type (steam, diesel or electric); the mock's consists are diesel."""
+MAP_POINT_SPACING_M = 50.0
+"""Largest distance between two track points of MAP/INIT."""
+TRACK_POINT = 0
+"""OpenRails' ``TypeOfPointOnApiMap.Track``, serialized as its number."""
+
+
+async def get_map_init(request: web.Request) -> web.Response:
+    """The route as points and lines in lat/lon, with its bounds (OpenRails' ``InfoApiMap``)."""
+    route = request.app[SERVER].simulation.route
+    distances: list[float] = []
+    for section in route.sections:
+        count = max(1, math.ceil(section.length / MAP_POINT_SPACING_M))
+        step = section.length / count
+        distances += [section.start_distance + i * step for i in range(count)]
+    distances.append(route.length)
+    latlons = [
+        {"Lat": p.latitude_deg, "Lon": p.longitude_deg} for p in map(route.position, distances)
+    ]
+    # OpenRails puts track points first in the list, each before the one added earlier
+    points = [
+        {"LatLon": ll, "Color": "red", "TypeOfPointOnApiMap": TRACK_POINT, "Name": "track"}
+        for ll in reversed(latlons)
+    ]
+    lines = [{"LatLonFrom": a, "LatLonTo": b} for a, b in itertools.pairwise(latlons)]
+    return web.json_response(
+        {
+            "TypeOfLocomotive": TYPE_OF_LOCOMOTIVE,
+            "PointOnApiMapList": points,
+            "LineOnApiMapList": lines,
+            "LatMin": min(ll["Lat"] for ll in latlons),
+            "LatMax": max(ll["Lat"] for ll in latlons),
+            "LonMin": min(ll["Lon"] for ll in latlons),
+            "LonMax": max(ll["Lon"] for ll in latlons),
         }
     )
 
@@ -300,7 +362,7 @@ def _control_post(item: object, *, with_locomotive: bool) -> ControlPost:
     )
 
 
-def _track_location(loc: TrackLocation) -> dict[str, float | int]:
+def _track_location(loc: TrackLocation) -> dict[str, float | int | str]:
     return {
         "trackNodeIndex": loc.track_node_index,
         "trackNodeLength": loc.track_node_length,
@@ -310,12 +372,28 @@ def _track_location(loc: TrackLocation) -> dict[str, float | int]:
     }
 
 
+def _world(position: WorldPosition) -> dict[str, float | int]:
+    return {
+        "tileX": position.tile_x,
+        "tileZ": position.tile_z,
+        "x": position.x,
+        "y": position.y,
+        "z": position.z,
+    }
+
+
+def _state(simulation: Simulation) -> dict[str, Any]:
+    """The lockstep reply: every train (the mock has one) and the camera sensors (none)."""
+    return {"trains": {simulation.train_name: _train(simulation.snapshot())}, "CameraSensors": {}}
+
+
 def _train(snap: Snapshot) -> dict[str, Any]:
     return {
-        "location": {"x": snap.x_m, "y": snap.y_m, "z": snap.z_m},
+        "location": _world(snap.lead),
         "trackLocation": _track_location(snap.front),
         "rearTrackLocation": _track_location(snap.rear),
-        "rotation": math.radians(snap.heading_deg),
+        # the front's Traveller.Rotation.Y: the compass heading it faces, wrapped to +-pi
+        "rotation": math.remainder(math.radians(snap.heading_deg), math.tau),
         "locomotiveState": {
             "v": snap.state.speed_mps,
             "a": snap.state.acceleration_mps2,
@@ -324,4 +402,5 @@ def _train(snap: Snapshot) -> dict[str, Any]:
             "wheelskid": False,
         },
         "trainLength": {"length": snap.length_m},
+        "carPositions": {"Front": _world(snap.first_car), "Rear": _world(snap.last_car)},
     }

@@ -46,6 +46,8 @@ class ConsistOverrides(BaseModel):
     """Force of the dynamic brake at full application."""
     rotating_mass_fraction: float | None = Field(default=None, ge=0)
     """Rotating masses as a fraction of the mass."""
+    car_count: int | None = Field(default=None, ge=1)
+    """Cars of equal length (the first one is the lead locomotive)."""
 
 
 class MockConfig(BaseSettings):
@@ -75,6 +77,16 @@ class MockConfig(BaseSettings):
     """Lockstep mode: GET /API/READY answers 425 for this long after start-up."""
     train_name: str = "PLAYER"
     """Name of the train in the lockstep API (``LocomotiveName``, key of ``trains``)."""
+    origin_tile_x: int = -5354
+    """World tile whose centre is the route's origin (east); the default is the start tile
+    OpenRails' simulation client assumes, so its local coordinates match the route's."""
+    origin_tile_z: int = 14849
+    """World tile whose centre is the route's origin (north)."""
+    track_nodes_reversed: bool = False
+    """The route's track nodes are laid against the direction the train faces, as in a route
+    drawn from the other end: ``movementDirection`` is ``"Backward"``."""
+    reset: bool = True
+    """Answer POST /API/RESET (a mock extension); false: 404, like OpenRails' builds."""
     consist_preset: str = "br642"
     """Consist the train starts from (see ``physics.PRESETS``)."""
     consist: ConsistOverrides = ConsistOverrides()

@@ -58,6 +58,8 @@ class Consist:
     """Retarding force of the dynamic (hydrodynamic/electric) brake at full application."""
     rotating_mass_fraction: float
     """Rotating masses as a fraction of the mass: m_eff = mass * (1 + fraction)."""
+    car_count: int = 1
+    """Cars of equal length; the API reports the first and last car's centres."""
 
     @property
     def effective_mass_kg(self) -> float:
@@ -95,6 +97,7 @@ DB_CLASS_642 = Consist(
     max_service_brake_decel_mps2=1.0,
     max_dynamic_brake_force_n=60_000.0,
     rotating_mass_fraction=0.08,
+    car_count=2,
 )
 """The Erzgebirge line's regional train: 2 x 275 kW diesel-hydraulic, about 500 kW at the wheel."""
 

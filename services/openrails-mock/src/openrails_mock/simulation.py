@@ -14,6 +14,7 @@ import dataclasses
 import math
 from collections.abc import Iterable
 from dataclasses import dataclass
+from typing import Literal
 
 from coupler.errors import CouplerError
 
@@ -21,6 +22,8 @@ from .physics import Consist, Controls, TrainDynamics, TrainState
 from .route import Route
 
 SECONDS_PER_DAY = 86400.0
+TILE_SIZE_M = 2048.0
+"""Side of an OpenRails (MSTS) world tile; positions are a tile and an offset from its centre."""
 ELEVATION_SPACING_M = 10.0
 """Spacing of the samples of the elevation profile integrated from the gradient."""
 
@@ -61,6 +64,10 @@ class ControlPost:
     locomotive_name: str | None = None
 
 
+TravellerDirection = Literal["Forward", "Backward"]
+"""OpenRails' ``Traveller.TravellerDirection``: the way the train faces along a track node."""
+
+
 @dataclass(frozen=True, kw_only=True)
 class TrackLocation:
     """A route distance in OpenRails' track terms (see the README for the mapping)."""
@@ -68,8 +75,20 @@ class TrackLocation:
     track_node_index: int
     track_node_length: float
     track_node_offset: float
+    """Distance into the node, counted in the direction the train faces."""
     track_vector_section_index: int
-    movement_direction: int
+    movement_direction: TravellerDirection
+
+
+@dataclass(frozen=True, kw_only=True)
+class WorldPosition:
+    """A point in OpenRails' world frame: 2048 m tiles, x east, y up, z north within a tile."""
+
+    tile_x: int
+    tile_z: int
+    x: float
+    y: float
+    z: float
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -84,15 +103,18 @@ class Snapshot:
     latitude_deg: float
     longitude_deg: float
     heading_deg: float
-    x_m: float
-    y_m: float
-    z_m: float
+    """Compass heading the train faces (towards increasing route distance)."""
+    lead: WorldPosition
+    """Centre of the lead locomotive (the first car)."""
+    first_car: WorldPosition
+    last_car: WorldPosition
     gradient_per_mille: float
     length_m: float
 
 
 class Simulation:
-    """One train on one route; ``advance`` moves time on, ``apply`` changes the controls."""
+    """One train on one route; ``advance`` moves time on, ``apply`` changes the controls,
+    ``reset`` puts everything back where the scenario starts."""
 
     def __init__(
         self,
@@ -102,6 +124,8 @@ class Simulation:
         start_time_s: float = 8 * 3600.0,
         start_distance_m: float | None = None,
         train_name: str = "PLAYER",
+        origin_tile: tuple[int, int] = (0, 0),
+        track_nodes_reversed: bool = False,
     ) -> None:
         if route.length < consist.length_m:
             raise ValueError(
@@ -111,18 +135,25 @@ class Simulation:
         self.route = route
         self.consist = consist
         self.train_name = train_name
-        self.elapsed_s = 0.0
+        self.origin_tile = origin_tile
+        self.facing: TravellerDirection = "Backward" if track_nodes_reversed else "Forward"
         self._start_time_s = start_time_s
-        self.controls = Controls()
-        position = consist.length_m if start_distance_m is None else start_distance_m
-        self.dynamics = TrainDynamics(
-            consist,
-            route.gradient,
-            position_m=position,
-            min_position_m=consist.length_m,
-            max_position_m=route.length,
-        )
+        self._start_position_m = consist.length_m if start_distance_m is None else start_distance_m
         self._elevation = _ElevationProfile(route)
+        self.reset()
+
+    def reset(self) -> None:
+        """Back to the scenario's initial state: start time and place, standstill, controls
+        at rest (reverser forward), odometer 0."""
+        self.elapsed_s = 0.0
+        self.controls = Controls()
+        self.dynamics = TrainDynamics(
+            self.consist,
+            self.route.gradient,
+            position_m=self._start_position_m,
+            min_position_m=self.consist.length_m,
+            max_position_m=self.route.length,
+        )
 
     @property
     def clock_time_s(self) -> float:
@@ -157,33 +188,53 @@ class Simulation:
         """The train's state in the API's terms."""
         state = self.dynamics.state
         front = state.position_m
-        rear = front - self.consist.length_m
-        forward = state.speed_mps > 0.0 or (state.speed_mps == 0.0 and self.controls.direction >= 0)
+        length = self.consist.length_m
+        rear = front - length
+        car = length / self.consist.car_count
         point = self.route.position(front)
         return Snapshot(
             clock_time_s=self.clock_time_s,
             state=state,
             controls=self.controls,
-            front=self._track_location(front, forward),
-            rear=self._track_location(rear, forward),
+            front=self._track_location(front),
+            rear=self._track_location(rear),
             latitude_deg=point.latitude_deg,
             longitude_deg=point.longitude_deg,
             heading_deg=point.heading_deg,
-            x_m=point.x_m,
-            y_m=point.y_m,
-            z_m=self._elevation.at(front),
-            gradient_per_mille=self.route.gradient(front - self.consist.length_m / 2.0),
-            length_m=self.consist.length_m,
+            lead=self._world(front - car / 2.0),
+            first_car=self._world(front - car / 2.0),
+            last_car=self._world(rear + car / 2.0),
+            gradient_per_mille=self.route.gradient(front - length / 2.0),
+            length_m=length,
         )
 
-    def _track_location(self, distance: float, forward: bool) -> TrackLocation:
+    def _track_location(self, distance: float) -> TrackLocation:
         index, offset = self.route.locate(distance)
+        # The train faces increasing route distance; on a node laid the other way it faces
+        # "Backward", and OpenRails counts the offset from the node's far end, which is again
+        # the distance from the node's end the train came in at: the same number.
         return TrackLocation(
             track_node_index=index + 1,
             track_node_length=self.route.sections[index].length,
             track_node_offset=offset,
             track_vector_section_index=0,
-            movement_direction=1 if forward else 0,
+            movement_direction=self.facing,
+        )
+
+    def _world(self, distance: float) -> WorldPosition:
+        """The route point at ``distance`` in tiles; the local frame's origin is the centre of
+        ``origin_tile``."""
+        point = self.route.position(distance)
+        east = self.origin_tile[0] * TILE_SIZE_M + point.x_m
+        north = self.origin_tile[1] * TILE_SIZE_M + point.y_m
+        tile_x = math.floor(east / TILE_SIZE_M + 0.5)
+        tile_z = math.floor(north / TILE_SIZE_M + 0.5)
+        return WorldPosition(
+            tile_x=tile_x,
+            tile_z=tile_z,
+            x=east - tile_x * TILE_SIZE_M,
+            y=self._elevation.at(distance),
+            z=north - tile_z * TILE_SIZE_M,
         )
 
     def _applied(self, controls: Controls, post: ControlPost) -> Controls:
