@@ -46,10 +46,13 @@ track-fmu: sync $(FMU_DIR)/TrackBalises.fmu
 $(FMU_DIR)/TrackBalises.fmu: $(TRACK_FMU_INPUTS)
 	$(UV) run --frozen python -m balise_fmu.build --railml $(RAILML) --out $@
 
-# Leaflet from npm into the map server's static files (no CDN at run time).
+# Leaflet (the map) and uPlot (`coupler plot -o FILE.html`) from npm into static files (no CDN
+# at run time).
 assets:
 	cd services/mapserver && npm ci --no-audit --no-fund --loglevel=error
 	$(UV) run --frozen python -m mapserver.assets
+	cd services/orchestrator && npm ci --no-audit --no-fund --loglevel=error
+	$(UV) run --frozen python -m coupler_orchestrator.assets
 
 # Debian's Chromium for the browser test (root only; the test skips without it).
 browser:
@@ -64,12 +67,13 @@ test: setup browser
 	$(UV) run --frozen pytest
 
 # The railway scenario end to end on local processes (no Docker). ARGS=--exit to not wait.
+# Ctrl-C (exit 130) is the way to stop it, not an error of make's.
 demo: setup
-	$(UV) run --frozen coupler fleet scenarios/railway/fleet.toml $(ARGS)
+	$(UV) run --frozen coupler fleet scenarios/railway/fleet.toml $(ARGS) || [ $$? -eq 130 ]
 
 # The smallest scenario: two FMUs and the example gRPC participant.
 demo-example: setup
-	$(UV) run --frozen coupler fleet examples/ramp-gain/fleet.toml $(ARGS)
+	$(UV) run --frozen coupler fleet examples/ramp-gain/fleet.toml $(ARGS) || [ $$? -eq 130 ]
 
 bench: setup
 	$(UV) run --frozen python benchmarks/step_overhead.py

@@ -1,7 +1,7 @@
 """Step overhead of the protocol, measured in one run: unary DoStep vs the StepStream session,
 and an FMU in-process vs the same FMU behind the generic gRPC host.
 
-    uv run python benchmarks/step_overhead.py [--steps N]
+    .venv/bin/python benchmarks/step_overhead.py [--steps N]
 
 Prints mean microseconds per step and the ratios. Not a test: nothing here asserts a time.
 """

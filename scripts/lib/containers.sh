@@ -132,14 +132,11 @@ PY
 # The railway scenario as local processes with the check's ports, unpaced, into $1.
 local_run() {
   local out=$1
-  # The fleet file with the check's ports (the SSD takes them from the environment), run
-  # unpaced like the containers (fleet.toml paces the demo at 20x real time).
-  sed -e "s/\b2150\b/$MOCK_PORT/g; s/\b50061\b/$BRIDGE_PORT/g; s/\b50062\b/$BALISE_PORT/g" \
-      -e "s/\b50071\b/$MAP_PORT/g; s/\b8080\b/$MAP_HTTP_PORT/g" \
-      scenarios/railway/fleet.toml >"$OUT/fleet.toml"
-  "$UV" run --frozen python scripts/fleet.py "$OUT/fleet.toml" --exit --realtime-factor 0 \
-      --out "$out" ||
-    { mkdir -p "$OUT/local-logs" && cp build/logs/*.log "$OUT/local-logs/" 2>/dev/null; exit 1; }
+  # The fleet file takes the check's ports from the exported *_PORT variables (as the SSD
+  # does); run unpaced like the containers (fleet.toml paces the demo at 20x real time).
+  "$UV" run --frozen python scripts/fleet.py scenarios/railway/fleet.toml --exit \
+      --realtime-factor 0 --out "$out" ||
+    { mkdir -p "$OUT/local-logs" && cp -r build/logs/. "$OUT/local-logs/" 2>/dev/null; exit 1; }
 }
 
 # Local and container results: the same balise sequence, and whether byte-identical.

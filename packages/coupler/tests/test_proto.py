@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[3]
+PATH = os.environ.get("PATH", "")
 GENERATED = ROOT / "packages" / "coupler" / "src" / "coupler" / "v1"
 
 
@@ -27,6 +29,8 @@ def test_generated_code_is_fresh(tmp_path: Path) -> None:
         cwd=ROOT,
         check=True,
         capture_output=True,
+        # the protoc-gen-mypy plugins beside this interpreter, also when the venv is not active
+        env={**os.environ, "PATH": os.pathsep.join([str(Path(sys.executable).parent), PATH])},
     )
     fresh = {p.name: p.read_bytes() for p in (tmp_path / "coupler" / "v1").iterdir()}
     committed = {p.name: p.read_bytes() for p in GENERATED.iterdir() if p.name in fresh}

@@ -4,7 +4,7 @@ The line Annaberg-Buchholz unt Bf - Schwarzenberg (Erzgebirge): station position
 public geography; between stations the route is a smooth made-up meander whose amplitude is
 scaled so the line is about 26 km long. Positions (pos/absPos) are computed with the
 library's own track model, so the file is self-consistent. Not surveyed; not for operation.
-Run: uv run --frozen python packages/railway/tools/make_annaberg_schwarzenberg.py
+Run: .venv/bin/python packages/railway/tools/make_annaberg_schwarzenberg.py
 """
 
 from __future__ import annotations

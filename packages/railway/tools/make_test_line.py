@@ -2,7 +2,7 @@
 
 The geometry is made in the library's LocalFrame around the first point and converted with
 its exact inverse, so the model's lengths are known exactly: 1000 m and 250*pi m.
-Run: uv run --frozen python packages/railway/tools/make_test_line.py
+Run: .venv/bin/python packages/railway/tools/make_test_line.py
 """
 
 from __future__ import annotations

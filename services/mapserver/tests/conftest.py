@@ -242,3 +242,40 @@ def stalled_socket(port: int, path: str = "/api/events") -> socket.socket:
     sock.setblocking(False)
     sock.sendall(f"GET {path} HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n".encode())
     return sock
+
+
+CHROMIUM = Path("/usr/bin/chromium")
+"""Debian's Chromium; the browser tests skip without it."""
+BROWSER_ARGS = [
+    "--headless=new",
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+    "--no-first-run",
+    "--disable-quic",
+]
+
+
+@pytest.fixture
+async def browser() -> AsyncIterator[Any]:
+    """Headless Chromium driven by Playwright."""
+    from playwright.async_api import async_playwright
+
+    async with async_playwright() as playwright:
+        launched = await playwright.chromium.launch(
+            executable_path=str(CHROMIUM), args=BROWSER_ARGS
+        )
+        try:
+            yield launched
+        finally:
+            await launched.close()
+
+
+def page_errors(page: Any) -> list[str]:
+    """Script errors and console errors of ``page``, collected from now on."""
+    errors: list[str] = []
+    page.on("pageerror", lambda exc: errors.append(str(exc)))
+    page.on("console", lambda m: errors.append(m.text) if m.type == "error" else None)
+    return errors

@@ -13,20 +13,9 @@ from typing import Any
 
 import pytest
 
-from .conftest import EXPECTED_IDS, REPO, MapService, Run
+from .conftest import CHROMIUM, EXPECTED_IDS, REPO, MapService, Run, page_errors
 
-CHROMIUM = Path("/usr/bin/chromium")
 ARTIFACT = REPO / "test-artifacts" / "mapserver.png"
-ARGS = [
-    "--headless=new",
-    "--no-sandbox",
-    "--disable-gpu",
-    "--disable-background-networking",
-    "--disable-component-update",
-    "--disable-sync",
-    "--no-first-run",
-    "--disable-quic",
-]
 
 pytestmark = pytest.mark.skipif(
     not CHROMIUM.exists(),
@@ -34,73 +23,62 @@ pytestmark = pytest.mark.skipif(
 )
 
 
-async def test_train_moves_and_readings_appear_in_chromium(service: MapService, run: Run) -> None:
-    from playwright.async_api import async_playwright
+async def test_train_moves_and_readings_appear_in_chromium(
+    service: MapService, run: Run, browser: Any
+) -> None:
+    page = await browser.new_page(viewport={"width": 1280, "height": 760})
+    errors = page_errors(page)
+    outside: list[str] = []
 
-    async with async_playwright() as playwright:
-        browser = await playwright.chromium.launch(executable_path=str(CHROMIUM), args=ARGS)
-        try:
-            page = await browser.new_page(viewport={"width": 1280, "height": 760})
-            errors: list[str] = []
-            page.on("pageerror", lambda exc: errors.append(str(exc)))
-            page.on("console", lambda m: errors.append(m.text) if m.type == "error" else None)
-            outside: list[str] = []
+    def only_local(request: Any) -> None:
+        if not request.url.startswith(service.url):
+            outside.append(request.url)
 
-            def only_local(request: Any) -> None:
-                if not request.url.startswith(service.url):
-                    outside.append(request.url)
+    page.on("request", only_local)
+    await page.goto(service.url)
+    await page.wait_for_function("window.coupler && window.coupler.ready")
+    assert await page.locator("#map.no-tiles").count() == 1  # no tile server configured
+    assert await page.locator("path.leaflet-interactive").count() >= 8  # line + balises
 
-            page.on("request", only_local)
-            await page.goto(service.url)
-            await page.wait_for_function("window.coupler && window.coupler.ready")
-            assert await page.locator("#map.no-tiles").count() == 1  # no tile server configured
-            assert await page.locator("path.leaflet-interactive").count() >= 8  # line + balises
+    await run.start()
+    await run.steps(8, pace_s=0.05)  # 200 m: 101 and 102 passed
+    await page.wait_for_selector("#train")
+    await page.wait_for_function("window.coupler.readingIds().length >= 2")
+    early = await page.evaluate("window.coupler.trainLatLng()")
+    early_box = await page.locator("#train").bounding_box()
 
-            await run.start()
-            await run.steps(8, pace_s=0.05)  # 200 m: 101 and 102 passed
-            await page.wait_for_selector("#train")
-            await page.wait_for_function("window.coupler.readingIds().length >= 2")
-            early = await page.evaluate("window.coupler.trainLatLng()")
-            early_box = await page.locator("#train").bounding_box()
+    await run.to_end(pace_s=0.02)
+    await run.participant.terminate("stop time reached")
+    await page.wait_for_function(f"window.coupler.readingIds().length >= {len(EXPECTED_IDS)}")
+    await page.wait_for_selector("#run-status.ended")
+    late = await page.evaluate("window.coupler.trainLatLng()")
+    late_box = await page.locator("#train").bounding_box()
 
-            await run.to_end(pace_s=0.02)
-            await run.participant.terminate("stop time reached")
-            await page.wait_for_function(
-                f"window.coupler.readingIds().length >= {len(EXPECTED_IDS)}"
-            )
-            await page.wait_for_selector("#run-status.ended")
-            late = await page.evaluate("window.coupler.trainLatLng()")
-            late_box = await page.locator("#train").bounding_box()
+    assert (early["lat"], early["lng"]) != (late["lat"], late["lng"])
+    end = run.infrastructure.model.position(run.length)
+    assert late["lat"] == pytest.approx(end.latitude_deg, abs=1e-7)
+    assert late["lng"] == pytest.approx(end.longitude_deg, abs=1e-7)
+    assert early_box is not None and late_box is not None
+    moved = abs(late_box["x"] - early_box["x"]) + abs(late_box["y"] - early_box["y"])
+    assert moved > 50, f"train marker moved only {moved:.1f} px on screen"
 
-            assert (early["lat"], early["lng"]) != (late["lat"], late["lng"])
-            end = run.infrastructure.model.position(run.length)
-            assert late["lat"] == pytest.approx(end.latitude_deg, abs=1e-7)
-            assert late["lng"] == pytest.approx(end.longitude_deg, abs=1e-7)
-            assert early_box is not None and late_box is not None
-            moved = abs(late_box["x"] - early_box["x"]) + abs(late_box["y"] - early_box["y"])
-            assert moved > 50, f"train marker moved only {moved:.1f} px on screen"
+    ids = await page.eval_on_selector_all(
+        "#readings tbody tr", "rows => rows.map(r => Number(r.dataset.baliseId))"
+    )
+    assert ids == EXPECTED_IDS
+    assert await page.locator("#run-id").text_content() == "test-run"
+    assert errors == []
+    assert outside == [], "the page fetched something from outside the map server"
 
-            ids = await page.eval_on_selector_all(
-                "#readings tbody tr", "rows => rows.map(r => Number(r.dataset.baliseId))"
-            )
-            assert ids == EXPECTED_IDS
-            assert await page.locator("#run-id").text_content() == "test-run"
-            assert errors == []
-            assert outside == [], "the page fetched something from outside the map server"
+    ARTIFACT.parent.mkdir(parents=True, exist_ok=True)
+    await page.screenshot(path=str(ARTIFACT), full_page=True)
+    copy = Path(tempfile.gettempdir()) / "mapserver.png"
+    shutil.copyfile(ARTIFACT, copy)
+    print(f"screenshot: {ARTIFACT} and {copy}")
 
-            ARTIFACT.parent.mkdir(parents=True, exist_ok=True)
-            await page.screenshot(path=str(ARTIFACT), full_page=True)
-            copy = Path(tempfile.gettempdir()) / "mapserver.png"
-            shutil.copyfile(ARTIFACT, copy)
-            print(f"screenshot: {ARTIFACT} and {copy}")
-
-            # a second browser joining now gets the whole run at once
-            other = await browser.new_page()
-            await other.goto(service.url)
-            await other.wait_for_function(
-                f"window.coupler.readingIds().length === {len(EXPECTED_IDS)}"
-            )
-            assert await other.evaluate("window.coupler.readingIds()") == EXPECTED_IDS
-            await asyncio.sleep(0)
-        finally:
-            await browser.close()
+    # a second browser joining now gets the whole run at once
+    other = await browser.new_page()
+    await other.goto(service.url)
+    await other.wait_for_function(f"window.coupler.readingIds().length === {len(EXPECTED_IDS)}")
+    assert await other.evaluate("window.coupler.readingIds()") == EXPECTED_IDS
+    await asyncio.sleep(0)

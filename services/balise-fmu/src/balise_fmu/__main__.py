@@ -68,7 +68,7 @@ def main(argv: list[str] | None = None) -> None:
     except (FileNotFoundError, FmuBuildError, RailMLError) as exc:
         sys.exit(
             f"balise-fmu: {exc}\n(build the TrackBalises FMU with "
-            f"'uv run python -m balise_fmu.build --railml FILE --out {DEFAULT_FMU}')"
+            f"'.venv/bin/python -m balise_fmu.build --railml FILE --out {DEFAULT_FMU}')"
         )
     participant = FmuParticipant(path, name=settings.name)
 

@@ -6,10 +6,9 @@ The page loads Leaflet from the server's own static files, never from a CDN. ``n
 
 from __future__ import annotations
 
-import argparse
-import shutil
-import sys
 from pathlib import Path
+
+from coupler import vendor as vendor_files
 
 STATIC = Path(__file__).parent / "static"
 VENDOR = STATIC / "vendor" / "leaflet"
@@ -18,43 +17,22 @@ NODE_MODULES = Path(__file__).resolve().parents[2] / "node_modules"
 REQUIRED = ("leaflet.js", "leaflet.css", "images")
 SETUP_HINT = (
     "run `make setup` (or: cd services/mapserver && npm ci --no-audit --no-fund "
-    "&& uv run python -m mapserver.assets)"
+    "&& .venv/bin/python -m mapserver.assets)"
 )
 
 
 def missing(vendor: Path | None = None) -> list[str]:
     """The Leaflet files absent from ``vendor`` (default: ours); empty when the page can work."""
-    vendor = VENDOR if vendor is None else vendor
-    return [name for name in REQUIRED if not (vendor / name).exists()]
+    return vendor_files.missing(VENDOR if vendor is None else vendor, REQUIRED)
 
 
 def copy_leaflet(node_modules: Path = NODE_MODULES, vendor: Path = VENDOR) -> Path:
     """Copy leaflet.js, leaflet.css and images/ from ``node_modules/leaflet/dist``."""
-    dist = node_modules / "leaflet" / "dist"
-    absent = [name for name in REQUIRED if not (dist / name).exists()]
-    if absent:
-        raise FileNotFoundError(
-            f"{dist} lacks {', '.join(absent)}: run `npm ci` in services/mapserver first"
-        )
-    vendor.mkdir(parents=True, exist_ok=True)
-    for name in REQUIRED:
-        source, target = dist / name, vendor / name
-        if source.is_dir():
-            shutil.copytree(source, target, dirs_exist_ok=True)
-        else:
-            shutil.copy2(source, target)
-    return vendor
+    return vendor_files.copy(node_modules / "leaflet" / "dist", REQUIRED, vendor)
 
 
 def main(argv: list[str] | None = None) -> None:
-    parser = argparse.ArgumentParser(prog="python -m mapserver.assets", description=__doc__)
-    parser.add_argument("--node-modules", type=Path, default=NODE_MODULES)
-    args = parser.parse_args(argv)
-    try:
-        target = copy_leaflet(args.node_modules)
-    except FileNotFoundError as exc:
-        sys.exit(f"mapserver.assets: {exc}")
-    print(f"Leaflet copied to {target}")
+    vendor_files.command("python -m mapserver.assets", "Leaflet", copy_leaflet, NODE_MODULES, argv)
 
 
 if __name__ == "__main__":

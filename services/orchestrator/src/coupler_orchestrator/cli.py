@@ -1,25 +1,34 @@
-"""The ``coupler`` command: run, validate, describe, fleet."""
+"""The ``coupler`` command: run, validate, describe, fleet.
+
+Exit codes: 0 the run completed (or a participant ended it early: ``terminated``; or Ctrl-C
+stopped a fleet's services after its run completed), 1 any problem (bad input, a participant
+failing: ``failed``), 2 a wrong command line, 130 interrupted (Ctrl-C or SIGTERM during a run:
+``aborted``, the rows so far kept).
+"""
 
 from __future__ import annotations
 
 import argparse
 import asyncio
+import re
 import signal
 import sys
 from collections.abc import Coroutine, Sequence
+from dataclasses import replace
 from pathlib import Path
 from typing import Any, TextIO
 
 from coupler.channels import Description
 from coupler.client import RemoteParticipant
-from coupler.errors import CouplerError, ValidationError
+from coupler.errors import CouplerError
 from coupler.fmu import FmuParticipant
 from coupler.logs import configure_logging
 from coupler.participant import Participant
 from coupler.security import ClientSecurity
 from coupler_orchestrator.fleet import Fleet, FleetSpec
-from coupler_orchestrator.observer import Observer
+from coupler_orchestrator.observer import Observer, RunEnd, RunInfo
 from coupler_orchestrator.options import Algorithm, RunOptions
+from coupler_orchestrator.plot import plot
 from coupler_orchestrator.progress import ProgressBar, ProgressLines
 from coupler_orchestrator.runner import run_scenario, validate_scenario
 
@@ -31,6 +40,13 @@ def parser() -> argparse.ArgumentParser:
         prog="coupler", description="Co-simulation of FMUs and gRPC participants from an SSP file."
     )
     top.add_argument("--log-level", default="WARNING", help="DEBUG, INFO, WARNING (default)")
+    top.add_argument(
+        "--log-format",
+        choices=["auto", "console", "json"],
+        default="auto",
+        help="log lines for people (console) or machines (json); default: console on a "
+        "terminal, else json",
+    )
     commands = top.add_subparsers(dest="command", required=True)
 
     run = commands.add_parser("run", help="run a scenario and record results")
@@ -82,6 +98,16 @@ def parser() -> argparse.ArgumentParser:
         "--realtime-factor", type=float, help="override the fleet file's pacing; 0 = unpaced"
     )
     fleet.add_argument("--health-timeout", type=float, default=60.0, help="[s] per service")
+
+    plot = commands.add_parser(
+        "plot",
+        help="draw channels of one or more runs into a PNG or a self-contained HTML page",
+        description="RESULTS are results directories or results.csv files (several are "
+        "overlaid); CHANNELS are names or globs (default: every numeric channel).",
+    )
+    plot.add_argument("inputs", nargs="+", metavar="RESULTS|CHANNEL", help="runs, then channels")
+    plot.add_argument("-o", "--output", type=Path, required=True, help="FILE.png or FILE.html")
+    plot.add_argument("--title", default="", help="default: the runs' directories")
 
     describe = commands.add_parser("describe", help="print a participant's channels")
     describe.add_argument("target", help="grpc://HOST:PORT, grpcs://HOST:PORT or an .fmu file")
@@ -185,18 +211,96 @@ def options_of(args: argparse.Namespace) -> RunOptions:
 def main(argv: Sequence[str] | None = None, *, stdout: TextIO | None = None) -> int:
     out = stdout or sys.stdout
     args = parser().parse_args(argv)
-    configure_logging(args.log_level)
+    configure_logging(
+        args.log_level, json={"auto": None, "console": False, "json": True}[args.log_format]
+    )
+    session = _Session()
     try:
-        return asyncio.run(_interruptible(_dispatch(args, out)))
+        return asyncio.run(_interruptible(_dispatch(args, out, session)))
     except (KeyboardInterrupt, _Interrupted):
-        print("interrupted; results so far are kept", file=sys.stderr)
-        return EXIT_INTERRUPTED
-    except ValidationError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return EXIT_ERROR
+        code, sentence = session.interrupted(args)
+        print(sentence, file=sys.stderr)
+        return code
     except CouplerError as exc:
         print(f"error: {exc}", file=sys.stderr)
+        if session.waited_for:
+            print(f"hint: {start_hint(args)}", file=sys.stderr)
         return EXIT_ERROR
+
+
+class _Session(Observer):
+    """What one command has seen, for its last words: the participants it waited for (printed
+    at once, one line each), the run's progress and end, where the results go."""
+
+    def __init__(self) -> None:
+        self.waited_for: list[str] = []
+        self.info: RunInfo | None = None
+        self.time: float | None = None
+        self.end: RunEnd | None = None
+        self.out_dir: Path | None = None
+
+    def waiting(self, name: str, address: str, reason: str) -> None:
+        self.waited_for.append(name)
+        print(f"waiting for {name} at {address} ({reason})", file=sys.stderr, flush=True)
+
+    def started(self, info: RunInfo) -> None:
+        self.info, self.end = info, None
+
+    def stepped(self, time: float, row: Sequence[Any]) -> None:
+        self.time = time
+
+    def finished(self, end: RunEnd) -> None:
+        self.end = end
+
+    def interrupted(self, args: argparse.Namespace) -> tuple[int, str]:
+        """The exit code and the one sentence Ctrl-C (or SIGTERM) ends a command with."""
+        where = _shown(self.out_dir) if self.out_dir else "./results (or the SSD's outputDirectory)"
+        end = self.end
+        if end is not None and end.status != "aborted":
+            return EXIT_OK, (
+                f"stopped the services; the run had ended {end.status} at t={end.end_time:g} s, "
+                f"results in {where}"
+            )
+        if self.info is None:
+            return EXIT_INTERRUPTED, "interrupted before the run started; nothing was recorded"
+        reached = end.end_time if end is not None else self.time
+        at = f"t={reached:g} s" if reached is not None else "the start"
+        return EXIT_INTERRUPTED, (
+            f"interrupted at {at} of {self.info.stop_time:g} s; the results so far are in "
+            f"{where} (summary.json: status aborted)"
+        )
+
+
+def _shown(path: Path) -> str:
+    """``path`` relative to the working directory when it is below it."""
+    try:
+        return str(path.resolve().relative_to(Path.cwd()))
+    except ValueError:
+        return str(path)
+
+
+def start_hint(args: argparse.Namespace) -> str:
+    """How to start the scenario's services: its fleet file (and the make target running it)
+    when there is one beside the SSD."""
+    ssp = getattr(args, "ssp", None)
+    fleet = ssp.resolve().parent / "fleet.toml" if ssp is not None else None
+    if fleet is None or not fleet.exists():
+        return "start the participants first (see the scenario's README), then run again"
+    shown = _shown(fleet)
+    command = f"`.venv/bin/coupler fleet {shown}`"
+    makefile = Path("Makefile")
+    if makefile.exists():
+        target = re.search(
+            rf"^([\w-]+):[^\n]*\n(?:\t[^\n]*\n)*?\t[^\n]*coupler fleet {re.escape(shown)}\b",
+            makefile.read_text(encoding="utf-8", errors="replace"),
+            re.MULTILINE,
+        )
+        if target:
+            command += f" or `make {target.group(1)}`"
+    return (
+        f"start the scenario's services with {command} (it starts them and runs the scenario), "
+        f"or start each one yourself"
+    )
 
 
 class _Interrupted(Exception):
@@ -229,12 +333,14 @@ async def _interruptible(command: Coroutine[Any, Any, int]) -> int:
             loop.remove_signal_handler(sig)
 
 
-async def _dispatch(args: argparse.Namespace, out: TextIO) -> int:
+async def _dispatch(args: argparse.Namespace, out: TextIO, session: _Session) -> int:
     if args.command == "describe":
         return await _describe(args.target, args.timeout, security_of(args), out=out)
     if args.command == "fleet":
-        return await _fleet(args, out)
-    options = options_of(args)
+        return await _fleet(args, out, session)
+    if args.command == "plot":
+        return _plot(args, out)
+    options = replace(options_of(args), on_waiting=session.waiting)
     if args.command == "validate":
         validation = await validate_scenario(args.ssp, options)
         for warning in validation.warnings:
@@ -246,11 +352,14 @@ async def _dispatch(args: argparse.Namespace, out: TextIO) -> int:
             file=out,
         )
         return EXIT_OK
-    return await _run(args, options, out)
+    return await _run(args, options, out, session)
 
 
-async def _run(args: argparse.Namespace, options: RunOptions, out: TextIO) -> int:
-    observers: list[Observer] = []
+async def _run(
+    args: argparse.Namespace, options: RunOptions, out: TextIO, session: _Session
+) -> int:
+    session.out_dir = args.out
+    observers: list[Observer] = [session]
     if not args.no_progress:
         observers.append(ProgressBar() if sys.stderr.isatty() else ProgressLines())
     outcome = await run_scenario(args.ssp, options, out_dir=args.out, observers=observers)
@@ -270,22 +379,42 @@ async def _run(args: argparse.Namespace, options: RunOptions, out: TextIO) -> in
     return EXIT_OK
 
 
-async def _fleet(args: argparse.Namespace, out: TextIO) -> int:
+async def _fleet(args: argparse.Namespace, out: TextIO, session: _Session) -> int:
     spec = FleetSpec.load(args.fleet)
     run_argv = ["run", str(spec.ssp), "--out", str(args.out or spec.out), *spec.run_args]
     if args.realtime_factor is not None:
         run_argv += ["--realtime-factor", str(args.realtime_factor)]
     run_args = parser().parse_args(run_argv)
     async with Fleet(spec, health_timeout=args.health_timeout) as fleet:
-        print(f"fleet: {len(spec.services)} services healthy (logs in {fleet.logs})", file=out)
+        print(
+            f"fleet: {len(spec.services)} services healthy (logs in {_shown(fleet.logs)})",
+            file=out,
+        )
         for name, url in spec.urls.items():
             print(f"{name}: {url}", file=out)
         out.flush()
-        code = await _run(run_args, options_of(run_args), out)
+        options = replace(options_of(run_args), on_waiting=session.waiting)
+        code = await _run(run_args, options, out, session)
         if code == EXIT_OK and not args.exit:
             print("services stay up; Ctrl-C stops them", file=out, flush=True)
             await asyncio.Event().wait()
     return code
+
+
+def _plot(args: argparse.Namespace, out: TextIO) -> int:
+    """The leading arguments that exist on disk are runs, the rest channels."""
+    count = next((i for i, a in enumerate(args.inputs) if not Path(a).exists()), len(args.inputs))
+    runs, channels = [Path(a) for a in args.inputs[:count]], args.inputs[count:]
+    looks_like_path = [c for c in channels if "/" in c or c.endswith(".csv")]
+    if not runs or looks_like_path:
+        missing = looks_like_path[0] if looks_like_path else args.inputs[0]
+        raise CouplerError(
+            f"coupler plot: {missing}: no such results directory or results.csv (give the runs "
+            f"first, then channel names or globs)"
+        )
+    written = plot(runs, channels, args.output, title=args.title)
+    print(f"plot: {written}", file=out)
+    return EXIT_OK
 
 
 async def _describe(

@@ -9,36 +9,54 @@ A fleet file (TOML) names the scenario and the services::
 
     [[service]]
     name = "openrails-mock"
-    command = ["python", "-m", "openrails_mock", "--port", "2150"]
-    health = "http://127.0.0.1:2150/API/READY"   # or grpc(s)://HOST:PORT (gRPC health)
+    command = ["python", "-m", "openrails_mock", "--port", "${MOCK_PORT:-2150}"]
+    health = "http://127.0.0.1:${MOCK_PORT:-2150}/API/READY"   # or grpc(s)://HOST:PORT
+    # ports = [2150]    # default: the health URL's port and every --*port option's value
 
     [urls]
-    map = "http://127.0.0.1:8080/"
+    map = "http://127.0.0.1:${MAP_HTTP_PORT:-8080}/"
 
-``Fleet`` starts the services (logs in ``build/logs/``), waits for their health and stops them
-all on the way out (SIGTERM, then SIGKILL after a grace period), also when something fails.
+Commands, health and URLs expand ``${VAR}`` / ``${VAR:-default}`` as SSD sources do (names
+ending in ``_PORT``, ``_HOST``, ...), so the same variables move a fleet and its SSD.
+
+``Fleet`` first checks that every port it needs is free (naming the process that holds one)
+and that no other fleet writes the same results directory; then it starts the services (logs
+in a folder of their own under ``build/logs/``), waits for their health and stops them all on
+the way out (SIGTERM, then SIGKILL after a grace period), also when something fails.
 """
 
 from __future__ import annotations
 
 import asyncio
 import contextlib
+import fcntl
 import os
+import re
 import signal
+import socket
 import sys
+import tempfile
 import time
 import tomllib
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
+from datetime import UTC, datetime
 from pathlib import Path
 from types import TracebackType
+from typing import IO, Any
+from urllib.parse import urlsplit
 
 import aiohttp
 import structlog
 
 from coupler.errors import CouplerError, ScenarioError
 from coupler.health import probe
+from coupler_orchestrator.ssp.expansion import expand
 
 log = structlog.get_logger("coupler.fleet")
+
+_PORT_OPTION = re.compile(r"^--[a-z-]*port$")
+_VARIABLE = re.compile(r"\$\{([A-Za-z_][A-Za-z0-9_]*)(?::-[^}]*)?\}")
 
 
 class FleetError(CouplerError):
@@ -56,6 +74,24 @@ class ServiceSpec:
     health: str
     """``grpc://HOST:PORT`` or ``grpcs://HOST:PORT`` (gRPC health SERVING; TLS from the
     ``COUPLER_TLS_*`` environment) or an http URL answering 200."""
+    ports: tuple[int, ...] = ()
+    """TCP ports the service listens on, checked free before anything starts; default: the
+    health URL's port and the value of every ``--*port`` option of the command."""
+    port_variables: Mapping[int, str] = field(default_factory=dict)
+    """The environment variable each port came from (``MOCK_PORT``), for messages."""
+
+    def needed_ports(self) -> tuple[int, ...]:
+        """The ports this service will listen on."""
+        if self.ports:
+            return self.ports
+        found: list[int] = []
+        port = urlsplit(self.health).port
+        if port:
+            found.append(port)
+        for option, value in zip(self.command, self.command[1:], strict=False):
+            if _PORT_OPTION.match(option) and value.isdigit() and int(value) > 0:
+                found.append(int(value))
+        return tuple(dict.fromkeys(found))
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -73,10 +109,16 @@ class FleetSpec:
     services: tuple[ServiceSpec, ...] = ()
     """Started in order."""
     urls: dict[str, str] = field(default_factory=dict)
-    """Printed when the run ends (e.g. the map)."""
+    """Printed before the run (e.g. the map)."""
+    source: Path | None = None
+    """The fleet file, when loaded from one."""
 
     @classmethod
-    def load(cls, path: Path, *, root: Path | None = None) -> FleetSpec:
+    def load(
+        cls, path: Path, *, root: Path | None = None, env: Mapping[str, str] | None = None
+    ) -> FleetSpec:
+        """Read a fleet file; ``${VAR:-default}`` from ``env`` (default: the environment)."""
+        env = os.environ if env is None else env
         try:
             data = tomllib.loads(path.read_text(encoding="utf-8"))
             scenario = data["scenario"]
@@ -86,32 +128,120 @@ class FleetSpec:
                 ssp=root / scenario["ssp"],
                 out=root / scenario.get("out", "results"),
                 run_args=tuple(scenario.get("args", ())),
-                services=tuple(
-                    ServiceSpec(name=s["name"], command=tuple(s["command"]), health=s["health"])
-                    for s in data.get("service", ())
-                ),
-                urls=dict(data.get("urls", {})),
+                services=tuple(_service(path, s, env) for s in data.get("service", ())),
+                urls={
+                    k: expand(v, env, what=f"{path} [urls] {k}")
+                    for k, v in data.get("urls", {}).items()
+                },
+                source=path,
             )
         except OSError as exc:
             raise ScenarioError(f"cannot read fleet file {path}: {exc.strerror}") from exc
-        except (tomllib.TOMLDecodeError, KeyError, TypeError) as exc:
+        except (tomllib.TOMLDecodeError, KeyError, TypeError, ValueError) as exc:
             raise ScenarioError(
                 f"{path}: not a fleet file ({type(exc).__name__}: {exc}); see "
                 f"coupler_orchestrator.fleet for the format"
             ) from exc
 
 
+def _service(path: Path, raw: Mapping[str, Any], env: Mapping[str, str]) -> ServiceSpec:
+    what = f"{path} service '{raw['name']}'"
+    command = tuple(expand(str(c), env, what=what) for c in raw["command"])
+    health = expand(raw["health"], env, what=what)
+    variables: dict[int, str] = {}
+    for text, value in [*zip(raw["command"], command, strict=True), (raw["health"], health)]:
+        for match in _VARIABLE.finditer(str(text)):
+            if match.group(1).endswith("_PORT"):
+                with contextlib.suppress(ValueError):
+                    port = int(value) if value.isdigit() else urlsplit(value).port
+                    if port:
+                        variables.setdefault(port, match.group(1))
+    return ServiceSpec(
+        name=raw["name"],
+        command=command,
+        health=health,
+        ports=tuple(int(p) for p in raw.get("ports", ())),
+        port_variables=variables,
+    )
+
+
+@dataclass(frozen=True, kw_only=True)
+class PortHolder:
+    """A process listening on a TCP port."""
+
+    pid: int
+    command: str
+
+
+def port_is_free(port: int) -> bool:
+    """Whether a server could listen on ``port`` on every address (TIME_WAIT does not count,
+    as servers set SO_REUSEADDR)."""
+    if _listeners(port):
+        return False
+    with socket.socket() as probe_socket:
+        probe_socket.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            probe_socket.bind(("", port))
+        except OSError:
+            return False
+    return True
+
+
+def holders_of(port: int) -> list[PortHolder]:
+    """The processes listening on ``port`` (from /proc; empty when they cannot be seen)."""
+    inodes = _listeners(port)
+    found = []
+    for pid in _pids():
+        try:
+            links = {os.readlink(f"/proc/{pid}/fd/{fd}") for fd in os.listdir(f"/proc/{pid}/fd")}
+            if not any(f"socket:[{inode}]" in links for inode in inodes):
+                continue
+            raw = Path(f"/proc/{pid}/cmdline").read_bytes()
+        except OSError:
+            continue
+        found.append(PortHolder(pid=pid, command=raw.replace(b"\0", b" ").decode().strip()))
+    return found
+
+
+def _listeners(port: int) -> set[str]:
+    """Socket inodes listening on ``port`` (IPv4 and IPv6), from /proc/net/tcp*."""
+    inodes = set()
+    for table in ("/proc/net/tcp", "/proc/net/tcp6"):
+        with contextlib.suppress(OSError):
+            for line in Path(table).read_text().splitlines()[1:]:
+                fields = line.split()
+                if fields[3] == "0A" and int(fields[1].rsplit(":", 1)[1], 16) == port:
+                    inodes.add(fields[9])
+    return inodes
+
+
+def _pids() -> Iterator[int]:
+    with contextlib.suppress(OSError):
+        for entry in os.listdir("/proc"):
+            if entry.isdigit():
+                yield int(entry)
+
+
 class Fleet:
-    """Starts the services on enter (healthy or FleetError), stops them all on exit."""
+    """Checks ports and results directory, starts the services on enter (healthy or
+    FleetError), stops them all on exit."""
 
     def __init__(self, spec: FleetSpec, *, health_timeout: float = 60.0) -> None:
         self.spec = spec
         self.health_timeout = health_timeout
         self.logs = spec.root / "build" / "logs"
+        """This fleet's own log folder (``build/logs/fleet-<UTC time>-<random>/`` once
+        entered): no other fleet writes there."""
         self._processes: dict[str, asyncio.subprocess.Process] = {}
+        self._lock: IO[str] | None = None
 
     async def __aenter__(self) -> Fleet:
+        self.check_ports()
+        self._lock_results()
         try:
+            self.logs.mkdir(parents=True, exist_ok=True)
+            stamp = datetime.now(UTC).strftime("%Y%m%d-%H%M%S")
+            self.logs = Path(tempfile.mkdtemp(prefix=f"fleet-{stamp}-", dir=self.logs))
             for service in self.spec.services:
                 await self._start(service)
             for service in self.spec.services:
@@ -133,10 +263,56 @@ class Fleet:
     def log_of(self, name: str) -> Path:
         return self.logs / f"{name}.log"
 
+    def check_ports(self) -> None:
+        """FleetError naming every port that is taken and the process holding it, before
+        anything starts (a service that cannot bind would otherwise look healthy through
+        the process already there)."""
+        taken = []
+        for service in self.spec.services:
+            for port in service.needed_ports():
+                if port_is_free(port):
+                    continue
+                holders = holders_of(port)
+                by = (
+                    ", ".join(f"pid {h.pid} ({_short(h.command)})" for h in holders)
+                    if holders
+                    else "a process this user cannot see"
+                )
+                variable = service.port_variables.get(port)
+                move = f"; or move this fleet with {variable}=<free port>" if variable else ""
+                taken.append(f"port {port} ({service.name}) is in use by {by}{move}")
+        if taken:
+            raise FleetError(
+                "cannot start the fleet: "
+                + "; ".join(taken)
+                + ". Another fleet (make demo?) is probably running: stop it first (Ctrl-C in "
+                "its terminal, or kill the pid)"
+            )
+
+    def _lock_results(self) -> None:
+        """Hold ``out/.fleet.lock`` while the fleet lives, so two fleets never write one
+        results directory; the lock goes with the process, however it ends."""
+        self.spec.out.mkdir(parents=True, exist_ok=True)
+        path = self.spec.out / ".fleet.lock"
+        lock = path.open("a+", encoding="utf-8")
+        try:
+            fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            lock.seek(0)
+            owner = lock.read().strip() or "another process"
+            lock.close()
+            raise FleetError(
+                f"{self.spec.out} is being written by another fleet ({owner}); stop it, or "
+                f"give this one its own results directory with --out"
+            ) from None
+        lock.truncate(0)
+        lock.write(f"pid {os.getpid()}\n")
+        lock.flush()
+        self._lock = lock
+
     async def _start(self, service: ServiceSpec) -> None:
-        self.logs.mkdir(parents=True, exist_ok=True)
         command = [sys.executable if c == "python" else c for c in service.command]
-        with self.log_of(service.name).open("wb") as output:
+        with self.log_of(service.name).open("xb") as output:
             try:
                 process = await asyncio.create_subprocess_exec(
                     *command,
@@ -203,3 +379,10 @@ class Fleet:
         if running:
             log.info("fleet_stopped", services=list(running))
         self._processes.clear()
+        if self._lock is not None:
+            self._lock.close()
+            self._lock = None
+
+
+def _short(command: str, limit: int = 80) -> str:
+    return command if len(command) <= limit else command[: limit - 3] + "..."

@@ -137,7 +137,7 @@ class Master:
             log.exception("run_failed", run_id=plan.run_id, reason=reason)
         except (asyncio.CancelledError, KeyboardInterrupt):
             status, reason = "aborted", "interrupted by the user"
-            log.warning("run_aborted", run_id=plan.run_id, time=self._time_reached())
+            log.info("run_aborted", run_id=plan.run_id, time=self._time_reached())
             raise
         finally:
             if self._watchdog is not None:

@@ -6,7 +6,7 @@ Every stage of the pipeline reads the part it needs; none of them changes it.
 from __future__ import annotations
 
 import uuid
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from enum import StrEnum
 
@@ -60,3 +60,7 @@ class RunOptions:
     security: ClientSecurity = field(default_factory=ClientSecurity.from_environment)
     """TLS trust, client certificate and token for every remote participant (default: the
     ``COUPLER_TLS_*`` and ``COUPLER_TOKEN_FILE`` environment variables)."""
+    on_waiting: Callable[[str, str, str], None] | None = field(default=None, compare=False)
+    """Called once per remote participant that is not SERVING at the first check, with its
+    component name, address and the reason (e.g. "connection refused: ..."), so a person
+    sees at once what the run waits for."""

@@ -12,6 +12,7 @@ import asyncio
 from collections.abc import AsyncIterator, Mapping
 from contextlib import asynccontextmanager
 from dataclasses import dataclass, field
+from functools import partial
 from pathlib import Path
 
 from coupler.channels import Description
@@ -82,6 +83,11 @@ def create(component: ssp.Component, options: RunOptions) -> Participant:
             connect_timeout=options.connect_timeout,
             call_timeout=call_timeout,
             security=options.security.override(own),
+            on_waiting=(
+                partial(options.on_waiting, component.name, component.source)
+                if options.on_waiting
+                else None
+            ),
         )
     raise ScenarioError(
         f"{where(component)}: component '{component.name}' has type '{component.type}'; "

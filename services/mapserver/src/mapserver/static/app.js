@@ -16,13 +16,30 @@
     snapshots: 0,
     train: null,
     trainLatLng: () => (trainMarker ? trainMarker.getLatLng() : null),
+    map: null, // the Leaflet map, set below
+    following: () => follow.checked,
+    trainOnScreen: () => {
+      if (!trainMarker) return null;
+      const p = map.latLngToContainerPoint(trainMarker.getLatLng());
+      const size = map.getSize();
+      return { x: p.x, y: p.y, width: size.x, height: size.y };
+    },
     readingIds: () => Array.from(rows.children, (tr) => Number(tr.dataset.baliseId)),
   };
   window.coupler = view;
 
   const map = L.map("map", { crs: L.CRS.EPSG3857, minZoom: 1, maxZoom: 19 });
+  view.map = map;
+  L.control.scale({ imperial: false, maxWidth: 160 }).addTo(map);
   let trainMarker = null;
   let source = null;
+
+  // Follow the train: keep it in the middle of the map; dragging the map ends following.
+  const follow = $("follow");
+  follow.addEventListener("change", () => {
+    if (follow.checked && trainMarker) map.panTo(trainMarker.getLatLng(), { animate: false });
+  });
+  map.on("dragstart", () => { follow.checked = false; });
 
   async function fetchJson(url) {
     const response = await fetch(url, { cache: "no-store" });
@@ -176,6 +193,7 @@
       `${train.speed_mps.toFixed(1)} m/s (${(train.speed_mps * 3.6).toFixed(0)} km/h)`;
     $("distance").textContent = `${train.distance_m.toFixed(1)} m`;
     const latlng = [train.latitude_deg, train.longitude_deg];
+    if (follow.checked) map.panTo(latlng, { animate: false });
     if (trainMarker) {
       trainMarker.setLatLng(latlng);
     } else {

@@ -1,0 +1,273 @@
+"""``coupler fleet`` and the console of ``coupler run`` as a person meets them, with real
+processes: a second fleet refused with the busy port and the pid holding it (the first one
+untouched), Ctrl-C during and after a run, and what a run waiting for a participant says.
+
+    coupler fleet (process) --starts--> gain participant (process, GAIN_PORT)
+         |  run: Source (FMU) -> Gain (gRPC) -> Feed, Feed2 (FMUs)      tests/data/mixed.ssd
+         v
+    out/results.csv, out/summary.json, build/logs/fleet-<time>-<random>/gain.log
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import signal
+import socket
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from coupler.health import probe
+from coupler_orchestrator.fleet import FleetSpec, holders_of, port_is_free
+
+DATA = Path(__file__).parent / "data"
+REPO = Path(__file__).resolve().parents[3]
+
+FLEET = f"""
+[scenario]
+ssp = "{DATA / "mixed.ssd"}"
+out = "out"
+
+[[service]]
+name = "gain"
+command = ["python", "-m", "coupler.examples", "gain", "--port", "${{GAIN_PORT:-50051}}"]
+health = "grpc://127.0.0.1:${{GAIN_PORT:-50051}}"
+"""
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+class Console:
+    """A ``coupler`` process whose stdout and stderr lines are collected as they come."""
+
+    def __init__(self, args: list[str], cwd: Path, env: dict[str, str]) -> None:
+        self.process = subprocess.Popen(
+            [sys.executable, "-m", "coupler_orchestrator", *args],
+            cwd=cwd,
+            env=env,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
+        self.out: list[str] = []
+        self.err: list[str] = []
+        assert self.process.stdout is not None and self.process.stderr is not None
+        self._readers = [
+            threading.Thread(target=self._read, args=(self.process.stdout, self.out), daemon=True),
+            threading.Thread(target=self._read, args=(self.process.stderr, self.err), daemon=True),
+        ]
+        for reader in self._readers:
+            reader.start()
+
+    @staticmethod
+    def _read(stream: object, lines: list[str]) -> None:
+        for line in stream:  # type: ignore[attr-defined]
+            lines.append(line.rstrip("\n"))
+
+    def wait_for(self, lines: list[str], pattern: str, timeout: float = 60.0) -> str:
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            for line in list(lines):
+                if re.search(pattern, line):
+                    return line
+            if self.process.poll() is not None and not any(r.is_alive() for r in self._readers):
+                break
+            time.sleep(0.05)
+        raise AssertionError(f"no line matching {pattern!r}; out={self.out} err={self.err}")
+
+    def finish(self, timeout: float = 30.0) -> int:
+        code = self.process.wait(timeout)
+        for reader in self._readers:
+            reader.join(5)
+        return code
+
+    def stop(self) -> None:
+        if self.process.poll() is None:
+            self.process.kill()
+            self.process.wait(10)
+        for reader in self._readers:
+            reader.join(5)
+        for stream in (self.process.stdout, self.process.stderr):
+            if stream is not None:
+                stream.close()
+
+
+@pytest.fixture
+def env(fmus: dict[str, Path]) -> dict[str, str]:
+    """The environment of the processes: the built FMUs and a free GAIN_PORT."""
+    return {**os.environ, "GAIN_PORT": str(free_port())}
+
+
+@pytest.fixture
+def fleet_dir(tmp_path: Path) -> Path:
+    (tmp_path / "fleet.toml").write_text(FLEET)
+    return tmp_path
+
+
+@pytest.fixture
+def consoles() -> Iterator[list[Console]]:
+    started: list[Console] = []
+    yield started
+    for console in started:
+        console.stop()
+
+
+def coupler(args: list[str], cwd: Path, env: dict[str, str]) -> subprocess.CompletedProcess[str]:
+    """``coupler ARGS`` run to its end."""
+    return subprocess.run(
+        [sys.executable, "-m", "coupler_orchestrator", *args],
+        cwd=cwd,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=60,
+        check=False,
+    )
+
+
+def children_of(pid: int) -> list[int]:
+    text = Path(f"/proc/{pid}/task/{pid}/children").read_text()
+    return [int(p) for p in text.split()]
+
+
+def files_of(folder: Path) -> dict[str, tuple[bytes, int]]:
+    return {
+        str(p.relative_to(folder)): (p.read_bytes(), p.stat().st_mtime_ns)
+        for p in sorted(folder.rglob("*"))
+        if p.is_file()
+    }
+
+
+def test_fleet_file_ports_come_from_the_environment(fleet_dir: Path) -> None:
+    spec = FleetSpec.load(fleet_dir / "fleet.toml", root=fleet_dir, env={"GAIN_PORT": "4321"})
+    (gain,) = spec.services
+    assert gain.command[-1] == "4321"
+    assert gain.health == "grpc://127.0.0.1:4321"
+    assert gain.needed_ports() == (4321,)
+    assert gain.port_variables == {4321: "GAIN_PORT"}
+    default = FleetSpec.load(fleet_dir / "fleet.toml", root=fleet_dir, env={})
+    assert default.services[0].needed_ports() == (50051,)
+
+
+def test_a_second_fleet_is_refused_and_the_first_is_untouched(
+    fleet_dir: Path, env: dict[str, str], consoles: list[Console]
+) -> None:
+    port = int(env["GAIN_PORT"])
+    first = Console(["fleet", "fleet.toml"], fleet_dir, env)
+    consoles.append(first)
+    first.wait_for(first.out, r"services stay up; Ctrl-C stops them")
+    (gain_pid,) = children_of(first.process.pid)
+    (log_folder,) = (fleet_dir / "build" / "logs").iterdir()
+    assert (log_folder / "gain.log").exists()
+    before = files_of(fleet_dir)
+    assert json.loads((fleet_dir / "out" / "summary.json").read_text())["status"] == "completed"
+
+    second = coupler(["fleet", "fleet.toml"], fleet_dir, env)
+    assert second.returncode == 1
+    assert "Traceback" not in second.stderr
+    assert f"port {port} (gain) is in use by pid {gain_pid} (" in second.stderr
+    assert "coupler.examples gain" in second.stderr
+    assert "move this fleet with GAIN_PORT=<free port>" in second.stderr
+    assert "services healthy" not in second.stdout
+    assert files_of(fleet_dir) == before  # no log truncated, no summary overwritten
+    assert [p.name for p in (fleet_dir / "build" / "logs").iterdir()] == [log_folder.name]
+
+    import asyncio
+
+    asyncio.run(probe(f"grpc://127.0.0.1:{port}", connect_timeout=5))  # the first still serves
+    assert [h.pid for h in holders_of(port)] == [gain_pid]
+
+    # Ctrl-C after a completed run stops the services: one sentence, exit 0
+    first.process.send_signal(signal.SIGINT)
+    assert first.finish() == 0
+    assert first.err[-1] == (
+        "stopped the services; the run had ended completed at t=1.5 s, results in out"
+    )
+    assert not any("Traceback" in line or line.startswith("{") for line in first.err)
+    assert port_is_free(port)
+
+
+def test_results_directory_of_a_running_fleet_is_refused(
+    fleet_dir: Path, env: dict[str, str], consoles: list[Console]
+) -> None:
+    first = Console(["fleet", "fleet.toml"], fleet_dir, env)
+    consoles.append(first)
+    first.wait_for(first.out, r"services stay up")
+    moved = {**env, "GAIN_PORT": str(free_port())}  # free ports, same results directory
+    second = coupler(["fleet", "fleet.toml"], fleet_dir, moved)
+    assert second.returncode == 1
+    assert f"is being written by another fleet (pid {first.process.pid})" in second.stderr
+    assert "--out" in second.stderr
+
+
+def test_ctrl_c_during_a_run_says_where_and_when_it_stopped(
+    fleet_dir: Path, env: dict[str, str], consoles: list[Console]
+) -> None:
+    run = Console(["fleet", "fleet.toml", "--exit", "--realtime-factor", "0.25"], fleet_dir, env)
+    consoles.append(run)
+    csv = fleet_dir / "out" / "results.csv"
+    deadline = time.monotonic() + 60
+    while not (csv.exists() and len(csv.read_text().splitlines()) >= 3):  # header, t=0, t=0.5
+        assert time.monotonic() < deadline and run.process.poll() is None, run.err
+        time.sleep(0.05)
+    run.process.send_signal(signal.SIGINT)
+    assert run.finish() == 130
+    rows = len(csv.read_text().splitlines()) - 1
+    reached = (rows - 1) * 0.5
+    assert run.err[-1] == (
+        f"interrupted at t={reached:g} s of 1.5 s; the results so far are in out "
+        "(summary.json: status aborted)"
+    )
+    assert not any("Traceback" in line or line.startswith("{") for line in run.err)
+    summary = json.loads((fleet_dir / "out" / "summary.json").read_text())
+    assert summary["status"] == "aborted"
+    assert port_is_free(int(env["GAIN_PORT"]))  # the fleet stopped its service
+
+
+def test_waiting_for_a_participant_is_said_at_once(
+    tmp_path: Path, env: dict[str, str], consoles: list[Console]
+) -> None:
+    port = env["GAIN_PORT"]  # nothing listens there
+    run = Console(
+        ["run", str(DATA / "mixed.ssd"), "--out", "out", "--connect-timeout", "60"], tmp_path, env
+    )
+    consoles.append(run)
+    line = run.wait_for(run.err, r"^waiting for ")
+    assert line == (
+        f"waiting for Gain at grpc://127.0.0.1:{port} "
+        "(connection refused: nothing listens on that port yet)"
+    )
+    assert run.process.poll() is None  # said while it still waits
+    run.process.send_signal(signal.SIGINT)
+    assert run.finish() == 130
+    assert run.err[-1] == "interrupted before the run started; nothing was recorded"
+
+
+def test_a_participant_not_running_ends_with_how_to_start_it(env: dict[str, str]) -> None:
+    out = Path(env.get("TMPDIR", "/tmp")) / f"coupler-hint-{os.getpid()}"
+    result = coupler(
+        ["run", "examples/ramp-gain/SystemStructure.ssd", "--out", str(out), "--connect-timeout",
+         "0.5"],
+        REPO,
+        env,
+    )  # fmt: skip
+    assert result.returncode == 1
+    lines = result.stderr.splitlines()
+    assert lines[0].startswith(f"waiting for Gain at grpc://127.0.0.1:{env['GAIN_PORT']} (")
+    assert "is the participant running" in result.stderr
+    assert lines[-1] == (
+        "hint: start the scenario's services with `.venv/bin/coupler fleet "
+        "examples/ramp-gain/fleet.toml` or `make demo-example` (it starts them and runs the "
+        "scenario), or start each one yourself"
+    )
