@@ -152,7 +152,7 @@ def assert_rows_kept(out: Path) -> list[dict[str, str]]:
     width = len(recorded[0])
     for row in recorded:  # a cut row would have missing (None) or surplus cells
         assert len(row) == width and None not in row.values() and None not in row, row
-        float(row["Integ.x"])
+        float(row["time"])
     assert len(recorded) == summary(out)["steps"] + 1
     return recorded
 
@@ -392,3 +392,129 @@ def test_a_full_disk_fails_the_run_keeping_whole_rows(
         assert all(float(row["Integ.x"]) >= 0 for row in recorded)
     finally:
         subprocess.run(["umount", str(full)], check=False)
+
+
+FAULTY_SSD = """<?xml version="1.0" encoding="UTF-8"?>
+<ssd:SystemStructureDescription version="1.0" name="FaultyFmu"
+    xmlns:ssd="http://ssp-standard.org/SSP1/SystemStructureDescription">
+  <ssd:System name="FaultyFmu">
+    <ssd:Elements>
+      <ssd:Component name="Source" source="${COUPLER_FMU_DIR}/Source2.fmu">
+        <ssd:Connectors><ssd:Connector name="ramp" kind="output"/></ssd:Connectors>
+      </ssd:Component>
+      <ssd:Component name="Faulty" source="${FAULTY_FMU_DIR}/Faulty2.fmu">
+        <ssd:Connectors><ssd:Connector name="u" kind="input"/></ssd:Connectors>
+      </ssd:Component>
+    </ssd:Elements>
+    <ssd:Connections>
+      <ssd:Connection startElement="Source" startConnector="ramp"
+                      endElement="Faulty" endConnector="u"/>
+    </ssd:Connections>
+  </ssd:System>
+  <ssd:DefaultExperiment startTime="0" stopTime="10"/>
+</ssd:SystemStructureDescription>
+"""
+
+
+@pytest.fixture
+def faulty_ssd(
+    tmp_path: Path, faulty_fmus: dict[str, Path], monkeypatch: pytest.MonkeyPatch
+) -> Path:
+    """Source (FMI 2) --ramp--> Faulty (FMI 2: crash_at / hang_at), 0 .. 10 s."""
+    monkeypatch.setenv("FAULTY_FMU_DIR", str(faulty_fmus["Faulty2"].parent))
+    path = tmp_path / "faulty.ssd"
+    path.write_text(FAULTY_SSD)
+    return path
+
+
+def test_an_isolated_fmu_that_crashes_fails_the_run_naming_how(
+    coupler: Coupler, faulty_ssd: Path, tmp_path: Path
+) -> None:
+    out = tmp_path / "o"
+    outcome = coupler(
+        "run", faulty_ssd, "--out", out, *RUN, "--isolate-fmus", "--param", "Faulty.crash_at=1"
+    )
+    assert outcome.code == 1
+    result = summary(out)
+    assert result["status"] == "failed"
+    assert "Faulty.DoStep" in result["reason"] and "killed by SIGSEGV" in result["reason"]
+    assert "the run had reached t=1 s" in result["reason"]
+    assert len(assert_rows_kept(out)) == 11
+
+
+def test_an_isolated_fmu_that_hangs_fails_within_the_deadline(
+    coupler: Coupler, faulty_ssd: Path, tmp_path: Path
+) -> None:
+    out = tmp_path / "o"
+    started = time.monotonic()
+    outcome = coupler(
+        "run", faulty_ssd, "--out", out, *RUN, "--isolate-fmus", "--call-timeout", "1",
+        "--param", "Faulty.hang_at=1",
+    )  # fmt: skip
+    took = time.monotonic() - started
+    assert outcome.code == 1
+    result = summary(out)
+    assert "Faulty.DoStep [DEADLINE_EXCEEDED]" in result["reason"]
+    assert len(assert_rows_kept(out)) == 11
+    assert took < 15  # start-up, the 1 s deadline, Terminate's 3 s, killing the host
+
+
+def test_an_fmu_hanging_in_process_ends_the_run_at_its_deadline(
+    faulty_ssd: Path, tmp_path: Path
+) -> None:
+    """The FMU blocks the orchestrator's thread: the watchdog ends the run from its own thread,
+    results written, and the process exits (the only way to leave a thread stuck in C)."""
+    out = tmp_path / "o"
+    started = time.monotonic()
+    run = orchestrator(faulty_ssd, out, *RUN, "--call-timeout", "1", "--param", "Faulty.hang_at=1")
+    _, err = run.communicate(timeout=30)
+    assert time.monotonic() - started < 20
+    assert run.returncode == 1, err
+    result = summary(out)
+    assert result["status"] == "failed"
+    assert "Faulty.DoStep [DEADLINE_EXCEEDED]: no answer within 1 s" in result["reason"]
+    assert "the FMU hangs in-process" in result["reason"]
+    assert len(assert_rows_kept(out)) == 11
+    assert "error: run failed: Faulty.DoStep [DEADLINE_EXCEEDED]" in err
+
+
+def test_an_interrupt_reaches_an_orchestrator_blocked_in_an_fmu(
+    faulty_ssd: Path, tmp_path: Path
+) -> None:
+    """SIGTERM while an in-process FMU hangs (long before its deadline): ended within seconds,
+    summary aborted, rows kept."""
+    out = tmp_path / "o"
+    run = orchestrator(
+        faulty_ssd, out, *RUN, "--call-timeout", "600", "--param", "Faulty.hang_at=1"
+    )
+    # blocked in doStep at t = 1 once started (the rows stay buffered: the loop is blocked)
+    deadline = time.monotonic() + 20
+    while not (out / "summary.json").exists() and time.monotonic() < deadline:
+        time.sleep(0.1)
+    time.sleep(2.0)
+    assert run.poll() is None
+    sent = time.monotonic()
+    run.send_signal(signal.SIGTERM)
+    _, err = run.communicate(timeout=20)
+    assert time.monotonic() - sent < 5
+    assert run.returncode == 130, err
+    result = summary(out)
+    assert (result["status"], result["reason"]) == ("aborted", "interrupted by the user")
+    assert len(assert_rows_kept(out)) == 11
+
+
+def test_an_fmu_crashing_in_process_leaves_the_summary_and_the_flushed_rows(
+    faulty_ssd: Path, tmp_path: Path
+) -> None:
+    """A segfault in-process ends the orchestrator with it (no Python code runs after it):
+    summary.json, written at the start, says running, and every row flushed before is whole.
+    That is why an FMU one does not trust runs isolated."""
+    out = tmp_path / "o"
+    run = orchestrator(
+        faulty_ssd, out, *RUN, "--realtime-factor", "2", "--param", "Faulty.crash_at=3"
+    )
+    run.communicate(timeout=30)
+    assert run.returncode == -signal.SIGSEGV
+    assert summary(out)["status"] == "running"
+    kept = rows(out)
+    assert 10 <= len(kept) <= 31 and all(None not in row.values() for row in kept)

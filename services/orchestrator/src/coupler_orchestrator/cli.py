@@ -10,10 +10,14 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import contextlib
+import os
 import re
 import signal
 import sys
-from collections.abc import Coroutine, Sequence
+import threading
+import time
+from collections.abc import Callable, Coroutine, Sequence
 from dataclasses import replace
 from pathlib import Path
 from typing import Any, TextIO
@@ -31,6 +35,7 @@ from coupler_orchestrator.options import Algorithm, RunOptions
 from coupler_orchestrator.plot import plot
 from coupler_orchestrator.progress import ProgressBar, ProgressLines
 from coupler_orchestrator.runner import run_scenario, validate_scenario
+from coupler_orchestrator.watchdog import active as active_watchdog
 
 EXIT_OK, EXIT_ERROR, EXIT_INTERRUPTED = 0, 1, 130
 
@@ -202,6 +207,7 @@ def options_of(args: argparse.Namespace) -> RunOptions:
         isolate_fmus=args.isolate_fmus,
         lease=args.lease,
         security=security_of(args),
+        exit_when_stuck=True,  # a hung in-process FMU cannot be left any other way
         output_interval=getattr(args, "output_interval", None),
         output_variables=tuple(getattr(args, "output_variables", ())),
         **({"run_id": args.run_id} if args.run_id else {}),
@@ -310,7 +316,12 @@ class _Interrupted(Exception):
 async def _interruptible(command: Coroutine[Any, Any, int]) -> int:
     """Run ``command``; the first SIGINT/SIGTERM cancels it, so the run ends as ``aborted`` with
     its summary written and every service stopped; further signals during that clean-up (a
-    terminal and ``uv run`` may both deliver Ctrl-C) are ignored."""
+    terminal and ``uv run`` may both deliver Ctrl-C) are ignored.
+
+    Signals are heard by a thread (through the signal wakeup pipe), not by the event loop's
+    thread: when that thread is blocked in a participant computing in-process (an FMU hanging
+    in doStep), the watchdog ends the run from there instead, within a second.
+    """
     loop = asyncio.get_running_loop()
     task = asyncio.ensure_future(command)
     interrupted = asyncio.Event()
@@ -320,17 +331,56 @@ async def _interruptible(command: Coroutine[Any, Any, int]) -> int:
             interrupted.set()
             task.cancel()
 
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        loop.add_signal_handler(sig, interrupt)
-    try:
-        return await task
-    except asyncio.CancelledError:
-        if interrupted.is_set():
-            raise _Interrupted from None
-        raise
-    finally:
-        for sig in (signal.SIGINT, signal.SIGTERM):
-            loop.remove_signal_handler(sig)
+    with _Signals(loop, interrupt):
+        try:
+            return await task
+        except asyncio.CancelledError:
+            if interrupted.is_set():
+                raise _Interrupted from None
+            raise
+
+
+class _Signals:
+    """SIGINT and SIGTERM, heard by a thread of their own through the signal wakeup pipe."""
+
+    SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+    def __init__(self, loop: asyncio.AbstractEventLoop, interrupt: Callable[[], None]) -> None:
+        self.loop = loop
+        self.interrupt = interrupt
+        self._read, self._write = os.pipe()
+        os.set_blocking(self._write, False)
+        self._previous: dict[int, Any] = {}
+        self._previous_fd = -1
+
+    def __enter__(self) -> _Signals:
+        self._previous_fd = signal.set_wakeup_fd(self._write, warn_on_full_buffer=False)
+        for sig in self.SIGNALS:  # the handler only has to exist; the thread acts
+            self._previous[sig] = signal.signal(sig, lambda number, frame: None)
+        threading.Thread(target=self._listen, name="coupler-signals", daemon=True).start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        for sig, handler in self._previous.items():
+            signal.signal(sig, handler)
+        signal.set_wakeup_fd(self._previous_fd)
+        os.close(self._write)  # ends the listening thread
+
+    def _listen(self) -> None:
+        while True:
+            try:
+                if not os.read(self._read, 64):
+                    break
+            except OSError:
+                break
+            with contextlib.suppress(RuntimeError):  # the loop has closed: nothing to tell
+                self.loop.call_soon_threadsafe(self.interrupt)
+            watchdog = active_watchdog()
+            if watchdog is not None:
+                time.sleep(0.5)  # a loop that is not blocked has begun ending the run by now
+                if watchdog.blocked_for() > 0.5:
+                    watchdog.end("aborted", "interrupted by the user")
+        os.close(self._read)
 
 
 async def _dispatch(args: argparse.Namespace, out: TextIO, session: _Session) -> int:

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import asyncio
 import os
+import sys
 import time as wallclock
 from collections import defaultdict
 from collections.abc import Mapping, Sequence
@@ -235,6 +236,7 @@ class Master:
             time=grid.time(self.completed_steps),
         )
         if self.plan.exit_when_stuck:
+            print(f"error: run {status}: {reason}", file=sys.stderr, flush=True)
             os._exit(130 if status == "aborted" else 1)
 
     def _inputs(self, m: Member) -> Values:
