@@ -8,6 +8,7 @@ through the ``coupler`` CLI.
 from __future__ import annotations
 
 import json
+import os
 import shutil
 import zipfile
 from collections.abc import Mapping
@@ -435,3 +436,33 @@ def test_a_train_state_column_reads_as_json(coupler: Coupler, tmp_path: Path) ->
     assert (last["time_s"], last["speed_mps"], last["distance_m"]) == (1.0, 2.0, 7.0)
     columns = {c["name"]: c for c in coupler.summary(tmp_path / "o")["columns"]}
     assert columns["Train.state"]["message_type"] == "coupler.v1.TrainState"
+
+
+def test_an_archive_and_its_fmus_share_one_unpack_budget(
+    coupler: Coupler, tmp_path: Path, fmus: dict[str, Path]
+) -> None:
+    """1.5 MB of the .ssp's own files and an FMU that unpacks 1 MB more: fine with 4 MB,
+    refused with 2 MB although each part alone would fit."""
+    padded = tmp_path / "Source2.fmu"
+    with zipfile.ZipFile(fmus["Source2"]) as source, zipfile.ZipFile(padded, "w") as copy:
+        for item in source.infolist():
+            copy.writestr(item, source.read(item))
+        copy.writestr("resources/padding.bin", bytes(1024 * 1024), zipfile.ZIP_DEFLATED)
+    ssd = write(
+        tmp_path, ['      <ssd:Component name="Source" source="resources/Source2.fmu"/>'], []
+    )
+    archive = tmp_path / "padded.ssp"
+    with zipfile.ZipFile(archive, "w") as zf:
+        zf.write(ssd, "SystemStructure.ssd")
+        zf.write(padded, "resources/Source2.fmu")
+        zf.writestr("resources/data.bin", os.urandom(1536 * 1024))  # does not compress
+    ran = coupler("run", archive, "--out", tmp_path / "ok", "--step", "0.5", "--unpack-limit", "4")
+    assert ran.code == 0, ran.err
+    refused = coupler(
+        "run", archive, "--out", tmp_path / "no", "--step", "0.5", "--unpack-limit", "2"
+    )
+    assert refused.code == 1
+    assert "exceed the 2097152 bytes a scenario may unpack (archive and FMUs together)" in (
+        refused.err
+    )
+    assert "component 'Source'" in refused.err

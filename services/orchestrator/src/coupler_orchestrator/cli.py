@@ -159,6 +159,13 @@ def _run_options(command: argparse.ArgumentParser) -> None:
         help="[s] deadline of every call to a participant (default 30)",
     )
     command.add_argument(
+        "--unpack-limit",
+        type=int,
+        default=2048,
+        metavar="MB",
+        help="what an .ssp and the FMUs it runs may unpack to, together (default 2048 MB)",
+    )
+    command.add_argument(
         "--isolate-fmus",
         action="store_true",
         help="run every FMU in a child process: a crash or hang of an FMU fails the run "
@@ -205,6 +212,7 @@ def options_of(args: argparse.Namespace) -> RunOptions:
         connect_timeout=args.connect_timeout,
         call_timeout=args.call_timeout,
         isolate_fmus=args.isolate_fmus,
+        unpack_limit=args.unpack_limit * 1024 * 1024,
         lease=args.lease,
         security=security_of(args),
         exit_when_stuck=True,  # a hung in-process FMU cannot be left any other way

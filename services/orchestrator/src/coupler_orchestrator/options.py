@@ -10,6 +10,7 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from enum import StrEnum
 
+from coupler.archives import DEFAULT_BUDGET_BYTES
 from coupler.security import ClientSecurity
 
 
@@ -50,6 +51,8 @@ class RunOptions:
     """When an in-process FMU hangs on the master's thread past its deadline (or through an
     interrupt), end the process after the run's results are written (the command line does;
     a library caller keeps its process and is told the run failed)."""
+    unpack_limit: int = DEFAULT_BUDGET_BYTES
+    """Bytes an .ssp and the FMUs it runs may unpack to, together (zip bombs)."""
     isolate_fmus: bool = False
     """Run every FMU in a child process (per component: ``org.coupler.component isolate``)."""
     output_interval: float | None = None

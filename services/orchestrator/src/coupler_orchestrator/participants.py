@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 from functools import partial
 from pathlib import Path
 
+from coupler.archives import Budget
 from coupler.channels import Description
 from coupler.client import RemoteParticipant
 from coupler.errors import CouplerError, ScenarioError
@@ -60,7 +61,9 @@ def where(item: ssp.Component | ssp.Connection | ssp.Connector, file: str = "") 
     return f"{name} line {item.line}"
 
 
-def create(component: ssp.Component, options: RunOptions) -> Participant:
+def create(
+    component: ssp.Component, options: RunOptions, budget: Budget | None = None
+) -> Participant:
     """The participant behind a component: an FMU in-process or isolated in a child process,
     or a remote one; the component's own settings (SSD annotation) over the options."""
     settings = component.settings
@@ -69,7 +72,7 @@ def create(component: ssp.Component, options: RunOptions) -> Participant:
         isolate = options.isolate_fmus if settings.isolate is None else settings.isolate
         if isolate:
             return IsolatedFmu(component.source, name=component.name, call_timeout=call_timeout)
-        return FmuParticipant(Path(component.source), name=component.name)
+        return FmuParticipant(Path(component.source), name=component.name, budget=budget)
     if component.type == ssp.GRPC_TYPE:
         own = ClientSecurity(
             ca=settings.tls_ca,
@@ -119,14 +122,17 @@ def units_of(participant: Participant) -> dict[str, ssp.BaseUnit]:
 
 
 @asynccontextmanager
-async def opened(scenario: ssp.Scenario, options: RunOptions) -> AsyncIterator[Roster]:
+async def opened(
+    scenario: ssp.Scenario, options: RunOptions, budget: Budget | None = None
+) -> AsyncIterator[Roster]:
     """Create, open and describe every component's participant concurrently; close them all on
-    the way out, whatever happened."""
+    the way out, whatever happened. In-process FMUs unpack within ``budget`` (shared with the
+    scenario's archive)."""
     created: dict[str, Participant] = {}
     problems: list[str] = []
     for component in scenario.components:
         try:
-            created[component.name] = create(component, options)
+            created[component.name] = create(component, options, budget)
         except CouplerError as exc:
             problems.append(str(exc))
     try:

@@ -19,6 +19,7 @@ from typing import Any
 
 import structlog
 
+from coupler.archives import Budget
 from coupler_orchestrator import ssp
 from coupler_orchestrator.checks import Checked, check
 from coupler_orchestrator.master import Master
@@ -58,9 +59,9 @@ class Validation:
 
 
 @asynccontextmanager
-async def loaded(path: Path) -> AsyncIterator[ssp.Scenario]:
+async def loaded(path: Path, budget: Budget | None = None) -> AsyncIterator[ssp.Scenario]:
     """The scenario at ``path`` (.ssp, unpacked folder, .ssd or .fmu), read off the event loop;
-    an extracted archive is removed on the way out, however it is left."""
+    an archive unpacks within ``budget``; it is removed on the way out, however it is left."""
     if path.suffix.lower() == ".fmu":
         yield await asyncio.to_thread(ssp.scenario_of_fmu, path)
         return
@@ -68,7 +69,7 @@ async def loaded(path: Path) -> AsyncIterator[ssp.Scenario]:
     stop = threading.Event()
     loop = asyncio.get_running_loop()
     reading = loop.run_in_executor(
-        None, lambda: ssp.load_ssp(path, workdir=workdir, cancelled=stop)
+        None, lambda: ssp.load_ssp(path, workdir=workdir, budget=budget, cancelled=stop)
     )
     try:
         try:
@@ -86,7 +87,8 @@ async def loaded(path: Path) -> AsyncIterator[ssp.Scenario]:
 
 async def validate_scenario(path: Path, options: RunOptions) -> Validation:
     """Every check of ``run`` without running; ValidationError lists every problem."""
-    async with loaded(path) as scenario, opened(scenario, options) as roster:
+    budget = Budget.of(options.unpack_limit)
+    async with loaded(path, budget) as scenario, opened(scenario, options, budget) as roster:
         checked = check(scenario, roster, options)
     return Validation(scenario=scenario, warnings=checked.warnings)
 
@@ -104,12 +106,13 @@ async def run_scenario(
     Raises ScenarioError/ValidationError before anything runs; a participant failing during
     the run ends it as ``failed`` with every completed step recorded.
     """
-    async with loaded(path) as scenario:
+    budget = Budget.of(options.unpack_limit)  # the archive and its FMUs together
+    async with loaded(path, budget) as scenario:
         if out_dir is None:
             configured = scenario.results.output_directory if scenario.results else None
             out_dir = Path(configured) if configured else Path("results")
         check_writable(out_dir)
-        async with opened(scenario, options) as roster:
+        async with opened(scenario, options, budget) as roster:
             checked = check(scenario, roster, options)
             plan = build_plan(checked, wire(checked), options)
             csv_path, summary_path = out_dir / "results.csv", out_dir / "summary.json"

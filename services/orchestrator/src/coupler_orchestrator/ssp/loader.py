@@ -17,6 +17,7 @@ import zipfile
 from collections.abc import Mapping
 from pathlib import Path
 
+from coupler.archives import Budget
 from coupler.errors import ScenarioError, ValidationError
 
 from . import archive
@@ -35,6 +36,7 @@ def load_ssp(
     env: Mapping[str, str] | None = None,
     workdir: Path | None = None,
     max_archive_bytes: int = archive.MAX_EXTRACTED_BYTES,
+    budget: Budget | None = None,
     cancelled: threading.Event | None = None,
 ) -> Scenario:
     """Load an .ssp archive, a folder holding an unpacked one, or a bare .ssd.
@@ -42,7 +44,8 @@ def load_ssp(
     ``env`` expands ``${VAR}`` in component sources (default: ``os.environ``; only the names
     ``expansion`` allows). Archives are extracted into ``workdir``, which the caller owns and
     removes (``runner`` does, on every path); without one, loading an archive is an error.
-    ``cancelled`` stops an extraction in progress.
+    ``budget`` (default: ``max_archive_bytes``) is what the archive may unpack to; the runner
+    shares it with the FMUs. ``cancelled`` stops an extraction in progress.
     """
     given = Path(path)
     source = given.resolve()
@@ -69,7 +72,9 @@ def load_ssp(
         )
     if workdir is None:
         raise ScenarioError(f"{source.name}: an archive needs a directory to be extracted into")
-    ssd = archive.extract(source, workdir, max_bytes=max_archive_bytes, cancelled=cancelled)
+    ssd = archive.extract(
+        source, workdir, budget=budget or Budget.of(max_archive_bytes), cancelled=cancelled
+    )
     return _load(source, digest, ssd, workdir.resolve(), env, confined=True)
 
 
