@@ -466,3 +466,21 @@ def test_an_archive_and_its_fmus_share_one_unpack_budget(
         refused.err
     )
     assert "component 'Source'" in refused.err
+
+
+def test_results_as_parquet_equal_the_csv(coupler: Coupler, tmp_path: Path) -> None:
+    """--parquet: the same rows, typed columns; selection and decimation apply alike."""
+    pq = pytest.importorskip("pyarrow.parquet", reason="pyarrow is not installed")
+    path = Path(__file__).parent / "data" / "chain.ssd"
+    outcome = coupler(
+        "run", path, "--out", tmp_path, "--parquet", "--output-interval", "1.0",
+        "--output-variables", "Source.*", "Integ.x",
+    )  # fmt: skip
+    assert outcome.code == 0, outcome.err
+    table = pq.read_table(tmp_path / "results.parquet")
+    rows = coupler.results(tmp_path)
+    assert table.column_names == list(rows[0])
+    assert table.schema.field("Source.counter").type == "int64"
+    assert table.column("time").to_pylist() == [float(r["time"]) for r in rows]
+    assert table.column("Integ.x").to_pylist() == [float(r["Integ.x"]) for r in rows]
+    assert table.column("Source.counter").to_pylist() == [int(r["Source.counter"]) for r in rows]

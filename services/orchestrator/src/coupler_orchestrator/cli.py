@@ -74,6 +74,11 @@ def parser() -> argparse.ArgumentParser:
         help="record only these outputs: Component.output names or globs (Gain.*)",
     )
     run.add_argument(
+        "--parquet",
+        action="store_true",
+        help="also write results.parquet, typed columns (needs the pyarrow package)",
+    )
+    run.add_argument(
         "--out",
         type=Path,
         help="results directory (default: the SSD's OpenMCx outputDirectory, else ./results)",
@@ -218,6 +223,7 @@ def options_of(args: argparse.Namespace) -> RunOptions:
         exit_when_stuck=True,  # a hung in-process FMU cannot be left any other way
         output_interval=getattr(args, "output_interval", None),
         output_variables=tuple(getattr(args, "output_variables", ())),
+        parquet=getattr(args, "parquet", False),
         **({"run_id": args.run_id} if args.run_id else {}),
     )
 

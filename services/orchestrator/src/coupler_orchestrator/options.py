@@ -60,6 +60,8 @@ class RunOptions:
     every one. Must be a multiple of the step."""
     output_variables: tuple[str, ...] = ()
     """Columns recorded: names or globs (``Gain.*``); empty: every output."""
+    parquet: bool = False
+    """Also write results.parquet (needs the pyarrow package)."""
     security: ClientSecurity = field(default_factory=ClientSecurity.from_environment)
     """TLS trust, client certificate and token for every remote participant (default: the
     ``COUPLER_TLS_*`` and ``COUPLER_TOKEN_FILE`` environment variables)."""

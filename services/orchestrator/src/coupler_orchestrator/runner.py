@@ -20,6 +20,7 @@ from typing import Any
 import structlog
 
 from coupler.archives import Budget
+from coupler.errors import ScenarioError
 from coupler_orchestrator import ssp
 from coupler_orchestrator.checks import Checked, check
 from coupler_orchestrator.master import Master
@@ -29,10 +30,12 @@ from coupler_orchestrator.participants import opened
 from coupler_orchestrator.plan import build_plan
 from coupler_orchestrator.results import (
     CsvRecorder,
+    ParquetRecorder,
     Selection,
     SummaryWriter,
     check_writable,
     coupler_version,
+    parquet_available,
 )
 from coupler_orchestrator.wiring import wire
 
@@ -112,13 +115,21 @@ async def run_scenario(
             configured = scenario.results.output_directory if scenario.results else None
             out_dir = Path(configured) if configured else Path("results")
         check_writable(out_dir)
+        if options.parquet and not parquet_available():
+            raise ScenarioError(
+                "--parquet needs the pyarrow package: install it (pip install pyarrow, or "
+                "uv sync in a checkout) or leave --parquet out (results.csv is always written)"
+            )
         async with opened(scenario, options, budget) as roster:
             checked = check(scenario, roster, options)
             plan = build_plan(checked, wire(checked), options)
             csv_path, summary_path = out_dir / "results.csv", out_dir / "summary.json"
             summary = SummaryWriter(summary_path, extra=_extra(checked, roster.described()))
             selection = Selection(patterns=options.output_variables, every=checked.record_every)
-            recorders = [CsvRecorder(csv_path, selection), summary, *observers]
+            recorders: list[Observer] = [CsvRecorder(csv_path, selection), summary]
+            if options.parquet:
+                recorders.append(ParquetRecorder(out_dir / "results.parquet", selection))
+            recorders.extend(observers)
             end = await Master(plan, recorders).run()
     return RunOutcome(
         end=end, summary=summary.summary, results_csv=csv_path, summary_json=summary_path
