@@ -1,4 +1,4 @@
-"""The ``coupler`` command: run, validate, describe, fleet.
+"""The ``coupler`` command: run, validate, describe, fleet, campaign, plot.
 
 Exit codes: 0 the run completed (or a participant ended it early: ``terminated``; or Ctrl-C
 stopped a fleet's services after its run completed), 1 any problem (bad input, a participant
@@ -29,6 +29,13 @@ from coupler.fmu import FmuParticipant
 from coupler.logs import configure_logging
 from coupler.participant import Participant
 from coupler.security import ClientSecurity
+from coupler_orchestrator.campaign import (
+    CampaignError,
+    CampaignProgress,
+    CampaignSpec,
+    format_table,
+    run_campaign,
+)
 from coupler_orchestrator.fleet import Fleet, FleetSpec
 from coupler_orchestrator.observer import Observer, RunEnd, RunInfo
 from coupler_orchestrator.options import Algorithm, RunOptions
@@ -108,6 +115,23 @@ def parser() -> argparse.ArgumentParser:
         "--realtime-factor", type=float, help="override the fleet file's pacing; 0 = unpaced"
     )
     fleet.add_argument("--health-timeout", type=float, default=60.0, help="[s] per service")
+
+    campaign = commands.add_parser(
+        "campaign",
+        help="run a scenario under many variants, in parallel, into one table",
+        description="Runs every variant of a campaign file (docs/campaigns.md): here, --jobs at "
+        "once, or as tasks of a Dask cluster (--scheduler). Runs that completed before are "
+        "skipped unless --force.",
+    )
+    campaign.add_argument("campaign", type=Path, help="campaign file (TOML)")
+    campaign.add_argument("--jobs", type=int, help="runs at once (default: one per core)")
+    campaign.add_argument(
+        "--scheduler",
+        help="tcp://HOST:8786 (a Dask scheduler) or local (a Dask LocalCluster); default: "
+        "runs as local processes",
+    )
+    campaign.add_argument("--force", action="store_true", help="run completed variants again")
+    campaign.add_argument("--out", type=Path, help="campaign folder (default: [scenario] out)")
 
     plot = commands.add_parser(
         "plot",
@@ -258,6 +282,7 @@ class _Session(Observer):
         self.time: float | None = None
         self.end: RunEnd | None = None
         self.out_dir: Path | None = None
+        self.campaign: Path | None = None
 
     def waiting(self, name: str, address: str, reason: str) -> None:
         self.waited_for.append(name)
@@ -274,6 +299,11 @@ class _Session(Observer):
 
     def interrupted(self, args: argparse.Namespace) -> tuple[int, str]:
         """The exit code and the one sentence Ctrl-C (or SIGTERM) ends a command with."""
+        if self.campaign is not None:
+            return EXIT_INTERRUPTED, (
+                f"interrupted the campaign; the runs that ended are in "
+                f"{_shown(self.campaign / 'campaign.csv')} (the same command again runs the rest)"
+            )
         where = _shown(self.out_dir) if self.out_dir else "./results (or the SSD's outputDirectory)"
         end = self.end
         if end is not None and end.status != "aborted":
@@ -404,6 +434,8 @@ async def _dispatch(args: argparse.Namespace, out: TextIO, session: _Session) ->
         return await _fleet(args, out, session)
     if args.command == "plot":
         return _plot(args, out)
+    if args.command == "campaign":
+        return await _campaign(args, out, session)
     options = replace(options_of(args), on_waiting=session.waiting)
     if args.command == "validate":
         validation = await validate_scenario(args.ssp, options)
@@ -463,6 +495,40 @@ async def _fleet(args: argparse.Namespace, out: TextIO, session: _Session) -> in
             print("services stay up; Ctrl-C stops them", file=out, flush=True)
             await asyncio.Event().wait()
     return code
+
+
+async def _campaign(args: argparse.Namespace, out: TextIO, session: _Session) -> int:
+    spec = CampaignSpec.load(args.campaign)
+    if args.out is not None:
+        spec = replace(spec, out=args.out)
+    if args.jobs is not None and args.jobs < 1:
+        raise CampaignError(f"--jobs {args.jobs}: give at least 1")
+    session.campaign = spec.out
+    print(
+        f"campaign: {len(spec.variants)} runs of {_shown(spec.scenario.ssp)} into "
+        f"{_shown(spec.out)}",
+        file=out,
+        flush=True,
+    )
+    result = await run_campaign(
+        spec,
+        jobs=args.jobs,
+        scheduler=args.scheduler,
+        force=args.force,
+        progress=CampaignProgress(sys.stderr),
+    )
+    print(format_table(spec, result.reports), file=out)
+    print(f"table: {_shown(result.table_csv)}", file=out)
+    if result.table_parquet is not None:
+        print(f"table: {_shown(result.table_parquet)}", file=out)
+    if result.failed:
+        print(
+            f"error: {len(result.failed)} of {len(result.reports)} runs did not complete "
+            f"(status and reason in the table; run.log in each run's folder)",
+            file=sys.stderr,
+        )
+        return EXIT_ERROR
+    return EXIT_OK
 
 
 def _plot(args: argparse.Namespace, out: TextIO) -> int:
