@@ -37,6 +37,7 @@ from coupler_orchestrator.campaign import (
     run_campaign,
 )
 from coupler_orchestrator.fleet import Fleet, FleetSpec
+from coupler_orchestrator.monitor import MonitorServer
 from coupler_orchestrator.observer import Observer, RunEnd, RunInfo
 from coupler_orchestrator.options import Algorithm, RunOptions
 from coupler_orchestrator.plot import plot
@@ -95,6 +96,19 @@ def parser() -> argparse.ArgumentParser:
         "--no-progress",
         action="store_true",
         help="no progress (default: a bar on a terminal, else a line every 10 s on stderr)",
+    )
+    run.add_argument(
+        "--monitor",
+        metavar="[HOST:]PORT",
+        help="serve a live page of the run (status, real-time factor, step latency, channel "
+        "charts) on HOST:PORT (default host 127.0.0.1; port 0: any free port)",
+    )
+    run.add_argument(
+        "--monitor-linger",
+        type=float,
+        default=0.0,
+        metavar="S",
+        help="keep the monitor page up S seconds after the run ends (default 0)",
     )
 
     validate = commands.add_parser("validate", help="check a scenario and its participants")
@@ -283,9 +297,12 @@ class _Session(Observer):
         self.end: RunEnd | None = None
         self.out_dir: Path | None = None
         self.campaign: Path | None = None
+        self.monitor: MonitorServer | None = None
 
     def waiting(self, name: str, address: str, reason: str) -> None:
         self.waited_for.append(name)
+        if self.monitor is not None:
+            self.monitor.state.waiting(name, address, reason)
         print(f"waiting for {name} at {address} ({reason})", file=sys.stderr, flush=True)
 
     def started(self, info: RunInfo) -> None:
@@ -458,7 +475,15 @@ async def _run(
     observers: list[Observer] = [session]
     if not args.no_progress:
         observers.append(ProgressBar() if sys.stderr.isatty() else ProgressLines())
-    outcome = await run_scenario(args.ssp, options, out_dir=args.out, observers=observers)
+    async with contextlib.AsyncExitStack() as stack:
+        if args.monitor is not None and session.monitor is None:
+            monitor = await stack.enter_async_context(MonitorServer(args.monitor))
+            print(f"monitor: {monitor.url}", file=out, flush=True)
+            stack.push_async_callback(_linger, monitor, args.monitor_linger, out)
+            session.monitor = monitor
+        if session.monitor is not None:
+            observers.append(session.monitor.state)
+        outcome = await run_scenario(args.ssp, options, out_dir=args.out, observers=observers)
     end = outcome.end
     print(
         f"{end.status}: {end.steps} steps to t={end.end_time:g} s in {end.wall_time:.3g} s",
@@ -475,12 +500,31 @@ async def _run(
     return EXIT_OK
 
 
+async def _linger(monitor: MonitorServer, seconds: float, out: TextIO) -> None:
+    if seconds > 0:
+        print(f"monitor: {monitor.url} stays up {seconds:g} s", file=out, flush=True)
+        await asyncio.sleep(seconds)
+
+
 async def _fleet(args: argparse.Namespace, out: TextIO, session: _Session) -> int:
     spec = FleetSpec.load(args.fleet)
     run_argv = ["run", str(spec.ssp), "--out", str(args.out or spec.out), *spec.run_args]
     if args.realtime_factor is not None:
         run_argv += ["--realtime-factor", str(args.realtime_factor)]
     run_args = parser().parse_args(run_argv)
+    async with contextlib.AsyncExitStack() as stack:
+        if run_args.monitor is not None:  # up as long as the fleet, from before its services
+            session.monitor = await stack.enter_async_context(MonitorServer(run_args.monitor))
+        return await _fleet_run(args, spec, run_args, out, session)
+
+
+async def _fleet_run(
+    args: argparse.Namespace,
+    spec: FleetSpec,
+    run_args: argparse.Namespace,
+    out: TextIO,
+    session: _Session,
+) -> int:
     async with Fleet(spec, health_timeout=args.health_timeout) as fleet:
         print(
             f"fleet: {len(spec.services)} services healthy (logs in {_shown(fleet.logs)})",
@@ -488,6 +532,8 @@ async def _fleet(args: argparse.Namespace, out: TextIO, session: _Session) -> in
         )
         for name, url in spec.urls.items():
             print(f"{name}: {url}", file=out)
+        if session.monitor is not None:
+            print(f"monitor: {session.monitor.url}", file=out)
         out.flush()
         options = replace(options_of(run_args), on_waiting=session.waiting)
         code = await _run(run_args, options, out, session)

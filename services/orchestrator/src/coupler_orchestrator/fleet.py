@@ -127,7 +127,10 @@ class FleetSpec:
                 root=root,
                 ssp=root / scenario["ssp"],
                 out=root / scenario.get("out", "results"),
-                run_args=tuple(scenario.get("args", ())),
+                run_args=tuple(
+                    expand(str(a), env, what=f"{path} [scenario] args")
+                    for a in scenario.get("args", ())
+                ),
                 services=tuple(_service(path, s, env) for s in data.get("service", ())),
                 urls={
                     k: expand(v, env, what=f"{path} [urls] {k}")

@@ -1,0 +1,327 @@
+"""The live monitor of ``coupler run --monitor [HOST:]PORT``: a page served while the run goes.
+
+It shows the run's status, simulated time, progress, real-time factor, each participant's step
+latency (a live chart) and live charts of the channels picked in the page. It follows the map
+server's rules: the run never waits for a browser.
+
+- The run only hands its events to :class:`MonitorState` (an observer): O(1) per step, no
+  network, no awaiting. History is kept decimated: at most ``points`` points per run (every
+  point at first; when full, every other point is dropped and the stride doubles), so a run of
+  a million steps keeps a bounded, evenly spread history.
+- Each browser has a stream (server-sent events) that wakes four times a second and sends what
+  is new since what that browser already has, read from the state at that moment: nothing
+  queues up for a slow browser, and one whose socket stays full for ``write_timeout`` seconds
+  is dropped (the page reconnects and starts over).
+- The first frame of every stream is the whole history: a late joiner sees the run so far.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import bisect
+import contextlib
+import json
+import math
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import structlog
+from aiohttp import web
+
+from coupler.channels import Value
+from coupler.errors import CouplerError
+from coupler_orchestrator.observer import Observer, RunEnd, RunInfo
+
+log = structlog.get_logger("coupler.monitor")
+
+STATIC = Path(__file__).parent / "static"
+NUMERIC = frozenset({"Real", "Integer", "Boolean", "Enumeration", "UInt64"})
+"""Column types the page can chart."""
+
+
+class MonitorError(CouplerError):
+    """The monitor cannot serve (its address is taken, not an address)."""
+
+
+class Decimated:
+    """A time series of rows holding at most ``points`` points, evenly spread over the run."""
+
+    def __init__(self, points: int) -> None:
+        self.points = max(points, 2)
+        self.times: list[float] = []
+        self.rows: list[Sequence[Any]] = []
+        self.stride = 1
+        self._offered = 0
+
+    def offer(self, time_s: float, row: Sequence[Any]) -> None:
+        """Keep ``row`` if it falls on the stride (amortized O(1))."""
+        offered, self._offered = self._offered, self._offered + 1
+        if offered % self.stride:
+            return
+        self.times.append(time_s)
+        self.rows.append(row)
+        if len(self.times) >= self.points:
+            self.times, self.rows = self.times[::2], self.rows[::2]
+            self.stride *= 2
+
+    def after(self, time_s: float) -> tuple[list[float], list[Sequence[Any]]]:
+        """The points later than ``time_s``."""
+        start = bisect.bisect_right(self.times, time_s)
+        return self.times[start:], self.rows[start:]
+
+
+class MonitorState(Observer):
+    """What the page shows, fed by the run's events (an observer)."""
+
+    def __init__(self, *, points: int = 2000) -> None:
+        self.points = points
+        self.status = "waiting"
+        """waiting, running, then the run's end status (completed, failed, ...)."""
+        self.reason = ""
+        self.waiting_for: dict[str, str] = {}
+        """Participants not up yet: name -> 'address (reason)'."""
+        self.info: RunInfo | None = None
+        self.time: float | None = None
+        self.row: Sequence[Value] = ()
+        self.latency: list[float | None] = []
+        """Each member's last step latency [ms]."""
+        self.values = Decimated(points)
+        self.latencies = Decimated(points)
+        self._started = 0.0
+        self._ended: float | None = None
+        self._numeric: list[int] = []
+        self.version = 0
+        """Bumped by every event (streams sleep while it stays the same)."""
+
+    # the run's events ----------------------------------------------------------------------
+
+    def waiting(self, name: str, address: str, reason: str) -> None:
+        self.waiting_for[name] = f"{address} ({reason})"
+        self.version += 1
+
+    def started(self, info: RunInfo) -> None:
+        self.info, self.status, self.reason = info, "running", ""
+        self.waiting_for.clear()
+        self.values, self.latencies = Decimated(self.points), Decimated(self.points)
+        self.time, self.latency = None, [None] * len(info.members)
+        self._numeric = [i for i, c in enumerate(info.columns) if c.type in NUMERIC]
+        self._started, self._ended = time.monotonic(), None
+        self.version += 1
+
+    def stepped(self, time_s: float, row: Sequence[Value]) -> None:
+        self.time, self.row = time_s, row
+        self.values.offer(time_s, row)
+        self.version += 1
+
+    def timed(self, seconds: Sequence[float | None]) -> None:
+        self.latency = [None if s is None else s * 1e3 for s in seconds]
+        if self.time is not None:
+            self.latencies.offer(self.time, self.latency)
+
+    def finished(self, end: RunEnd) -> None:
+        self.status, self.reason = end.status, end.reason
+        self._ended = time.monotonic()
+        self.version += 1
+
+    # what the page gets ---------------------------------------------------------------------
+
+    def header(self) -> dict[str, Any]:
+        """Status, times, progress and real-time factor."""
+        info = self.info
+        found: dict[str, Any] = {"status": self.status, "reason": self.reason}
+        if self.waiting_for:
+            found["waiting_for"] = self.waiting_for
+        if info is None:
+            return found
+        now = self._ended if self._ended is not None else time.monotonic()
+        elapsed = now - self._started
+        reached = (self.time if self.time is not None else info.start_time) - info.start_time
+        span = info.stop_time - info.start_time
+        rtf = reached / elapsed if elapsed > 0 else None
+        return found | {
+            "run_id": info.run_id,
+            "time": self.time,
+            "start_time": info.start_time,
+            "stop_time": info.stop_time,
+            "progress": reached / span if span > 0 else 1.0,
+            "elapsed_s": elapsed,
+            "realtime_factor": rtf,
+            "eta_s": (span - reached) / rtf if rtf and self._ended is None else None,
+            "latency_ms": dict(zip(info.members, self.latency, strict=False)),
+        }
+
+    def layout(self) -> dict[str, Any]:
+        """The run's participants and the channels the page may chart."""
+        info = self.info
+        if info is None:
+            return {"members": [], "channels": []}
+        return {
+            "members": list(info.members),
+            "channels": [
+                {"name": info.columns[i].name, "unit": info.columns[i].unit} for i in self._numeric
+            ],
+        }
+
+    def frame(
+        self, since: tuple[float, float] | None, channels: Sequence[str]
+    ) -> tuple[dict[str, Any], tuple[float, float]]:
+        """What a stream sends: the header and, after the cursor ``since`` (None: from the
+        start, with the layout), the latency and picked channels' points; and the new cursor."""
+        frame: dict[str, Any] = {"header": self.header()}
+        info = self.info
+        if since is None:
+            frame["layout"] = self.layout()
+        latency_after, values_after = since or (-math.inf, -math.inf)
+        if info is None:
+            return frame, (latency_after, values_after)
+        times, rows = self.latencies.after(latency_after)
+        frame["latency"] = {
+            "t": times,
+            "series": {m: [r[i] for r in rows] for i, m in enumerate(info.members)},
+        }
+        index = {info.columns[i].name: i for i in self._numeric}
+        picked = [(name, index[name]) for name in channels if name in index]
+        times_v, rows_v = self.values.after(values_after)
+        frame["values"] = {
+            "t": times_v,
+            "series": {name: [_number(r[i]) for r in rows_v] for name, i in picked},
+        }
+        return frame, (
+            times[-1] if times else latency_after,
+            times_v[-1] if times_v else values_after,
+        )
+
+
+def _number(value: Value) -> float | None:
+    if isinstance(value, (int, float)):
+        number = float(value)
+        return number if math.isfinite(number) else None
+    return None
+
+
+@dataclass(frozen=True, kw_only=True)
+class MonitorSettings:
+    interval_s: float = 0.25
+    """How often a stream looks for news."""
+    write_timeout_s: float = 10.0
+    """A browser whose socket stays full this long is dropped."""
+
+
+STATE: web.AppKey[MonitorState] = web.AppKey("state", MonitorState)
+SETTINGS: web.AppKey[MonitorSettings] = web.AppKey("settings", MonitorSettings)
+STREAMS: web.AppKey[set[asyncio.Event]] = web.AppKey("streams", set)
+SSE_HEADERS = {"Content-Type": "text/event-stream", "Cache-Control": "no-store"}
+
+
+def application(state: MonitorState, settings: MonitorSettings | None = None) -> web.Application:
+    app = web.Application()
+    app[STATE] = state
+    app[SETTINGS] = settings or MonitorSettings()
+    app[STREAMS] = set()
+    app.router.add_get("/", _index)
+    app.router.add_get("/api/state", _state)
+    app.router.add_get("/api/events", _events)
+    app.router.add_static("/static/", STATIC, append_version=False)
+    app.on_shutdown.append(_close_streams)
+    return app
+
+
+async def _close_streams(app: web.Application) -> None:
+    for stop in app[STREAMS]:
+        stop.set()
+
+
+async def _index(request: web.Request) -> web.StreamResponse:
+    return web.FileResponse(STATIC / "monitor.html", headers={"Cache-Control": "no-store"})
+
+
+async def _state(request: web.Request) -> web.Response:
+    channels = [c for c in request.query.get("channels", "").split(",") if c]
+    frame, _ = request.app[STATE].frame(None, channels)
+    return web.json_response(frame)
+
+
+async def _events(request: web.Request) -> web.StreamResponse:
+    """One browser's stream: the whole history first, then what is new, at its own pace."""
+    state, settings = request.app[STATE], request.app[SETTINGS]
+    channels = [c for c in request.query.get("channels", "").split(",") if c]
+    response = web.StreamResponse(headers=SSE_HEADERS)
+    try:
+        await response.prepare(request)
+    except ConnectionError:
+        return response
+    stop = asyncio.Event()
+    request.app[STREAMS].add(stop)
+    cursor: tuple[float, float] | None = None
+    seen = -1
+    try:
+        while not stop.is_set():
+            if state.version != seen:
+                seen = state.version
+                frame, cursor = state.frame(cursor, channels)
+                body = f"data: {json.dumps(frame, separators=(',', ':'))}\n\n".encode()
+                await asyncio.wait_for(response.write(body), settings.write_timeout_s)
+            with contextlib.suppress(TimeoutError):
+                await asyncio.wait_for(stop.wait(), settings.interval_s)
+    except (ConnectionError, TimeoutError):
+        pass  # gone, or stalled: the page reconnects and gets the history again
+    finally:
+        request.app[STREAMS].discard(stop)
+    return response
+
+
+def parse_address(text: str) -> tuple[str, int]:
+    """``[HOST:]PORT`` -> (host, port); the host defaults to 127.0.0.1 (this machine only)."""
+    host, _, port = text.rpartition(":")
+    host = host.strip("[]") or "127.0.0.1"
+    if not port.isdigit() or not 0 <= int(port) < 65536:
+        raise MonitorError(
+            f"--monitor {text}: not [HOST:]PORT; e.g. --monitor 8090 or --monitor 0.0.0.0:8090"
+        )
+    return host, int(port)
+
+
+class MonitorServer:
+    """The monitor's web server, for the life of a ``with`` block."""
+
+    def __init__(self, address: str, state: MonitorState | None = None) -> None:
+        self.host, self.port = parse_address(address)
+        self.state = state or MonitorState()
+        self._runner: web.AppRunner | None = None
+        self._app: web.Application | None = None
+
+    @property
+    def url(self) -> str:
+        host = "127.0.0.1" if self.host in ("0.0.0.0", "::", "") else self.host
+        return f"http://{host}:{self.port}/"
+
+    async def __aenter__(self) -> MonitorServer:
+        self._app = application(self.state)
+        runner = web.AppRunner(self._app, access_log=None, shutdown_timeout=1.0)
+        await runner.setup()
+        try:
+            site = web.TCPSite(runner, self.host, self.port)
+            await site.start()
+        except OSError as exc:
+            await runner.cleanup()
+            raise MonitorError(
+                f"--monitor {self.host}:{self.port}: cannot serve there ({exc.strerror or exc}); "
+                "pick a free port (--monitor 0 takes any)"
+            ) from None
+        bound: Any = runner.addresses[0]
+        self.port = int(bound[1])
+        self._runner = runner
+        log.info("monitor_serving", url=self.url)
+        return self
+
+    async def __aexit__(self, *exc: object) -> None:
+        if self._runner is not None:
+            if (
+                self._app is not None and self._app[STREAMS]
+            ):  # let open pages get the run's last frame
+                await asyncio.sleep(2 * self._app[SETTINGS].interval_s + 0.1)
+            await self._runner.cleanup()
+            self._runner = None

@@ -1,0 +1,166 @@
+// The run monitor's page: one server-sent event stream (/api/events?channels=...), whose first
+// frame is the whole history and whose later frames carry only what is new. Picking a channel
+// opens a new stream (its history comes with the first frame).
+"use strict";
+
+const MAX_POINTS = 4000; // per chart; beyond, every other point is dropped (as the server does)
+const COLORS = ["#2a7de1", "#e1582a", "#2e9b4f", "#9b2e8f", "#b58400", "#2ab5b5", "#555", "#c93a3a"];
+const view = {
+  picked: new URLSearchParams(location.search).get("channels")?.split(",").filter(Boolean) || [],
+  members: [], channels: [], units: {},
+  latency: null, latencyData: null,
+  values: {}, // channel -> {chart, data: [[t...], [v...]]}
+  source: null, frames: 0,
+};
+window.monitor = view; // for tests and the curious
+
+function text(id, value) { document.getElementById(id).textContent = value; }
+function fmt(x, digits = 4) { return x === null || x === undefined ? "–" : Number(x).toPrecision(digits); }
+function duration(s) {
+  if (s === null || s === undefined || !isFinite(s)) return "–";
+  s = Math.round(s);
+  return s < 60 ? `${s} s` : s < 3600 ? `${Math.floor(s / 60)} min ${s % 60} s` : `${Math.floor(s / 3600)} h ${Math.floor(s / 60) % 60} min`;
+}
+
+function chartWidth() { return Math.max(300, document.querySelector("main > div").clientWidth - 40); }
+
+function thin(data) {
+  if (data[0].length <= MAX_POINTS) return data;
+  return data.map((column) => column.filter((_, i) => i % 2 === 0));
+}
+
+function append(data, times, columns) {
+  for (let i = 0; i < times.length; i++) {
+    data[0].push(times[i]);
+    columns.forEach((column, k) => data[k + 1].push(column[i]));
+  }
+  return thin(data);
+}
+
+function showHeader(h) {
+  const status = document.getElementById("status");
+  status.textContent = h.status;
+  status.className = `status ${h.status}`;
+  const waiting = h.waiting_for ? Object.entries(h.waiting_for).map(([n, a]) => `waiting for ${n} at ${a}`).join("; ") : "";
+  text("reason", h.reason || waiting);
+  text("time", fmt(h.time, 6));
+  text("stop", fmt(h.stop_time, 6));
+  const share = Math.max(0, Math.min(1, h.progress || 0));
+  document.getElementById("progress").style.width = `${share * 100}%`;
+  text("percent", `${(share * 100).toFixed(1)} %`);
+  text("rtf", h.realtime_factor ? `${fmt(h.realtime_factor, 3)}×` : "–");
+  text("elapsed", duration(h.elapsed_s));
+  text("eta", duration(h.eta_s));
+  text("run", h.run_id ? `run ${h.run_id}` : "");
+  const body = document.querySelector("#latency-table tbody");
+  body.innerHTML = "";
+  for (const [member, ms] of Object.entries(h.latency_ms || {})) {
+    const row = body.insertRow();
+    row.insertCell().textContent = member;
+    const cell = row.insertCell();
+    cell.className = "num";
+    cell.textContent = ms === null ? "–" : `${fmt(ms, 3)} ms`;
+  }
+}
+
+function showLayout(layout) {
+  view.members = layout.members;
+  view.channels = layout.channels;
+  view.units = Object.fromEntries(layout.channels.map((c) => [c.name, c.unit]));
+  const list = document.getElementById("channels");
+  list.innerHTML = "";
+  for (const channel of layout.channels) {
+    const label = document.createElement("label");
+    const box = document.createElement("input");
+    box.type = "checkbox";
+    box.value = channel.name;
+    box.checked = view.picked.includes(channel.name);
+    box.addEventListener("change", () => pick(channel.name, box.checked));
+    label.append(box, ` ${channel.name}${channel.unit ? ` [${channel.unit}]` : ""}`);
+    label.title = channel.name;
+    list.append(label);
+  }
+  filterChannels();
+  if (view.latency) { view.latency.destroy(); view.latency = null; }
+  view.latencyData = [[], ...layout.members.map(() => [])];
+  if (layout.members.length) {
+    view.latency = new uPlot({
+      width: chartWidth(), height: 220, scales: { x: { time: false } },
+      series: [{ label: "t [s]" }, ...layout.members.map((m, i) => ({ label: m, stroke: COLORS[i % COLORS.length], width: 1.5 }))],
+      axes: [{}, { label: "ms" }],
+    }, view.latencyData, document.getElementById("latency-chart"));
+  }
+}
+
+function filterChannels() {
+  const needle = document.getElementById("filter").value.toLowerCase();
+  for (const label of document.querySelectorAll("#channels label")) {
+    label.style.display = label.title.toLowerCase().includes(needle) ? "" : "none";
+  }
+}
+
+function resetValueCharts() {
+  for (const entry of Object.values(view.values)) entry.chart.destroy();
+  view.values = {};
+  const box = document.getElementById("value-charts");
+  box.innerHTML = view.picked.length ? "" : '<p id="hint">Pick channels on the left to chart them live.</p>';
+  view.picked.forEach((name, i) => {
+    const div = document.createElement("div");
+    div.dataset.channel = name;
+    box.append(div);
+    const data = [[], []];
+    const unit = view.units[name] || "";
+    const chart = new uPlot({
+      title: name, width: chartWidth(), height: 200, scales: { x: { time: false } },
+      series: [{ label: "t [s]" }, { label: name, stroke: COLORS[i % COLORS.length], width: 1.5 }],
+      axes: [{}, { label: unit }],
+    }, data, div);
+    view.values[name] = { chart, data };
+  });
+}
+
+function onFrame(frame) {
+  view.frames++;
+  showHeader(frame.header);
+  if (frame.layout) { showLayout(frame.layout); resetValueCharts(); }
+  if (frame.latency && view.latency) {
+    view.latencyData = append(view.latencyData, frame.latency.t, view.members.map((m) => frame.latency.series[m]));
+    view.latency.setData(view.latencyData);
+  }
+  if (frame.values) {
+    for (const [name, series] of Object.entries(frame.values.series)) {
+      const entry = view.values[name];
+      if (!entry) continue;
+      entry.data = append(entry.data, frame.values.t, [series]);
+      entry.chart.setData(entry.data);
+    }
+  }
+}
+
+function connect() {
+  if (view.source) view.source.close();
+  const query = view.picked.length ? `?channels=${encodeURIComponent(view.picked.join(","))}` : "";
+  view.source = new EventSource(`/api/events${query}`);
+  view.source.onmessage = (event) => onFrame(JSON.parse(event.data));
+  view.source.onerror = () => {
+    const status = document.getElementById("status");
+    if (!["completed", "terminated", "failed", "aborted"].includes(status.textContent)) {
+      status.textContent = "reconnecting";
+      status.className = "status";
+    } else {
+      view.source.close(); // the run ended and its server has gone: keep the last picture
+    }
+  };
+}
+
+function pick(name, on) {
+  view.picked = on ? [...view.picked, name] : view.picked.filter((n) => n !== name);
+  const url = new URL(location.href);
+  if (view.picked.length) url.searchParams.set("channels", view.picked.join(","));
+  else url.searchParams.delete("channels");
+  history.replaceState(null, "", url);
+  connect(); // its first frame brings the history of every picked channel
+}
+
+document.getElementById("filter").addEventListener("input", filterChannels);
+connect();

@@ -1,0 +1,182 @@
+"""The live monitor (``coupler run --monitor``) with a real run: FMUs in-process and the example
+gain participant over gRPC (tests/data/mixed.ssd), paced so the page sees it move.
+
+    run_scenario --events--> MonitorState <--frames-- aiohttp /api/events (SSE) --> Chromium
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+from pathlib import Path
+from typing import Any
+
+import aiohttp
+import pytest
+
+from coupler.server import ParticipantServer
+from coupler_orchestrator.monitor import (
+    Decimated,
+    MonitorError,
+    MonitorServer,
+    MonitorState,
+    parse_address,
+)
+from coupler_orchestrator.options import RunOptions
+from coupler_orchestrator.runner import run_scenario
+
+from .conftest import DATA, REPO, Coupler
+
+CHROMIUM = Path("/usr/bin/chromium")
+BROWSER_ARGS = ["--headless=new", "--no-sandbox", "--disable-gpu", "--no-first-run"]
+ARTIFACT = REPO / "test-artifacts" / "monitor.png"
+MEMBERS = ["Source", "Gain", "Feed", "Feed2"]
+
+
+async def frames(url: str, count: int, query: str = "") -> list[dict[str, Any]]:
+    """The first ``count`` frames of the monitor's event stream."""
+    found: list[dict[str, Any]] = []
+    async with aiohttp.ClientSession() as session, session.get(f"{url}api/events{query}") as reply:
+        async for line in reply.content:
+            if line.startswith(b"data: "):
+                found.append(json.loads(line[6:]))
+                if len(found) == count:
+                    return found
+    return found
+
+
+def run(stop: float, rtf: float | None, monitor: MonitorServer, out: Path) -> Any:
+    options = RunOptions(stop_time=stop, step_size=0.1, realtime_factor=rtf)
+    return run_scenario(DATA / "mixed.ssd", options, out_dir=out, observers=[monitor.state])
+
+
+@pytest.mark.skipif(not CHROMIUM.exists(), reason="Debian's chromium is not installed")
+async def test_the_page_charts_a_picked_channel_and_each_participants_latency(
+    fmus: dict[str, Path], gain_server: ParticipantServer, tmp_path: Path
+) -> None:
+    from playwright.async_api import async_playwright
+
+    async with MonitorServer("127.0.0.1:0") as monitor:
+        running = asyncio.create_task(run(8.0, 2.0, monitor, tmp_path))  # 4 s of wall time
+        async with async_playwright() as playwright:
+            browser = await playwright.chromium.launch(
+                executable_path=str(CHROMIUM), args=BROWSER_ARGS
+            )
+            try:
+                page = await browser.new_page(viewport={"width": 1200, "height": 900})
+                errors: list[str] = []
+                page.on("pageerror", lambda exc: errors.append(str(exc)))
+                page.on("console", lambda m: errors.append(m.text) if m.type == "error" else None)
+                await page.goto(monitor.url)
+                await page.wait_for_function("window.monitor.channels.length > 0")
+                await page.check("#channels input[value='Gain.y']")
+                gain = "window.monitor.values['Gain.y']"
+                await page.wait_for_function(f"{gain} && {gain}.data[0].length > 3")
+                first = await page.evaluate("window.monitor.values['Gain.y'].data[0].length")
+                await page.wait_for_function(
+                    f"window.monitor.values['Gain.y'].data[0].length > {first + 3}"
+                )  # the chart moves
+                status = await page.text_content("#status")
+                latency = await page.evaluate(
+                    "Array.from(document.querySelectorAll('#latency-table tbody tr'))"
+                    ".map((row) => row.cells[0].textContent)"
+                )
+                series = await page.evaluate(
+                    "window.monitor.latency.series.slice(1).map((s) => s.label)"
+                )
+                ARTIFACT.parent.mkdir(exist_ok=True)
+                await page.screenshot(path=str(ARTIFACT), full_page=True)
+                outcome = await running
+                await page.wait_for_function(
+                    "document.getElementById('status').textContent === 'completed'"
+                )
+                drawn = await page.evaluate("window.monitor.values['Gain.y'].data[0].length")
+            finally:
+                await browser.close()
+    assert status == "running"
+    assert latency == MEMBERS and series == MEMBERS
+    assert outcome.end.status == "completed"
+    assert drawn == 81  # every point of t = 0 .. 8 s, h = 0.1 s
+    assert errors == []
+    assert ARTIFACT.stat().st_size > 20_000
+
+
+async def test_a_late_joiner_gets_the_history(
+    fmus: dict[str, Path], gain_server: ParticipantServer, tmp_path: Path
+) -> None:
+    async with MonitorServer("0") as monitor:
+        outcome = await run(3.0, None, monitor, tmp_path)
+        [frame] = await frames(monitor.url, 1, "?channels=Gain.y,Feed.real_out,Nope.x")
+    assert outcome.end.status == "completed"
+    assert frame["header"]["status"] == "completed"
+    assert frame["header"]["progress"] == pytest.approx(1.0)
+    assert frame["layout"]["members"] == MEMBERS
+    assert {"name": "Gain.y", "unit": "m/s"} in frame["layout"]["channels"]
+    values = frame["values"]
+    assert values["t"][0] == 0.0 and values["t"][-1] == pytest.approx(3.0)
+    assert len(values["t"]) == 31
+    assert set(values["series"]) == {"Gain.y", "Feed.real_out"}  # unknown names ignored
+    assert set(frame["latency"]["series"]) == set(MEMBERS)
+    assert values["series"]["Gain.y"] == Coupler.column(tmp_path, "Gain.y")
+
+
+async def test_a_browser_that_never_reads_does_not_slow_the_run(
+    fmus: dict[str, Path], gain_server: ParticipantServer, tmp_path: Path
+) -> None:
+    """A stream nobody reads: its frames stay in the socket (the kernel's buffers, then the
+    server's write times out and drops it); the run goes on at full speed and completes."""
+    async with MonitorServer("0") as monitor:
+        _reader, writer = await asyncio.open_connection("127.0.0.1", monitor.port)
+        writer.write(b"GET /api/events?channels=Gain.y,Feed.real_out HTTP/1.1\r\nHost: x\r\n\r\n")
+        await writer.drain()  # and never read a byte
+        outcome = await asyncio.wait_for(run(200.0, None, monitor, tmp_path), 120)
+        writer.close()
+    assert outcome.end.status == "completed" and outcome.end.steps == 2000
+    assert len(monitor.state.values.times) <= monitor.state.points  # bounded history
+
+
+def test_history_stays_bounded_and_spread_over_the_run() -> None:
+    series = Decimated(points=100)
+    for k in range(1_000_000):
+        series.offer(k * 0.01, (k,))
+    assert len(series.times) < 100
+    assert series.times[0] == 0.0 and series.times[-1] > 9000  # the whole run, evenly
+    steps = {round(b - a, 6) for a, b in zip(series.times, series.times[1:], strict=False)}
+    assert len(steps) == 1
+    later_times, _ = series.after(5000.0)
+    assert all(t > 5000.0 for t in later_times)
+
+
+def test_state_before_the_run_says_what_it_waits_for() -> None:
+    state = MonitorState()
+    state.waiting("Gain", "grpc://127.0.0.1:1", "connection refused")
+    frame, _cursor = state.frame(None, [])
+    assert frame["header"] == {
+        "status": "waiting",
+        "reason": "",
+        "waiting_for": {"Gain": "grpc://127.0.0.1:1 (connection refused)"},
+    }
+    assert frame["layout"] == {"members": [], "channels": []}
+
+
+@pytest.mark.parametrize("text", ["host:port", "70000", ""])
+def test_bad_monitor_addresses_are_refused(text: str) -> None:
+    with pytest.raises(MonitorError, match="not \\[HOST:\\]PORT"):
+        parse_address(text)
+
+
+async def test_a_taken_port_is_refused_with_the_fix() -> None:
+    async with MonitorServer("127.0.0.1:0") as first:
+        with pytest.raises(MonitorError, match=r"cannot serve there.*--monitor 0"):
+            async with MonitorServer(f"127.0.0.1:{first.port}"):
+                pass
+
+
+def test_the_cli_prints_the_monitor_url(
+    fmus: dict[str, Path], gain_server: ParticipantServer, coupler: Coupler, tmp_path: Path
+) -> None:
+    outcome = coupler(
+        "run", str(DATA / "mixed.ssd"), "--out", str(tmp_path), "--monitor", "0", "--no-progress"
+    )
+    assert outcome.code == 0, outcome
+    assert "monitor: http://127.0.0.1:" in outcome.out
