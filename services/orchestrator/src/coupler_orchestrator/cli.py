@@ -1,4 +1,4 @@
-"""The ``coupler`` command: run, validate, describe, fleet.
+"""The ``coupler`` command: run, validate, describe, fleet, plot, replay.
 
 Exit codes: 0 the run completed (or a participant ended it early: ``terminated``; or Ctrl-C
 stopped a fleet's services after its run completed), 1 any problem (bad input, a participant
@@ -29,11 +29,13 @@ from coupler.fmu import FmuParticipant
 from coupler.logs import configure_logging
 from coupler.participant import Participant
 from coupler.security import ClientSecurity
+from coupler.server import ParticipantServer
 from coupler_orchestrator.fleet import Fleet, FleetSpec
 from coupler_orchestrator.observer import Observer, RunEnd, RunInfo
 from coupler_orchestrator.options import Algorithm, RunOptions
 from coupler_orchestrator.plot import plot
 from coupler_orchestrator.progress import ProgressBar, ProgressLines
+from coupler_orchestrator.replay import ReplayParticipant
 from coupler_orchestrator.runner import run_scenario, validate_scenario
 from coupler_orchestrator.watchdog import active as active_watchdog
 
@@ -83,6 +85,7 @@ def parser() -> argparse.ArgumentParser:
         type=Path,
         help="results directory (default: the SSD's OpenMCx outputDirectory, else ./results)",
     )
+    _record_options(run)
     run.add_argument("--realtime-factor", type=float, help="pace at X times real time")
     run.add_argument(
         "--no-progress",
@@ -108,6 +111,7 @@ def parser() -> argparse.ArgumentParser:
         "--realtime-factor", type=float, help="override the fleet file's pacing; 0 = unpaced"
     )
     fleet.add_argument("--health-timeout", type=float, default=60.0, help="[s] per service")
+    _record_options(fleet)
 
     plot = commands.add_parser(
         "plot",
@@ -118,6 +122,16 @@ def parser() -> argparse.ArgumentParser:
     plot.add_argument("inputs", nargs="+", metavar="RESULTS|CHANNEL", help="runs, then channels")
     plot.add_argument("-o", "--output", type=Path, required=True, help="FILE.png or FILE.html")
     plot.add_argument("--title", default="", help="default: the runs' directories")
+
+    replay = commands.add_parser(
+        "replay", help="serve a recording (coupler run --record) as a gRPC participant"
+    )
+    replay.add_argument("recording", type=Path, help="a .crec file or a results directory")
+    replay.add_argument(
+        "--component", help="the recorded component (default: the file's; needed for a directory)"
+    )
+    replay.add_argument("--host", default="127.0.0.1", help="bind address (default: 127.0.0.1)")
+    replay.add_argument("--port", type=int, default=0, help="gRPC port (default: any free one)")
 
     describe = commands.add_parser("describe", help="print a participant's channels")
     describe.add_argument("target", help="grpc://HOST:PORT, grpcs://HOST:PORT or an .fmu file")
@@ -180,6 +194,25 @@ def _run_options(command: argparse.ArgumentParser) -> None:
     _security_options(command)
 
 
+def _record_options(command: argparse.ArgumentParser) -> None:
+    command.add_argument(
+        "--record",
+        action="append",
+        default=[],
+        metavar="COMPONENT[,...]",
+        help="record every output of these components at each of their communication points "
+        "into OUT/recordings/COMPONENT.crec, for replay (docs/replay.md)",
+    )
+    command.add_argument(
+        "--replay",
+        action="append",
+        default=[],
+        metavar="COMPONENT=RECORDING",
+        help="serve COMPONENT from a recording (a .crec file or a results directory) instead "
+        "of its participant (repeatable)",
+    )
+
+
 def _security_options(command: argparse.ArgumentParser) -> None:
     group = command.add_argument_group(
         "security of grpcs:// participants (default: COUPLER_TLS_CA, COUPLER_TLS_CERT, "
@@ -224,8 +257,25 @@ def options_of(args: argparse.Namespace) -> RunOptions:
         output_interval=getattr(args, "output_interval", None),
         output_variables=tuple(getattr(args, "output_variables", ())),
         parquet=getattr(args, "parquet", False),
+        record=tuple(
+            name.strip()
+            for item in getattr(args, "record", ())
+            for name in item.split(",")
+            if name.strip()
+        ),
+        replays=_replays_of(getattr(args, "replay", ())),
         **({"run_id": args.run_id} if args.run_id else {}),
     )
+
+
+def _replays_of(items: Sequence[str]) -> dict[str, Path]:
+    replays = {}
+    for item in items:
+        component, sep, path = item.partition("=")
+        if not sep or not component or not path:
+            raise CouplerError(f"--replay {item!r}: write COMPONENT=RECORDING")
+        replays[component] = Path(path)
+    return replays
 
 
 def main(argv: Sequence[str] | None = None, *, stdout: TextIO | None = None) -> int:
@@ -274,6 +324,8 @@ class _Session(Observer):
 
     def interrupted(self, args: argparse.Namespace) -> tuple[int, str]:
         """The exit code and the one sentence Ctrl-C (or SIGTERM) ends a command with."""
+        if args.command == "replay":
+            return EXIT_OK, "stopped serving the recording"
         where = _shown(self.out_dir) if self.out_dir else "./results (or the SSD's outputDirectory)"
         end = self.end
         if end is not None and end.status != "aborted":
@@ -404,6 +456,8 @@ async def _dispatch(args: argparse.Namespace, out: TextIO, session: _Session) ->
         return await _fleet(args, out, session)
     if args.command == "plot":
         return _plot(args, out)
+    if args.command == "replay":
+        return await _replay(args, out)
     options = replace(options_of(args), on_waiting=session.waiting)
     if args.command == "validate":
         validation = await validate_scenario(args.ssp, options)
@@ -446,6 +500,8 @@ async def _run(
 async def _fleet(args: argparse.Namespace, out: TextIO, session: _Session) -> int:
     spec = FleetSpec.load(args.fleet)
     run_argv = ["run", str(spec.ssp), "--out", str(args.out or spec.out), *spec.run_args]
+    run_argv += [f"--record={item}" for item in args.record]
+    run_argv += [f"--replay={item}" for item in args.replay]
     if args.realtime_factor is not None:
         run_argv += ["--realtime-factor", str(args.realtime_factor)]
     run_args = parser().parse_args(run_argv)
@@ -463,6 +519,21 @@ async def _fleet(args: argparse.Namespace, out: TextIO, session: _Session) -> in
             print("services stay up; Ctrl-C stops them", file=out, flush=True)
             await asyncio.Event().wait()
     return code
+
+
+async def _replay(args: argparse.Namespace, out: TextIO) -> int:
+    """Serve a recording until Ctrl-C or SIGTERM (``_interruptible`` cancels the wait)."""
+    participant = ReplayParticipant(args.recording, args.component)
+    server = ParticipantServer(participant, host=args.host, port=args.port)
+    try:
+        await server.start()
+        recording = participant.recording
+        print(recording.summary(), file=out)
+        print(f"serving {recording.component} at {server.address}", file=out, flush=True)
+        await asyncio.Event().wait()
+    finally:
+        await server.stop()
+    return EXIT_OK
 
 
 def _plot(args: argparse.Namespace, out: TextIO) -> int:

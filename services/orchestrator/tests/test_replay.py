@@ -1,0 +1,273 @@
+"""Record & replay: ``coupler run --record``, ``--replay``, ``replay:`` sources and the
+``coupler replay`` service, on the mixed scenario (every value type over gRPC):
+
+    Source (FMI 2) --ramp, counter--> Gain (gRPC) --y, count, inverted, echo, blob_out-->
+        Feed (FMI 3) --real_out, int_out, bool_out, string_out--> Feed2 (FMI 2)
+
+Gain is recorded against the real example participant, then replayed three ways with that
+participant out of reach; results.csv must be the recorded run's, byte for byte.
+"""
+
+from __future__ import annotations
+
+import math
+import socket
+import struct
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from coupler.channels import Causality, Channel, Description, ValueType
+from coupler.errors import ScenarioError
+from coupler.server import ParticipantServer
+from coupler_orchestrator import recording
+from coupler_orchestrator.observer import Column, RunEnd, RunInfo
+from coupler_orchestrator.replay import ReplayParticipant
+
+from .conftest import DATA, Coupler
+
+BLOB = "00010203ff"
+
+
+def closed_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+@pytest.fixture
+def recorded(
+    coupler: Coupler,
+    tmp_path: Path,
+    gain_server: ParticipantServer,
+    fmus: dict[str, Path],
+) -> Path:
+    """The results directory of the mixed scenario run against the real Gain participant, Gain
+    recorded."""
+    out = tmp_path / "recorded"
+    outcome = coupler(
+        "run", DATA / "mixed.ssd", "--out", out, "--record", "Gain", "--param", f"Gain.blob={BLOB}"
+    )
+    assert outcome.code == 0, outcome.err
+    return out
+
+
+def test_recording_holds_every_output_typed(
+    coupler: Coupler, tmp_path: Path, gain_server: ParticipantServer, fmus: dict[str, Path]
+) -> None:
+    """The recording has all of Gain's outputs, typed, even when the CSV selects none of them,
+    plus its grid and declared channels."""
+    out = tmp_path / "out"
+    outcome = coupler(
+        "run",
+        DATA / "mixed.ssd",
+        "--out",
+        out,
+        "--record",
+        "Gain,Source",
+        "--output-variables",
+        "Feed2.*",
+        "--param",
+        f"Gain.blob={BLOB}",
+    )
+    assert outcome.code == 0, outcome.err
+    assert "Gain.y" not in coupler.results(out)[0]
+    gain = recording.read(out / "recordings" / "Gain.crec")
+    assert gain.component == "Gain"
+    assert [c.name for c in gain.outputs] == ["y", "x", "count", "inverted", "echo", "blob_out"]
+    assert gain.times == (0.0, 0.5, 1.0, 1.5)
+    assert [v["y"] for v in gain.values] == [0.0, 0.0, 1.5, 3.0]
+    assert [v["count"] for v in gain.values] == [10, 10, 11, 12]
+    assert [v["inverted"] for v in gain.values] == [True] * 4
+    assert [v["echo"] for v in gain.values] == ["hi"] * 4
+    assert [v["blob_out"] for v in gain.values] == [bytes.fromhex("ff03020100")] * 4
+    assert gain.grid == recording.Grid(
+        start_time=0.0, step_size=0.5, multiple=1, component_step=0.5
+    )
+    assert gain.description.name == "Gain"
+    u = gain.description.channel("u")
+    assert u is not None and (u.causality, u.type, u.unit) == (
+        Causality.INPUT,
+        ValueType.REAL,
+        "m/s",
+    )
+    assert gain.summary().endswith("has t0=0 s, h=0.5 s, 3 steps to 1.5 s")
+    assert (out / "recordings" / "Source.crec").is_file()
+
+
+def test_real_values_are_bit_exact(tmp_path: Path) -> None:
+    """Reals keep their float64 bits (-0.0, NaN payloads, subnormals, inf); a component with
+    step multiple 2 is recorded at its own communication points only; a run killed mid-record
+    leaves every complete record readable."""
+    channels = (
+        Channel(name="r", causality=Causality.OUTPUT, type=ValueType.REAL),
+        Channel(name="s", causality=Causality.OUTPUT, type=ValueType.STRING),
+        Channel(
+            name="state", causality=Causality.OUTPUT, type=ValueType.BINARY, message_type="x.Y"
+        ),
+    )
+    path = tmp_path / "Slow.crec"
+    recorder = recording.Recorder(
+        path, Description(name="Slow", channels=channels), component="Slow", multiple=2, step=0.2
+    )
+    nan = struct.unpack("<d", struct.pack("<Q", 0x7FF8_0000_DEAD_BEEF))[0]
+    reals = [-0.0, nan, 5e-324, math.inf, 0.1 + 0.2]
+    recorder.started(
+        RunInfo(
+            run_id="bits",
+            algorithm="jacobi",
+            members=("Other", "Slow"),
+            multiples=(1, 2),
+            columns=(
+                Column(name="Other.z", unit="", type="Real"),
+                *(Column(name=f"Slow.{c.name}", unit="", type=str(c.type)) for c in channels),
+            ),
+            start_time=1.0,
+            stop_time=1.8,
+            step_size=0.1,
+            steps=8,
+        )
+    )
+    for k in range(9):
+        held = reals[k // 2]
+        recorder.stepped(1.0 + k * 0.1, [float(k), held, f"ü{k // 2}", bytes([k // 2]) * 3])
+    recorder.finished(RunEnd(status="completed", reason="", steps=8, end_time=1.8, wall_time=0))
+    read = recording.read(path)
+    assert read.steps == 4
+    bits = [struct.pack("<d", v["r"]) for v in read.values]  # type: ignore[arg-type]
+    assert bits == [struct.pack("<d", r) for r in reals]
+    assert [v["s"] for v in read.values] == [f"ü{j}" for j in range(5)]
+    assert read.outputs[2].message_type == "x.Y"
+    assert read.grid.multiple == 2 and read.grid.component_step == 0.2
+
+    data = path.read_bytes()
+    path.write_bytes(data[:-3])  # killed while writing the last record
+    assert recording.read(path).steps == 3
+    path.write_bytes(b"PK\x03\x04 not a recording")
+    with pytest.raises(ScenarioError, match="is not a readable Coupler recording"):
+        recording.read(path)
+
+
+def test_replay_option_is_byte_identical(
+    coupler: Coupler, tmp_path: Path, recorded: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``--replay Gain=RESULTS``: the recording runs in-process in Gain's place."""
+    monkeypatch.setenv("GAIN_PORT", str(closed_port()))
+    out = tmp_path / "replayed"
+    outcome = coupler("run", DATA / "mixed.ssd", "--out", out, "--replay", f"Gain={recorded}")
+    assert outcome.code == 0, outcome.err
+    assert (out / "results.csv").read_bytes() == (recorded / "results.csv").read_bytes()
+    assert coupler.summary(out)["implementations"]["Gain"].startswith(
+        "coupler replay of coupler.examples.gain"
+    )
+
+
+def test_replay_source_in_the_ssd(coupler: Coupler, tmp_path: Path, recorded: Path) -> None:
+    """``source="replay:PATH#Gain"``, PATH relative to the SSD."""
+    ssd = (DATA / "mixed.ssd").read_text()
+    grpc_source = 'source="grpc://${GAIN_HOST:-127.0.0.1}:${GAIN_PORT}"'
+    assert grpc_source in ssd
+    copy = tmp_path / "mixed-replay.ssd"
+    copy.write_text(ssd.replace(grpc_source, 'source="replay:recorded#Gain"'))
+    out = tmp_path / "replayed"
+    outcome = coupler("run", copy, "--out", out)
+    assert outcome.code == 0, outcome.err
+    assert (out / "results.csv").read_bytes() == (recorded / "results.csv").read_bytes()
+
+    copy.write_text(ssd.replace(grpc_source, 'source="replay:recorded#Feed"'))
+    outcome = coupler("run", copy, "--out", tmp_path / "wrong")
+    assert outcome.code == 1
+    assert "no recording of 'Feed'" in outcome.err
+
+
+def test_replay_refuses_another_grid(coupler: Coupler, tmp_path: Path, recorded: Path) -> None:
+    """Another step, start or a stop beyond the recording: one problem, the recorded grid."""
+    recorded_grid = "has t0=0 s, h=0.5 s, 3 steps to 1.5 s"
+    for flags, asked in (
+        (["--step", "0.25"], "the run asks h=0.25 s"),
+        (["--start-time", "0.5", "--stop-time", "1.5"], "the run asks t0=0.5 s"),
+        (["--stop-time", "2"], "the run asks a stop time of 2 s, beyond its end"),
+    ):
+        outcome = coupler(
+            "run",
+            DATA / "mixed.ssd",
+            "--out",
+            tmp_path / "x",
+            "--replay",
+            f"Gain={recorded}",
+            *flags,
+        )
+        assert outcome.code == 1
+        assert "1 problem(s)" in outcome.err
+        assert recorded_grid in outcome.err and asked in outcome.err, outcome.err
+    shorter = coupler(
+        "run", DATA / "mixed.ssd", "--out", tmp_path / "y", "--replay", f"Gain={recorded}",
+        "--stop-time", "1",
+    )  # fmt: skip
+    assert shorter.code == 0, shorter.err
+
+
+async def test_replay_participant_refuses_steps_it_does_not_have(recorded: Path) -> None:
+    replay = ReplayParticipant(recorded, "Gain")
+    await replay.open()
+    assert (await replay.do_step(0.5, 0.5, {"u": 99.0}))["y"] == 1.5  # inputs are ignored
+    with pytest.raises(ScenarioError, match=r"step from t=1.5 s by 0.5 s, which it does not"):
+        await replay.do_step(1.5, 0.5, {})
+    with pytest.raises(ScenarioError, match=r"step from t=0.25 s"):
+        await replay.do_step(0.25, 0.5, {})
+
+
+def test_coupler_replay_service(
+    coupler: Coupler, tmp_path: Path, recorded: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``coupler replay RESULTS --component Gain`` as its own process, reached over gRPC as
+    the SSD's Gain; asked for another step it refuses at Initialize with the recorded grid."""
+    service = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "coupler_orchestrator",
+            "replay",
+            str(recorded),
+            "--component",
+            "Gain",
+            "--port",
+            "0",
+        ],
+        stdout=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        assert service.stdout is not None
+        first = service.stdout.readline()
+        assert "has t0=0 s, h=0.5 s, 3 steps to 1.5 s" in first
+        serving = service.stdout.readline()
+        assert serving.startswith("serving Gain at grpc://127.0.0.1:"), serving
+        monkeypatch.setenv("GAIN_PORT", serving.strip().rpartition(":")[2])
+        out = tmp_path / "served"
+        outcome = coupler("run", DATA / "mixed.ssd", "--out", out)
+        assert outcome.code == 0, outcome.err
+        assert (out / "results.csv").read_bytes() == (recorded / "results.csv").read_bytes()
+        refused = coupler("run", DATA / "mixed.ssd", "--out", tmp_path / "x", "--step", "0.25")
+        assert refused.code == 1
+        assert "Gain.Initialize [INVALID_ARGUMENT]" in refused.err
+        assert "has t0=0 s, h=0.5 s, 3 steps to 1.5 s; the run asks h=0.25 s" in refused.err
+    finally:
+        service.terminate()
+        assert service.wait(10) == 0
+        assert service.stdout is not None
+        service.stdout.close()
+
+
+def test_record_and_replay_names_are_checked(
+    coupler: Coupler, tmp_path: Path, recorded: Path
+) -> None:
+    outcome = coupler(
+        "run", DATA / "mixed.ssd", "--out", tmp_path / "x", "--record", "Gian",
+        "--replay", f"Feed3={recorded}",
+    )  # fmt: skip
+    assert outcome.code == 1
+    assert "--record Gian: no component 'Gian' in the scenario" in outcome.err
+    assert "--replay Feed3: no component 'Feed3'" in outcome.err
