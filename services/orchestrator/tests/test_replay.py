@@ -271,3 +271,53 @@ def test_record_and_replay_names_are_checked(
     assert outcome.code == 1
     assert "--record Gian: no component 'Gian' in the scenario" in outcome.err
     assert "--replay Feed3: no component 'Feed3'" in outcome.err
+
+
+def test_a_terminated_run_replays_its_end(
+    coupler: Coupler, tmp_path: Path, fmus: dict[str, Path]
+) -> None:
+    """Stair (FMI 2) alone asks to end the run at t=9 s; its replay asks again there, with the
+    same reason, though the run plans to go to 20 s."""
+    recorded, replayed = tmp_path / "recorded", tmp_path / "replayed"
+    runs = {}
+    for out, flags in (
+        (recorded, ["--record", "Stair"]),
+        (replayed, ["--replay", f"Stair={recorded}"]),
+    ):
+        outcome = coupler(
+            "run", fmus["Stair2"], "--out", out, "--step", "0.5", "--stop-time", "20", *flags
+        )
+        assert outcome.code == 0, outcome.err
+        runs[out.name] = coupler.summary(out)
+        assert runs[out.name]["status"] == "terminated"
+    assert runs["replayed"]["reason"] == runs["recorded"]["reason"]
+    assert "Stair asked to end the run at t=9 s" in runs["replayed"]["reason"]
+    assert (replayed / "results.csv").read_bytes() == (recorded / "results.csv").read_bytes()
+
+
+@pytest.mark.parametrize("algorithm", ["jacobi", "gauss-seidel"])
+def test_step_multiples_replay(
+    coupler: Coupler, tmp_path: Path, fmus: dict[str, Path], algorithm: str
+) -> None:
+    """Source steps every 2 base steps (deltaTime 1 s, h 0.5 s): recorded at t = 0, 1, 2 only,
+    replayed in its place with the same rows; with h 0.25 (multiple 4) its own step is still
+    1 s, so the replay serves that run too."""
+    recorded, replayed = tmp_path / "recorded", tmp_path / "replayed"
+    for out, flags in (
+        (recorded, ["--record", "Source"]),
+        (replayed, ["--replay", f"Source={recorded}"]),
+    ):
+        outcome = coupler(
+            "run", DATA / "multiples.ssd", "--out", out, "--algorithm", algorithm, *flags
+        )
+        assert outcome.code == 0, outcome.err
+    source = recording.read(recorded / "recordings" / "Source.crec")
+    assert source.times == (0.0, 1.0, 2.0)
+    assert (source.grid.multiple, source.grid.component_step) == (2, 1.0)
+    assert (replayed / "results.csv").read_bytes() == (recorded / "results.csv").read_bytes()
+    finer = coupler(
+        "run", DATA / "multiples.ssd", "--out", tmp_path / "finer", "--step", "0.25",
+        "--algorithm", algorithm, "--replay", f"Source={recorded}",
+    )  # fmt: skip
+    assert finer.code == 0, finer.err
+    assert coupler.column(tmp_path / "finer", "Source.ramp")[::4] == [0.0, 1.0, 2.0]

@@ -10,8 +10,10 @@ serves it again. docs/replay.md describes the file format (``.crec``), version 1
         u64 j  f64 time  each output in header order:
             Real f64 | Integer, Enumeration i64 | Boolean u8 | String, Binary u32 n + n bytes
 
-little-endian throughout. Records are appended as the run goes; a run that is killed leaves
-every complete record readable (a trailing partial one is ignored).
+little-endian throughout; when the component asked to end the run, a last record with
+j = 2**64 - 1 holds the time and its reason (a String). Records are appended as the run goes:
+a run that is killed leaves every complete record readable (a trailing partial one is
+ignored).
 """
 
 from __future__ import annotations
@@ -35,6 +37,8 @@ _PREFIX = struct.Struct("<4sHI")
 _LENGTH = struct.Struct("<I")
 _POINT = struct.Struct("<Qd")
 _REAL, _INT, _BOOL = struct.Struct("<d"), struct.Struct("<q"), struct.Struct("<B")
+END = 2**64 - 1
+"""j of the record saying the component asked to end the run there (after the last point)."""
 _TOLERANCE = 1e-9
 """Relative tolerance when a run's times and steps are compared with the recorded grid."""
 
@@ -70,6 +74,8 @@ class Recording:
     values: tuple[dict[str, Value], ...]
     """Outputs at t_j, by channel name."""
     run_id: str = ""
+    request: str | None = None
+    """The component asked to end the run at its last point, with this reason; else None."""
 
     @property
     def steps(self) -> int:
@@ -99,7 +105,7 @@ class Recording:
             ratio = (stop - start) / step
             if not math.isclose(ratio, round(ratio), rel_tol=_TOLERANCE, abs_tol=_TOLERANCE):
                 asked.append(f"a stop time of {stop:g} s, off its grid")
-            elif round(ratio) > self.steps:
+            elif round(ratio) > self.steps and self.request is None:
                 asked.append(f"a stop time of {stop:g} s, beyond its end")
         if not asked:
             return None
@@ -208,7 +214,17 @@ class Recorder(Observer):
             raise CouplerError(f"cannot write the recording {self.path}: {exc}") from exc
 
     def finished(self, end: RunEnd) -> None:
-        if self._file is not None:
+        """Close the file; when this component ended the run, its request closes the records
+        (a record with j = ``END``: the end time and the reason, as a String)."""
+        if self._file is None:
+            return
+        try:
+            if end.ended_by == self.component:
+                record = _POINT.pack(END, end.end_time) + _encode(ValueType.STRING, end.request)
+                self._file.write(_LENGTH.pack(len(record)) + record)
+        except OSError as exc:
+            raise CouplerError(f"cannot write the recording {self.path}: {exc}") from exc
+        finally:
             self._file.close()
             self._file = None
 
@@ -250,12 +266,19 @@ def _parse(path: Path, data: bytes) -> Recording:
     )
     times: list[float] = []
     values: list[dict[str, Value]] = []
+    request: Value | None = None
     while offset + _LENGTH.size <= len(data):
         (length,) = _LENGTH.unpack_from(data, offset)
         end = offset + _LENGTH.size + length
         if end > len(data):
             break  # the run was killed while writing this record
         j, time = _POINT.unpack_from(data, offset + _LENGTH.size)
+        if j == END and times:
+            request, at = _decode(ValueType.STRING, data, offset + _LENGTH.size + _POINT.size)
+            if at != end:
+                raise ValueError("the end record has stray bytes")
+            offset = end
+            break
         if j != len(times):
             raise ValueError(f"communication point {j} where {len(times)} was expected")
         at = offset + _LENGTH.size + _POINT.size
@@ -278,6 +301,7 @@ def _parse(path: Path, data: bytes) -> Recording:
         times=tuple(times),
         values=tuple(values),
         run_id=str(header.get("run_id", "")),
+        request=None if request is None else str(request),
     )
 
 

@@ -6,7 +6,8 @@ It declares the recorded channels and answers each step with the recorded output
 the step reaches, bit for bit. Its inputs and parameters are accepted and ignored: a replay
 does not depend on what the rest of the run sends it. A run whose start time, step or stop
 time the recording does not have is refused at Initialize (and by ``coupler validate``/the
-checks, for an in-process replay), naming the recorded grid.
+checks, for an in-process replay), naming the recorded grid. When the recorded participant
+asked to end the run, the replay asks again at the same point, with the same reason.
 """
 
 from __future__ import annotations
@@ -18,7 +19,7 @@ from pathlib import Path
 
 from coupler.channels import Description, RunSetup, Value
 from coupler.errors import ScenarioError
-from coupler.participant import Participant, Values
+from coupler.participant import EndRun, Participant, Values
 from coupler_orchestrator.recording import Recording, locate, read
 from coupler_orchestrator.ssp import REPLAY_SCHEME as SCHEME
 
@@ -85,7 +86,12 @@ class ReplayParticipant(Participant):
         return dict(self.recording.values[0])
 
     async def do_step(self, time: float, step: float, inputs: Mapping[str, Value]) -> Values:
-        return dict(self.recording.values[self.recording.point(time, step)])
+        recording = self.recording
+        j = recording.point(time, step)
+        outputs = dict(recording.values[j])
+        if j == recording.steps and recording.request is not None:
+            raise EndRun(recording.request, outputs)  # as the recorded participant did
+        return outputs
 
     async def terminate(self, reason: str = "") -> None:
         return None
