@@ -338,6 +338,13 @@ async def test_replayed_openrails_gives_the_same_results(
         )
     summary = json.loads((replayed / "summary.json").read_text())
     assert summary["implementations"]["OpenRails"].startswith("coupler replay of")
+    before, after = (json.loads((d / "summary.json").read_text()) for d in (recorded, replayed))
+    size = (recorded / "recordings" / "OpenRails.crec").stat().st_size
+    print(
+        f"railway {SHORT[1]} s: recorded run {before['wall_time_s']:.3f} s, replayed "
+        f"{after['wall_time_s']:.3f} s (x{before['wall_time_s'] / after['wall_time_s']:.1f}); "
+        f"OpenRails.crec {size} bytes"
+    )
     rows = read_rows(replayed / "results.csv")
     assert len(rows) == int(SHORT[1]) + 1
     assert readings_of(rows), "the short run should pass at least one balise"
