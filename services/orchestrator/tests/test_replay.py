@@ -321,3 +321,20 @@ def test_step_multiples_replay(
     )  # fmt: skip
     assert finer.code == 0, finer.err
     assert coupler.column(tmp_path / "finer", "Source.ramp")[::4] == [0.0, 1.0, 2.0]
+
+
+def test_fleet_passes_record_on(
+    coupler: Coupler, tmp_path: Path, fmus: dict[str, Path], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``coupler fleet FLEET --record Gain``: the fleet's run records Gain."""
+    monkeypatch.setenv("GAIN_PORT", str(closed_port()))
+    fleet = tmp_path / "fleet.toml"
+    fleet.write_text(
+        f'[scenario]\nssp = "{DATA / "mixed.ssd"}"\nout = "{tmp_path / "out"}"\n\n'
+        '[[service]]\nname = "gain"\n'
+        'command = ["python", "-m", "coupler.examples", "gain", "--port", "${GAIN_PORT}"]\n'
+        'health = "grpc://127.0.0.1:${GAIN_PORT}"\n'
+    )
+    outcome = coupler("fleet", fleet, "--exit", "--record", "Gain")
+    assert outcome.code == 0, outcome.err
+    assert recording.read(tmp_path / "out" / "recordings" / "Gain.crec").steps == 3
