@@ -10,7 +10,10 @@ participant out of reach; results.csv must be the recorded run's, byte for byte.
 
 from __future__ import annotations
 
+import contextlib
+import json
 import math
+import os
 import socket
 import struct
 import subprocess
@@ -18,6 +21,8 @@ import sys
 from pathlib import Path
 
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from coupler.channels import Causality, Channel, Description, ValueType
 from coupler.errors import ScenarioError
@@ -97,57 +102,109 @@ def test_recording_holds_every_output_typed(
     assert (out / "recordings" / "Source.crec").is_file()
 
 
-def test_real_values_are_bit_exact(tmp_path: Path) -> None:
-    """Reals keep their float64 bits (-0.0, NaN payloads, subnormals, inf); a component with
-    step multiple 2 is recorded at its own communication points only; a run killed mid-record
-    leaves every complete record readable."""
+def write_recording(path: Path, reals: list[float], *, multiple: int = 2) -> None:
+    """A recording of "Slow" (Real, String, Binary outputs; step multiple ``multiple``) made
+    by the Recorder from rows as the master hands them over, t0 = 1 s, h = 0.1 s."""
     channels = (
         Channel(name="r", causality=Causality.OUTPUT, type=ValueType.REAL),
         Channel(name="s", causality=Causality.OUTPUT, type=ValueType.STRING),
         Channel(
             name="state", causality=Causality.OUTPUT, type=ValueType.BINARY, message_type="x.Y"
         ),
+        Channel(name="u", causality=Causality.INPUT, type=ValueType.BINARY, start=b"\x01"),
     )
-    path = tmp_path / "Slow.crec"
     recorder = recording.Recorder(
-        path, Description(name="Slow", channels=channels), component="Slow", multiple=2, step=0.2
+        path,
+        Description(name="Slow", channels=channels),
+        component="Slow",
+        multiple=multiple,
+        step=0.1 * multiple,
     )
-    nan = struct.unpack("<d", struct.pack("<Q", 0x7FF8_0000_DEAD_BEEF))[0]
-    reals = [-0.0, nan, 5e-324, math.inf, 0.1 + 0.2]
+    steps = (len(reals) - 1) * multiple
     recorder.started(
         RunInfo(
             run_id="bits",
             algorithm="jacobi",
             members=("Other", "Slow"),
-            multiples=(1, 2),
+            multiples=(1, multiple),
             columns=(
                 Column(name="Other.z", unit="", type="Real"),
-                *(Column(name=f"Slow.{c.name}", unit="", type=str(c.type)) for c in channels),
+                *(Column(name=f"Slow.{c.name}", unit="", type=str(c.type)) for c in channels[:3]),
             ),
             start_time=1.0,
-            stop_time=1.8,
+            stop_time=1.0 + steps * 0.1,
             step_size=0.1,
-            steps=8,
+            steps=steps,
         )
     )
-    for k in range(9):
-        held = reals[k // 2]
-        recorder.stepped(1.0 + k * 0.1, [float(k), held, f"ü{k // 2}", bytes([k // 2]) * 3])
-    recorder.finished(RunEnd(status="completed", reason="", steps=8, end_time=1.8, wall_time=0))
+    for k in range(steps + 1):
+        j = k // multiple
+        recorder.stepped(1.0 + k * 0.1, [float(k), reals[j], f"ü{j}", bytes([j]) * 3])
+    recorder.finished(RunEnd(status="completed", reason="", steps=steps, end_time=0, wall_time=0))
+
+
+def test_real_values_are_bit_exact(tmp_path: Path) -> None:
+    """Reals keep their float64 bits (-0.0, NaN payloads, subnormals, inf); a component with
+    step multiple 2 is recorded at its own communication points only; a run killed mid-record
+    leaves every complete record readable."""
+    path = tmp_path / "Slow.crec"
+    nan = struct.unpack("<d", struct.pack("<Q", 0x7FF8_0000_DEAD_BEEF))[0]
+    reals = [-0.0, nan, 5e-324, math.inf, 0.1 + 0.2]
+    write_recording(path, reals)
     read = recording.read(path)
     assert read.steps == 4
     bits = [struct.pack("<d", v["r"]) for v in read.values]  # type: ignore[arg-type]
     assert bits == [struct.pack("<d", r) for r in reals]
     assert [v["s"] for v in read.values] == [f"ü{j}" for j in range(5)]
     assert read.outputs[2].message_type == "x.Y"
+    assert read.description.channel("u") == Channel(
+        name="u", causality=Causality.INPUT, type=ValueType.BINARY, start=b"\x01"
+    )
     assert read.grid.multiple == 2 and read.grid.component_step == 0.2
 
     data = path.read_bytes()
     path.write_bytes(data[:-3])  # killed while writing the last record
     assert recording.read(path).steps == 3
+    _, version, size = struct.unpack_from("<4sHI", data)
+    header = json.loads(data[10 : 10 + size])
+    header["description"]["capabilities"] = []  # valid JSON, not the format
+    body = json.dumps(header).encode()
+    path.write_bytes(struct.pack("<4sHI", b"CREC", version, len(body)) + body + data[10 + size :])
+    with pytest.raises(ScenarioError, match="is not a readable Coupler recording"):
+        recording.read(path)
+    header["description"]["capabilities"] = {}
+    body = json.dumps(header).encode()
+    path.write_bytes(struct.pack("<4sHI", b"CREC", version, len(body)) + body + data[10 + size :])
+    assert recording.read(path).steps == 4  # the rebuilt file is read, so the above was fair
     path.write_bytes(b"PK\x03\x04 not a recording")
     with pytest.raises(ScenarioError, match="is not a readable Coupler recording"):
         recording.read(path)
+
+
+@settings(
+    max_examples=int(os.environ.get("COUPLER_FUZZ_EXAMPLES", "120")),
+    deadline=None,
+    suppress_health_check=[HealthCheck.function_scoped_fixture],
+)
+@given(data=st.data())
+def test_any_bytes_give_a_recording_or_a_scenario_error(
+    tmp_path: Path, data: st.DataObject
+) -> None:
+    """Arbitrary bytes and mutations of a real recording: a Recording or ScenarioError."""
+    original = tmp_path / "original.crec"
+    if not original.exists():
+        write_recording(original, [0.0, 1.5, -2.0])
+    content = bytearray(original.read_bytes())
+    if data.draw(st.booleans()):
+        content = bytearray(data.draw(st.binary(max_size=200)))
+    for _ in range(data.draw(st.integers(0, 4))):
+        at = data.draw(st.integers(0, max(len(content) - 1, 0)))
+        size = data.draw(st.integers(1, 16))
+        content[at : at + size] = data.draw(st.binary(max_size=size))
+    case = tmp_path / "case.crec"
+    case.write_bytes(bytes(content))
+    with contextlib.suppress(ScenarioError):
+        recording.read(case)
 
 
 def test_replay_option_is_byte_identical(

@@ -237,7 +237,7 @@ def read(path: Path) -> Recording:
         raise ScenarioError(f"cannot read the recording {path}: {exc.strerror or exc}") from exc
     try:
         return _parse(path, data)
-    except (ValueError, KeyError, TypeError, struct.error, UnicodeDecodeError) as exc:
+    except (ValueError, KeyError, TypeError, AttributeError, RecursionError, struct.error) as exc:
         raise ScenarioError(
             f"{path} is not a readable Coupler recording ({exc}); record it again with "
             f"coupler run --record COMPONENT"
