@@ -79,6 +79,11 @@ def test_recording_holds_every_output_typed(
     )
     assert outcome.code == 0, outcome.err
     assert "Gain.y" not in coupler.results(out)[0]
+    assert f"recording: {out / 'recordings' / 'Gain.crec'}" in outcome.out
+    assert coupler.summary(out)["recordings"] == {
+        "Gain": "recordings/Gain.crec",
+        "Source": "recordings/Source.crec",
+    }
     gain = recording.read(out / "recordings" / "Gain.crec")
     assert gain.component == "Gain"
     assert [c.name for c in gain.outputs] == ["y", "x", "count", "inverted", "echo", "blob_out"]

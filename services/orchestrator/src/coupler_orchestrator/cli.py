@@ -488,6 +488,8 @@ async def _run(
     )
     print(f"results: {outcome.results_csv}", file=out)
     print(f"summary: {outcome.summary_json}", file=out)
+    for recording in outcome.recordings:
+        print(f"recording: {recording}", file=out)
     if end.status == "terminated":
         print(f"terminated early: {end.reason}", file=out)
         return EXIT_OK

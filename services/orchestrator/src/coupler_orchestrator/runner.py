@@ -54,6 +54,8 @@ class RunOutcome:
     """What summary.json holds."""
     results_csv: Path
     summary_json: Path
+    recordings: tuple[Path, ...] = ()
+    """The ``--record`` files written."""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -127,16 +129,24 @@ async def run_scenario(
             checked = check(scenario, roster, options)
             plan = build_plan(checked, wire(checked), options)
             csv_path, summary_path = out_dir / "results.csv", out_dir / "summary.json"
-            summary = SummaryWriter(summary_path, extra=_extra(checked, roster.described()))
+            recordings = recorders_of(plan, roster.described(), out_dir, options)
+            extra = _extra(checked, roster.described())
+            if recordings:
+                extra["recordings"] = {r.component: f"recordings/{r.path.name}" for r in recordings}
+            summary = SummaryWriter(summary_path, extra=extra)
             selection = Selection(patterns=options.output_variables, every=checked.record_every)
             recorders: list[Observer] = [CsvRecorder(csv_path, selection), summary]
             if options.parquet:
                 recorders.append(ParquetRecorder(out_dir / "results.parquet", selection))
-            recorders.extend(recorders_of(plan, roster.described(), out_dir, options))
+            recorders.extend(recordings)
             recorders.extend(observers)
             end = await Master(plan, recorders).run()
     return RunOutcome(
-        end=end, summary=summary.summary, results_csv=csv_path, summary_json=summary_path
+        end=end,
+        summary=summary.summary,
+        results_csv=csv_path,
+        summary_json=summary_path,
+        recordings=tuple(r.path for r in recordings),
     )
 
 
