@@ -105,6 +105,8 @@ def test_recording_holds_every_output_typed(
     )
     assert gain.summary().endswith("has t0=0 s, h=0.5 s, 3 steps to 1.5 s")
     assert (out / "recordings" / "Source.crec").is_file()
+    with pytest.raises(ScenarioError, match=r"holds 2 recordings \(Gain, Source\); name the"):
+        recording.locate(out, None)
 
 
 def write_recording(path: Path, reals: list[float], *, multiple: int = 2) -> None:
@@ -264,6 +266,10 @@ def test_replay_refuses_another_grid(coupler: Coupler, tmp_path: Path, recorded:
         assert outcome.code == 1
         assert "1 problem(s)" in outcome.err
         assert recorded_grid in outcome.err and asked in outcome.err, outcome.err
+    checked = coupler(
+        "validate", DATA / "mixed.ssd", "--replay", f"Gain={recorded}", "--step", "0.25"
+    )
+    assert checked.code == 1 and recorded_grid in checked.err
     shorter = coupler(
         "run", DATA / "mixed.ssd", "--out", tmp_path / "y", "--replay", f"Gain={recorded}",
         "--stop-time", "1",
@@ -284,7 +290,7 @@ async def test_replay_participant_refuses_steps_it_does_not_have(recorded: Path)
 def test_coupler_replay_service(
     coupler: Coupler, tmp_path: Path, recorded: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    """``coupler replay RESULTS --component Gain`` as its own process, reached over gRPC as
+    """``coupler replay RESULTS`` as its own process, reached over gRPC as
     the SSD's Gain; asked for another step it refuses at Initialize with the recorded grid."""
     service = subprocess.Popen(
         [
@@ -292,9 +298,7 @@ def test_coupler_replay_service(
             "-m",
             "coupler_orchestrator",
             "replay",
-            str(recorded),
-            "--component",
-            "Gain",
+            str(recorded),  # its only recording: no --component needed
             "--port",
             "0",
         ],

@@ -98,6 +98,7 @@ def parser() -> argparse.ArgumentParser:
         "ssp", type=Path, help=".ssp archive, unpacked SSP folder, .ssd file or a single .fmu"
     )
     _run_options(validate)
+    _replay_option(validate)
 
     fleet = commands.add_parser(
         "fleet", help="start a scenario's services as local processes, run it, keep them up"
@@ -203,6 +204,10 @@ def _record_options(command: argparse.ArgumentParser) -> None:
         help="record every output of these components at each of their communication points "
         "into OUT/recordings/COMPONENT.crec, for replay (docs/replay.md)",
     )
+    _replay_option(command)
+
+
+def _replay_option(command: argparse.ArgumentParser) -> None:
     command.add_argument(
         "--replay",
         action="append",

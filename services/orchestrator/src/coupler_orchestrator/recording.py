@@ -133,10 +133,20 @@ def _same(a: float, b: float) -> bool:
     return math.isclose(a, b, rel_tol=_TOLERANCE, abs_tol=_TOLERANCE)
 
 
-def locate(path: Path, component: str) -> Path:
+def locate(path: Path, component: str | None) -> Path:
     """The recording file of ``component`` at ``path``: the file itself, or
-    ``PATH/recordings/C.crec`` (a results directory), or ``PATH/C.crec``."""
+    ``PATH/recordings/C.crec`` (a results directory), or ``PATH/C.crec``; with no component
+    named, a directory's only recording."""
     if path.is_dir():
+        if component is None:
+            found = sorted({*path.glob(f"recordings/*{SUFFIX}"), *path.glob(f"*{SUFFIX}")})
+            if len(found) == 1:
+                return found[0]
+            names = ", ".join(p.stem for p in found) or "none"
+            raise ScenarioError(
+                f"{path} holds {len(found)} recordings ({names}); name the component "
+                f"(--component C, or replay:PATH#C)"
+            )
         for candidate in (
             path / "recordings" / f"{component}{SUFFIX}",
             path / f"{component}{SUFFIX}",

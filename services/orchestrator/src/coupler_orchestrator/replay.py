@@ -42,7 +42,9 @@ class ReplayParticipant(Participant):
     def __init__(self, path: Path, component: str | None = None, *, name: str = "") -> None:
         self.path = path
         self.component = component
-        self.name = name or component or path.stem
+        """The recorded component asked for; None: whichever the file holds."""
+        self.name = name or component or ""
+        """The component it stands in for (a directory's recording of that name is used)."""
         self._recording: Recording | None = None
 
     @property
@@ -54,7 +56,7 @@ class ReplayParticipant(Participant):
     async def open(self) -> None:
         if self._recording is not None:
             return
-        file = locate(self.path, self.component or self.name)
+        file = locate(self.path, self.component or self.name or None)
         recording = await asyncio.to_thread(read, file)
         if self.component is not None and recording.component != self.component:
             raise ScenarioError(
