@@ -290,8 +290,13 @@ async def test_replay_participant_refuses_steps_it_does_not_have(recorded: Path)
 def test_coupler_replay_service(
     coupler: Coupler, tmp_path: Path, recorded: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    """``coupler replay RESULTS`` as its own process, reached over gRPC as
-    the SSD's Gain; asked for another step it refuses at Initialize with the recorded grid."""
+    """``coupler replay RESULTS --token-file F`` as its own process, reached over gRPC as the
+    SSD's Gain (with the token; without it, refused); asked for another step it refuses at
+    Initialize with the recorded grid."""
+    token = tmp_path / "token"
+    token.write_text("replay-token-0123456789abcdef\n")
+    token.chmod(0o600)
+    monkeypatch.setenv("COUPLER_TOKEN_FILE", str(token))
     service = subprocess.Popen(
         [
             sys.executable,
@@ -301,6 +306,8 @@ def test_coupler_replay_service(
             str(recorded),  # its only recording: no --component needed
             "--port",
             "0",
+            "--token-file",
+            str(token),
         ],
         stdout=subprocess.PIPE,
         text=True,
@@ -316,6 +323,10 @@ def test_coupler_replay_service(
         outcome = coupler("run", DATA / "mixed.ssd", "--out", out)
         assert outcome.code == 0, outcome.err
         assert (out / "results.csv").read_bytes() == (recorded / "results.csv").read_bytes()
+        monkeypatch.delenv("COUPLER_TOKEN_FILE")
+        anonymous = coupler("run", DATA / "mixed.ssd", "--out", tmp_path / "anonymous")
+        assert anonymous.code == 1 and "Gain.Describe [UNAUTHENTICATED]" in anonymous.err
+        monkeypatch.setenv("COUPLER_TOKEN_FILE", str(token))
         refused = coupler("run", DATA / "mixed.ssd", "--out", tmp_path / "x", "--step", "0.25")
         assert refused.code == 1
         assert "Gain.Initialize [INVALID_ARGUMENT]" in refused.err

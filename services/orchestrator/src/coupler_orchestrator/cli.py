@@ -30,6 +30,7 @@ from coupler.logs import configure_logging
 from coupler.participant import Participant
 from coupler.security import ClientSecurity
 from coupler.server import ParticipantServer
+from coupler.settings import SecuritySettings, add_security_arguments
 from coupler_orchestrator.fleet import Fleet, FleetSpec
 from coupler_orchestrator.observer import Observer, RunEnd, RunInfo
 from coupler_orchestrator.options import Algorithm, RunOptions
@@ -133,6 +134,7 @@ def parser() -> argparse.ArgumentParser:
     )
     replay.add_argument("--host", default="127.0.0.1", help="bind address (default: 127.0.0.1)")
     replay.add_argument("--port", type=int, default=0, help="gRPC port (default: any free one)")
+    add_security_arguments(replay)
 
     describe = commands.add_parser("describe", help="print a participant's channels")
     describe.add_argument("target", help="grpc://HOST:PORT, grpcs://HOST:PORT or an .fmu file")
@@ -531,7 +533,15 @@ async def _fleet(args: argparse.Namespace, out: TextIO, session: _Session) -> in
 async def _replay(args: argparse.Namespace, out: TextIO) -> int:
     """Serve a recording until Ctrl-C or SIGTERM (``_interruptible`` cancels the wait)."""
     participant = ReplayParticipant(args.recording, args.component)
-    server = ParticipantServer(participant, host=args.host, port=args.port)
+    given = {k: getattr(args, k) for k in ReplaySettings.model_fields if getattr(args, k, None)}
+    security = ReplaySettings(**given).security()
+    server = ParticipantServer(
+        participant,
+        host=args.host,
+        port=args.port,
+        security=security,
+        reflection=bool(given.get("reflection")),
+    )
     try:
         await server.start()
         recording = participant.recording
@@ -541,6 +551,13 @@ async def _replay(args: argparse.Namespace, out: TextIO) -> int:
     finally:
         await server.stop()
     return EXIT_OK
+
+
+class ReplaySettings(SecuritySettings):
+    """``coupler replay``'s server security: its options over ``COUPLER_REPLAY_*`` variables
+    (``COUPLER_REPLAY_TLS_CERT``, ...; docs/security.md)."""
+
+    model_config = SecuritySettings.model_config | {"env_prefix": "COUPLER_REPLAY_"}
 
 
 def _plot(args: argparse.Namespace, out: TextIO) -> int:
