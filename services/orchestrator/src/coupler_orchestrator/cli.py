@@ -1,4 +1,4 @@
-"""The ``coupler`` command: run, validate, describe, fleet, plot, replay.
+"""The ``coupler`` command: run, validate, describe, fleet, campaign, plot, replay.
 
 Exit codes: 0 the run completed (or a participant ended it early: ``terminated``; or Ctrl-C
 stopped a fleet's services after its run completed), 1 any problem (bad input, a participant
@@ -31,6 +31,13 @@ from coupler.participant import Participant
 from coupler.security import ClientSecurity
 from coupler.server import ParticipantServer
 from coupler.settings import SecuritySettings, add_security_arguments
+from coupler_orchestrator.campaign import (
+    CampaignError,
+    CampaignProgress,
+    CampaignSpec,
+    format_table,
+    run_campaign,
+)
 from coupler_orchestrator.fleet import Fleet, FleetSpec
 from coupler_orchestrator.observer import Observer, RunEnd, RunInfo
 from coupler_orchestrator.options import Algorithm, RunOptions
@@ -114,6 +121,23 @@ def parser() -> argparse.ArgumentParser:
     )
     fleet.add_argument("--health-timeout", type=float, default=60.0, help="[s] per service")
     _record_options(fleet)
+
+    campaign = commands.add_parser(
+        "campaign",
+        help="run a scenario under many variants, in parallel, into one table",
+        description="Runs every variant of a campaign file (docs/campaigns.md): here, --jobs at "
+        "once, or as tasks of a Dask cluster (--scheduler). Runs that completed before are "
+        "skipped unless --force.",
+    )
+    campaign.add_argument("campaign", type=Path, help="campaign file (TOML)")
+    campaign.add_argument("--jobs", type=int, help="runs at once (default: one per core)")
+    campaign.add_argument(
+        "--scheduler",
+        help="tcp://HOST:8786 (a Dask scheduler) or local (a Dask LocalCluster); default: "
+        "runs as local processes",
+    )
+    campaign.add_argument("--force", action="store_true", help="run completed variants again")
+    campaign.add_argument("--out", type=Path, help="campaign folder (default: [scenario] out)")
 
     plot = commands.add_parser(
         "plot",
@@ -315,6 +339,7 @@ class _Session(Observer):
         self.time: float | None = None
         self.end: RunEnd | None = None
         self.out_dir: Path | None = None
+        self.campaign: Path | None = None
 
     def waiting(self, name: str, address: str, reason: str) -> None:
         self.waited_for.append(name)
@@ -331,6 +356,11 @@ class _Session(Observer):
 
     def interrupted(self, args: argparse.Namespace) -> tuple[int, str]:
         """The exit code and the one sentence Ctrl-C (or SIGTERM) ends a command with."""
+        if self.campaign is not None:
+            return EXIT_INTERRUPTED, (
+                f"interrupted the campaign; the runs that ended are in "
+                f"{_shown(self.campaign / 'campaign.csv')} (the same command again runs the rest)"
+            )
         if args.command == "replay":
             return EXIT_OK, "stopped serving the recording"
         where = _shown(self.out_dir) if self.out_dir else "./results (or the SSD's outputDirectory)"
@@ -465,6 +495,8 @@ async def _dispatch(args: argparse.Namespace, out: TextIO, session: _Session) ->
         return _plot(args, out)
     if args.command == "replay":
         return await _replay(args, out)
+    if args.command == "campaign":
+        return await _campaign(args, out, session)
     options = replace(options_of(args), on_waiting=session.waiting)
     if args.command == "validate":
         validation = await validate_scenario(args.ssp, options)
@@ -558,6 +590,40 @@ class ReplaySettings(SecuritySettings):
     (``COUPLER_REPLAY_TLS_CERT``, ...; docs/security.md)."""
 
     model_config = SecuritySettings.model_config | {"env_prefix": "COUPLER_REPLAY_"}
+
+
+async def _campaign(args: argparse.Namespace, out: TextIO, session: _Session) -> int:
+    spec = CampaignSpec.load(args.campaign)
+    if args.out is not None:
+        spec = replace(spec, out=args.out)
+    if args.jobs is not None and args.jobs < 1:
+        raise CampaignError(f"--jobs {args.jobs}: give at least 1")
+    session.campaign = spec.out
+    print(
+        f"campaign: {len(spec.variants)} runs of {_shown(spec.scenario.ssp)} into "
+        f"{_shown(spec.out)}",
+        file=out,
+        flush=True,
+    )
+    result = await run_campaign(
+        spec,
+        jobs=args.jobs,
+        scheduler=args.scheduler,
+        force=args.force,
+        progress=CampaignProgress(sys.stderr),
+    )
+    print(format_table(spec, result.reports), file=out)
+    print(f"table: {_shown(result.table_csv)}", file=out)
+    if result.table_parquet is not None:
+        print(f"table: {_shown(result.table_parquet)}", file=out)
+    if result.failed:
+        print(
+            f"error: {len(result.failed)} of {len(result.reports)} runs did not complete "
+            f"(status and reason in the table; run.log in each run's folder)",
+            file=sys.stderr,
+        )
+        return EXIT_ERROR
+    return EXIT_OK
 
 
 def _plot(args: argparse.Namespace, out: TextIO) -> int:

@@ -173,6 +173,33 @@ class PortHolder:
     command: str
 
 
+def port_variables(path: Path) -> tuple[str, ...]:
+    """The ``${NAME_PORT}`` variables a fleet file uses, in order of appearance: setting each
+    to a free port moves the whole fleet (and an SSD reading the same variables)."""
+    try:
+        text = path.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise ScenarioError(f"cannot read fleet file {path}: {exc.strerror}") from exc
+    names = (m.group(1) for m in _VARIABLE.finditer(text))
+    return tuple(dict.fromkeys(n for n in names if n.endswith("_PORT")))
+
+
+_handed_out: set[int] = set()
+
+
+def free_port() -> int:
+    """A TCP port free on every address now, never the same twice in this process (two runs
+    started at once get different ports; another process may still take it, which the fleet's
+    port check then reports)."""
+    while True:
+        with socket.socket() as probe_socket:
+            probe_socket.bind(("", 0))
+            port = int(probe_socket.getsockname()[1])
+        if port not in _handed_out and port_is_free(port):
+            _handed_out.add(port)
+            return port
+
+
 def port_is_free(port: int) -> bool:
     """Whether a server could listen on ``port`` on every address (TIME_WAIT does not count,
     as servers set SO_REUSEADDR)."""

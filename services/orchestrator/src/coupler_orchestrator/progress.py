@@ -44,11 +44,11 @@ class _Progress(Observer):
         eta = (info.stop_time - time_s) / rtf if rtf > 0 else float("inf")
         return done, (
             f"t={time_s:.6g}/{info.stop_time:.6g} s  {done:6.1%}  {rtf:.3g}x real time  "
-            f"ETA {_duration(eta)}"
+            f"ETA {duration(eta)}"
         )
 
 
-def _duration(seconds: float) -> str:
+def duration(seconds: float) -> str:
     if seconds == float("inf"):
         return "?"
     seconds = round(seconds)

@@ -1,0 +1,281 @@
+"""``coupler campaign`` with real processes: the ramp-gain example under a 3 x 3 grid, here
+(parallel runs) and on a Dask LocalCluster of worker processes; a run that fails is a row and
+the others complete; a second campaign run skips what completed; a pool of running
+participants instead of per-run services; campaign files that cannot run are refused.
+
+    campaign --per run--> fleet (gain participant on a free port) + `coupler run` process
+        |                  Source (FMU) -> Gain (gRPC) -> Integrator (FMU)
+        v
+    out/campaign.csv, out/runs/<n>-<key>/{results.csv, summary.json, variant.json, run.log}
+"""
+
+from __future__ import annotations
+
+import asyncio
+import csv
+import json
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from coupler.errors import CouplerError
+from coupler.health import probe
+from coupler_orchestrator.campaign import (
+    CampaignError,
+    CampaignSpec,
+    Output,
+    reduce,
+    run_campaign,
+)
+from coupler_orchestrator.cli import main
+from coupler_orchestrator.fleet import free_port
+
+REPO = Path(__file__).resolve().parents[3]
+EXAMPLE = REPO / "examples" / "ramp-gain"
+
+GRID = """
+[grid]
+"Gain.gain" = [1.0, 2.0, 3.0]
+"Source.slope" = [0.5, 1.0, 2.0]
+
+[outputs]
+y_max = "max(Gain.y)"
+x_final = "Integrator.x"
+y_changes = "count_changes(Gain.y)"
+
+[checks]
+y_bounded = "y_max <= 2 * x_final + 20"
+"""
+
+
+def campaign_file(tmp_path: Path, body: str, *, scenario: str = "") -> Path:
+    path = tmp_path / "campaign.toml"
+    path.write_text(
+        f"""
+[scenario]
+{scenario or 'fleet = "examples/ramp-gain/fleet.toml"'}
+stop_time = 2.0
+out = "{tmp_path / "out"}"
+timeout = 120
+{body}
+""",
+        encoding="utf-8",
+    )
+    return path
+
+
+def table(path: Path) -> list[dict[str, str]]:
+    with path.open(encoding="utf-8", newline="") as file:
+        return list(csv.DictReader(file))
+
+
+def assert_ramp_gain_table(rows: list[dict[str, str]]) -> None:
+    """y = gain * slope * t at the last point (t = 1.9 s, the Jacobi delay of one step of
+    0.1 s), its maximum; x integrates y."""
+    assert len(rows) == 9
+    assert sorted((float(r["Gain.gain"]), float(r["Source.slope"])) for r in rows) == [
+        (g, s) for g in (1.0, 2.0, 3.0) for s in (0.5, 1.0, 2.0)
+    ]
+    for row in rows:
+        gain, slope = float(row["Gain.gain"]), float(row["Source.slope"])
+        assert row["status"] == "completed", row
+        assert float(row["y_max"]) == pytest.approx(1.9 * gain * slope)
+        assert float(row["x_final"]) == pytest.approx(gain * slope * 1.71, rel=1e-6)
+        assert int(row["y_changes"]) == 19
+        assert row["y_bounded"] == "true"
+        assert float(row["wall_time_s"]) > 0 and float(row["realtime_factor"]) > 0
+
+
+@pytest.fixture
+def ramp_gain(fmus: dict[str, Path], monkeypatch: pytest.MonkeyPatch) -> Path:
+    """Relative paths of campaign files are taken from the repository (the working folder)."""
+    monkeypatch.chdir(REPO)
+    return EXAMPLE
+
+
+def test_a_3x3_campaign_runs_in_parallel_and_a_second_run_skips_it(
+    ramp_gain: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    path = campaign_file(tmp_path, GRID)
+    assert main(["campaign", str(path), "--jobs", "2"]) == 0
+    out = tmp_path / "out"
+    rows = table(out / "campaign.csv")
+    assert_ramp_gain_table(rows)
+    printed = capsys.readouterr()
+    assert "table: " in printed.out and "y_max" in printed.out
+    assert "9/9 done, 0 failed" in printed.err
+    for row in rows:  # every run's own files
+        run = out / row["directory"]
+        assert json.loads((run / "variant.json").read_text()) == {
+            "Gain.gain": float(row["Gain.gain"]),
+            "Source.slope": float(row["Source.slope"]),
+        }
+        assert json.loads((run / "summary.json").read_text())["status"] == "completed"
+        assert (run / "results.csv").read_text().startswith("time,")
+        assert "--param Gain.gain=" in (run / "run.log").read_text()
+    stamps = {p: p.stat().st_mtime_ns for p in out.glob("runs/*/results.csv")}
+
+    assert main(["campaign", str(path)]) == 0  # again: nothing runs
+    assert "9 of 9 runs completed earlier" in capsys.readouterr().err
+    assert {p: p.stat().st_mtime_ns for p in out.glob("runs/*/results.csv")} == stamps
+    assert table(out / "campaign.csv") == rows
+
+
+async def test_the_same_campaign_on_a_dask_local_cluster(ramp_gain: Path, tmp_path: Path) -> None:
+    spec = CampaignSpec.load(campaign_file(tmp_path, GRID))
+    result = await run_campaign(spec, jobs=2, scheduler="local")
+    assert result.skipped == 0 and not result.failed
+    rows = table(result.table_csv)
+    assert_ramp_gain_table(rows)
+    workers = {r.worker for r in result.reports}
+    assert workers  # the runs ran in the cluster's worker processes
+    assert result.table_parquet is not None and result.table_parquet.is_file()
+
+
+def test_a_failing_run_is_a_row_and_the_others_complete(
+    ramp_gain: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    path = campaign_file(
+        tmp_path,
+        """
+[[variant]]
+"Gain.gain" = 2.0
+
+[[variant]]
+"Gain.no_such_parameter" = 1.0
+
+[[variant]]
+"Gain.gain" = 3.0
+stop_time = 1.0
+
+[outputs]
+y_final = "Gain.y"
+""",
+    )
+    assert main(["campaign", str(path)]) == 1
+    err = capsys.readouterr().err
+    assert "1 of 3 runs did not complete" in err
+    rows = table(tmp_path / "out" / "campaign.csv")
+    assert [r["status"] for r in rows] == ["completed", "failed", "completed"]
+    assert "no_such_parameter" in rows[1]["reason"]
+    assert float(rows[0]["y_final"]) == pytest.approx(2 * 0.5 * 1.9)  # slope 0.5 (the SSD)
+    assert float(rows[2]["y_final"]) == pytest.approx(3 * 0.5 * 0.9)  # its own stop time
+    assert rows[1]["y_final"] == ""
+
+    assert main(["campaign", str(path)]) == 1  # again: only the failed run runs again
+    assert "2 of 3 runs completed earlier" in capsys.readouterr().err
+    assert main(["campaign", str(path), "--force", "--jobs", "1"]) == 1
+    assert "completed earlier" not in capsys.readouterr().err
+
+
+async def serving(address: str, within: float = 30.0) -> None:
+    deadline = time.monotonic() + within
+    while True:
+        try:
+            await probe(address, connect_timeout=1.0)
+            return
+        except CouplerError:
+            if time.monotonic() > deadline:
+                raise
+            await asyncio.sleep(0.2)
+
+
+@pytest.fixture
+def gain_pool(fmus: dict[str, Path]) -> Iterator[list[int]]:
+    """Two gain participants already running, each its own process."""
+    ports = [free_port(), free_port()]
+    processes = [
+        subprocess.Popen(
+            [sys.executable, "-m", "coupler.examples", "gain", "--port", str(port)],
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+        )
+        for port in ports
+    ]
+    try:
+        for port in ports:
+            asyncio.run(serving(f"grpc://127.0.0.1:{port}"))
+        yield ports
+    finally:
+        for process in processes:
+            process.terminate()
+            process.wait(10)
+
+
+def test_a_pool_of_running_participants_serves_one_run_each(
+    ramp_gain: Path, gain_pool: list[int], tmp_path: Path
+) -> None:
+    pool = ", ".join(f'{{ GAIN_PORT = "{port}" }}' for port in gain_pool)
+    path = campaign_file(
+        tmp_path,
+        GRID + f"\n[pool]\nenv = [{pool}]\n",
+        scenario='ssp = "examples/ramp-gain/SystemStructure.ssd"',
+    )
+    # 4 asked, 2 at once (the pool's size): a participant serves one run at a time and refuses
+    # a second, which would fail that run
+    assert main(["campaign", str(path), "--jobs", "4"]) == 0
+    assert_ramp_gain_table(table(tmp_path / "out" / "campaign.csv"))
+
+
+@pytest.mark.parametrize(
+    ("body", "message"),
+    [
+        ("[grids]\n", "[grids]: unknown section"),
+        ('[grid]\n"gain" = [1]\n', "'gain' is neither Component.parameter"),
+        ('[grid]\n"Gain.gain" = 2\n', "'Gain.gain' is not a list of values"),
+        ('[outputs]\ny = "median(Gain.y)"\n', "is not a channel or a reduction of one"),
+        ("[checks]\nok = \"__import__('os')\"\n", "Call is not allowed"),
+        ('[sample]\nn = 3\n"Gain.gain" = { normal = [1, 2] }\n', "'Gain.gain' has no law"),
+        ('[table]\nfile = "missing.csv"\n', "cannot read"),
+        ('[[derive]]\nfunction = "nothing"\n', "'nothing' is not module:function"),
+    ],
+)
+def test_campaign_files_that_cannot_run_are_refused(
+    ramp_gain: Path, tmp_path: Path, body: str, message: str
+) -> None:
+    path = campaign_file(tmp_path, body)
+    with pytest.raises(CampaignError) as caught:
+        CampaignSpec.load(path)
+    assert str(path) in str(caught.value) and message in str(caught.value)
+
+
+def test_the_cli_says_what_is_wrong_with_a_campaign_file(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    path = campaign_file(tmp_path, "", scenario='ssp = "nowhere.ssd"')
+    assert main(["campaign", str(path)]) == 1
+    err = capsys.readouterr().err
+    assert err.startswith("error: ") and "nowhere.ssd does not exist" in err
+    assert "Traceback" not in err
+
+
+def test_variants_from_a_table_and_from_a_seeded_sample(ramp_gain: Path, tmp_path: Path) -> None:
+    (tmp_path / "variants.csv").write_text("Gain.gain,stop_time\n1.5,1.0\n2.5,\n")
+    sampled = '[sample]\nn = 4\nseed = 7\n"Gain.gain" = { uniform = [0.5, 2.0] }\n'
+    spec = CampaignSpec.load(campaign_file(tmp_path, '[table]\nfile = "variants.csv"\n' + sampled))
+    assert spec.variants[:2] == ({"Gain.gain": 1.5, "stop_time": 1}, {"Gain.gain": 2.5})
+    drawn = [v["Gain.gain"] for v in spec.variants[2:]]
+    assert len(drawn) == 4 and all(0.5 <= float(g) <= 2.0 for g in drawn)
+    again = CampaignSpec.load(campaign_file(tmp_path, '[table]\nfile = "variants.csv"\n' + sampled))
+    assert again.variants == spec.variants  # the seed makes the sample reproducible
+
+
+def test_reductions() -> None:
+    cells = ["1.0", "3.5", "3.5", "-2.0", "0.5"]
+    found = {
+        name: reduce(Output(name=name, reduction=name, channel="A.b"), cells)
+        for name in ("max", "min", "first", "last", "mean", "count_changes")
+    }
+    assert found == {
+        "max": 3.5,
+        "min": -2.0,
+        "first": 1.0,
+        "last": 0.5,
+        "mean": pytest.approx(6.5 / 5),
+        "count_changes": 3,
+    }
+    assert reduce(Output(name="x", reduction="last", channel="A.b"), []) is None
