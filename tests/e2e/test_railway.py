@@ -18,6 +18,7 @@ import socket
 import sys
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -36,6 +37,8 @@ FMUS = ROOT / "build" / "fmus"
 ANTENNA_OFFSET = 39.7  # parameters.ssv: TrackBalises.antenna_offset
 STOP_DISTANCE = 25908.3  # parameters.ssv: Driver.stop_distance
 STEP = 1.0
+SHORT = ("--stop-time", "120")
+"""A short run: the first balises are passed within it."""
 CHROMIUM = Path("/usr/bin/chromium")
 HAVE_CHROMIUM = CHROMIUM.exists()  # Debian's chromium: .ci/run installs it, else no browser part
 ARTIFACT = ROOT / "test-artifacts" / "railway-map.png"
@@ -66,9 +69,13 @@ def ports() -> dict[str, int]:
 
 @asynccontextmanager
 async def railway_fleet(
-    ports: dict[str, int], monkeypatch: pytest.MonkeyPatch, *mock_options: str
+    ports: dict[str, int],
+    monkeypatch: pytest.MonkeyPatch,
+    *mock_options: str,
+    without_openrails: bool = False,
 ) -> AsyncIterator[Fleet]:
-    """The railway fleet on ``ports``; ``mock_options`` go to the OpenRails mock."""
+    """The railway fleet on ``ports``; ``mock_options`` go to the OpenRails mock;
+    ``without_openrails``: neither the mock nor the bridge (OpenRails is replayed)."""
     for fmu in ("Driver2.fmu", "TrackBalises.fmu"):
         if not (FMUS / fmu).exists():
             pytest.fail(f"{FMUS / fmu} is missing: run 'make setup' (make test does)")
@@ -143,6 +150,8 @@ async def railway_fleet(
             ),
         ),
     )
+    if without_openrails:
+        spec = replace(spec, services=tuple(s for s in spec.services if "openrails" not in s.name))
     async with Fleet(spec, health_timeout=60) as running:
         yield running
 
@@ -300,3 +309,45 @@ async def test_without_reset_the_second_run_is_refused(
     assert "Traceback" not in stderr
     summary = json.loads((tmp_path / "second" / "summary.json").read_text())
     assert summary["status"] == "failed" and "Restart OpenRails" in summary["reason"]
+
+
+async def test_replayed_openrails_gives_the_same_results(
+    ports: dict[str, int], monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
+    """Record the OpenRails bridge, then run the scenario again without OpenRails:
+
+        recording run:  Driver, OpenRails bridge (+ mock), TrackBalises, Map   --record OpenRails
+        replayed run:   Driver, replay of OpenRails (in-process), TrackBalises, Map  (fresh)
+
+    The mock and the bridge are stopped; results.csv of the replayed run is the recorded run's,
+    byte for byte (OpenRails' columns and every downstream participant's)."""
+    recorded, replayed = tmp_path / "recorded", tmp_path / "replayed"
+    async with railway_fleet(ports, monkeypatch):
+        code, stderr = await coupler_run(recorded, *SHORT, "--record", "OpenRails")
+        assert code == 0, stderr
+    with pytest.raises(OSError):  # the mock is gone
+        socket.create_connection(("127.0.0.1", ports["mock"]), timeout=1).close()
+    fresh = {name: free_port() for name in ports}
+    async with railway_fleet(fresh, monkeypatch, without_openrails=True) as fleet:
+        assert not any("openrails" in s.name for s in fleet.spec.services)
+        code, stderr = await coupler_run(replayed, *SHORT, "--replay", f"OpenRails={recorded}")
+        assert code == 0, stderr
+        # another step than the recording's is refused before anything runs
+        refused, why = await coupler_run(
+            tmp_path / "refused", *SHORT, "--step", "0.4", "--replay", f"OpenRails={recorded}"
+        )
+    summary = json.loads((replayed / "summary.json").read_text())
+    assert summary["implementations"]["OpenRails"].startswith("coupler replay of")
+    before, after = (json.loads((d / "summary.json").read_text()) for d in (recorded, replayed))
+    size = (recorded / "recordings" / "OpenRails.crec").stat().st_size
+    print(
+        f"railway {SHORT[1]} s: recorded run {before['wall_time_s']:.3f} s, replayed "
+        f"{after['wall_time_s']:.3f} s (x{before['wall_time_s'] / after['wall_time_s']:.1f}); "
+        f"OpenRails.crec {size} bytes"
+    )
+    rows = read_rows(replayed / "results.csv")
+    assert len(rows) == int(SHORT[1]) + 1
+    assert readings_of(rows), "the short run should pass at least one balise"
+    assert (replayed / "results.csv").read_bytes() == (recorded / "results.csv").read_bytes()
+    assert refused == 1
+    assert f"has t0=0 s, h=1 s, {SHORT[1]} steps to {SHORT[1]} s; the run asks h=0.4 s" in why

@@ -38,6 +38,7 @@ from coupler.values import parse, widen
 from coupler_orchestrator import ssp
 from coupler_orchestrator.options import Algorithm, RunOptions
 from coupler_orchestrator.participants import Roster, Seat, where
+from coupler_orchestrator.replay import ReplayParticipant
 from coupler_orchestrator.ssp.units import Affine, IncompatibleUnits, affine, from_symbol
 
 T = TypeVar("T")
@@ -190,6 +191,12 @@ class _Checker:
                 self.problems.append(
                     f"--output-variables {pattern}: matches no output (outputs: "
                     f"{', '.join(names) or 'none'}); write Component.output names or globs"
+                )
+        for name in self.options.record:
+            if self.scenario.component(name) is None:
+                self.problems.append(
+                    f"--record {name}: no component '{name}' in the scenario (components: "
+                    f"{', '.join(c.name for c in self.scenario.components)})"
                 )
         interval = self.options.output_interval
         if interval is None or grid is None:
@@ -497,6 +504,12 @@ class _Checker:
                 multiple = multiple_of(component, grid)
                 step = grid.step if component.delta_time is None else component.delta_time
                 self.fixed_step(component, description, step)
+                if isinstance(seat.participant, ReplayParticipant):
+                    problem = seat.participant.grid_problem(grid.start, step, grid.stop)
+                    if problem is not None:
+                        problems.append(
+                            f"{where(component)}: component '{component.name}': {problem}"
+                        )
             except ScenarioError as exc:
                 problems.append(str(exc))
         if problems:

@@ -1,4 +1,4 @@
-"""The ``coupler`` command: run, validate, describe, fleet, campaign, plot.
+"""The ``coupler`` command: run, validate, describe, fleet, campaign, plot, replay.
 
 Exit codes: 0 the run completed (or a participant ended it early: ``terminated``; or Ctrl-C
 stopped a fleet's services after its run completed), 1 any problem (bad input, a participant
@@ -29,6 +29,8 @@ from coupler.fmu import FmuParticipant
 from coupler.logs import configure_logging
 from coupler.participant import Participant
 from coupler.security import ClientSecurity
+from coupler.server import ParticipantServer
+from coupler.settings import SecuritySettings, add_security_arguments
 from coupler_orchestrator.campaign import (
     CampaignError,
     CampaignProgress,
@@ -42,6 +44,7 @@ from coupler_orchestrator.observer import Observer, RunEnd, RunInfo
 from coupler_orchestrator.options import Algorithm, RunOptions
 from coupler_orchestrator.plot import plot
 from coupler_orchestrator.progress import ProgressBar, ProgressLines
+from coupler_orchestrator.replay import ReplayParticipant
 from coupler_orchestrator.runner import run_scenario, validate_scenario
 from coupler_orchestrator.watchdog import active as active_watchdog
 
@@ -91,6 +94,7 @@ def parser() -> argparse.ArgumentParser:
         type=Path,
         help="results directory (default: the SSD's OpenMCx outputDirectory, else ./results)",
     )
+    _record_options(run)
     run.add_argument("--realtime-factor", type=float, help="pace at X times real time")
     run.add_argument(
         "--no-progress",
@@ -116,6 +120,7 @@ def parser() -> argparse.ArgumentParser:
         "ssp", type=Path, help=".ssp archive, unpacked SSP folder, .ssd file or a single .fmu"
     )
     _run_options(validate)
+    _replay_option(validate)
 
     fleet = commands.add_parser(
         "fleet", help="start a scenario's services as local processes, run it, keep them up"
@@ -129,6 +134,7 @@ def parser() -> argparse.ArgumentParser:
         "--realtime-factor", type=float, help="override the fleet file's pacing; 0 = unpaced"
     )
     fleet.add_argument("--health-timeout", type=float, default=60.0, help="[s] per service")
+    _record_options(fleet)
 
     campaign = commands.add_parser(
         "campaign",
@@ -156,6 +162,17 @@ def parser() -> argparse.ArgumentParser:
     plot.add_argument("inputs", nargs="+", metavar="RESULTS|CHANNEL", help="runs, then channels")
     plot.add_argument("-o", "--output", type=Path, required=True, help="FILE.png or FILE.html")
     plot.add_argument("--title", default="", help="default: the runs' directories")
+
+    replay = commands.add_parser(
+        "replay", help="serve a recording (coupler run --record) as a gRPC participant"
+    )
+    replay.add_argument("recording", type=Path, help="a .crec file or a results directory")
+    replay.add_argument(
+        "--component", help="the recorded component (default: the file's; needed for a directory)"
+    )
+    replay.add_argument("--host", default="127.0.0.1", help="bind address (default: 127.0.0.1)")
+    replay.add_argument("--port", type=int, default=0, help="gRPC port (default: any free one)")
+    add_security_arguments(replay)
 
     describe = commands.add_parser("describe", help="print a participant's channels")
     describe.add_argument("target", help="grpc://HOST:PORT, grpcs://HOST:PORT or an .fmu file")
@@ -218,6 +235,29 @@ def _run_options(command: argparse.ArgumentParser) -> None:
     _security_options(command)
 
 
+def _record_options(command: argparse.ArgumentParser) -> None:
+    command.add_argument(
+        "--record",
+        action="append",
+        default=[],
+        metavar="COMPONENT[,...]",
+        help="record every output of these components at each of their communication points "
+        "into OUT/recordings/COMPONENT.crec, for replay (docs/replay.md)",
+    )
+    _replay_option(command)
+
+
+def _replay_option(command: argparse.ArgumentParser) -> None:
+    command.add_argument(
+        "--replay",
+        action="append",
+        default=[],
+        metavar="COMPONENT=RECORDING",
+        help="serve COMPONENT from a recording (a .crec file or a results directory) instead "
+        "of its participant (repeatable)",
+    )
+
+
 def _security_options(command: argparse.ArgumentParser) -> None:
     group = command.add_argument_group(
         "security of grpcs:// participants (default: COUPLER_TLS_CA, COUPLER_TLS_CERT, "
@@ -262,8 +302,25 @@ def options_of(args: argparse.Namespace) -> RunOptions:
         output_interval=getattr(args, "output_interval", None),
         output_variables=tuple(getattr(args, "output_variables", ())),
         parquet=getattr(args, "parquet", False),
+        record=tuple(
+            name.strip()
+            for item in getattr(args, "record", ())
+            for name in item.split(",")
+            if name.strip()
+        ),
+        replays=_replays_of(getattr(args, "replay", ())),
         **({"run_id": args.run_id} if args.run_id else {}),
     )
+
+
+def _replays_of(items: Sequence[str]) -> dict[str, Path]:
+    replays = {}
+    for item in items:
+        component, sep, path = item.partition("=")
+        if not sep or not component or not path:
+            raise CouplerError(f"--replay {item!r}: write COMPONENT=RECORDING")
+        replays[component] = Path(path)
+    return replays
 
 
 def main(argv: Sequence[str] | None = None, *, stdout: TextIO | None = None) -> int:
@@ -321,6 +378,8 @@ class _Session(Observer):
                 f"interrupted the campaign; the runs that ended are in "
                 f"{_shown(self.campaign / 'campaign.csv')} (the same command again runs the rest)"
             )
+        if args.command == "replay":
+            return EXIT_OK, "stopped serving the recording"
         where = _shown(self.out_dir) if self.out_dir else "./results (or the SSD's outputDirectory)"
         end = self.end
         if end is not None and end.status != "aborted":
@@ -451,6 +510,8 @@ async def _dispatch(args: argparse.Namespace, out: TextIO, session: _Session) ->
         return await _fleet(args, out, session)
     if args.command == "plot":
         return _plot(args, out)
+    if args.command == "replay":
+        return await _replay(args, out)
     if args.command == "campaign":
         return await _campaign(args, out, session)
     options = replace(options_of(args), on_waiting=session.waiting)
@@ -491,6 +552,8 @@ async def _run(
     )
     print(f"results: {outcome.results_csv}", file=out)
     print(f"summary: {outcome.summary_json}", file=out)
+    for recording in outcome.recordings:
+        print(f"recording: {recording}", file=out)
     if end.status == "terminated":
         print(f"terminated early: {end.reason}", file=out)
         return EXIT_OK
@@ -509,6 +572,8 @@ async def _linger(monitor: MonitorServer, seconds: float, out: TextIO) -> None:
 async def _fleet(args: argparse.Namespace, out: TextIO, session: _Session) -> int:
     spec = FleetSpec.load(args.fleet)
     run_argv = ["run", str(spec.ssp), "--out", str(args.out or spec.out), *spec.run_args]
+    run_argv += [f"--record={item}" for item in args.record]
+    run_argv += [f"--replay={item}" for item in args.replay]
     if args.realtime_factor is not None:
         run_argv += ["--realtime-factor", str(args.realtime_factor)]
     run_args = parser().parse_args(run_argv)
@@ -541,6 +606,36 @@ async def _fleet_run(
             print("services stay up; Ctrl-C stops them", file=out, flush=True)
             await asyncio.Event().wait()
     return code
+
+
+async def _replay(args: argparse.Namespace, out: TextIO) -> int:
+    """Serve a recording until Ctrl-C or SIGTERM (``_interruptible`` cancels the wait)."""
+    participant = ReplayParticipant(args.recording, args.component)
+    given = {k: getattr(args, k) for k in ReplaySettings.model_fields if getattr(args, k, None)}
+    security = ReplaySettings(**given).security()
+    server = ParticipantServer(
+        participant,
+        host=args.host,
+        port=args.port,
+        security=security,
+        reflection=bool(given.get("reflection")),
+    )
+    try:
+        await server.start()
+        recording = participant.recording
+        print(recording.summary(), file=out)
+        print(f"serving {recording.component} at {server.address}", file=out, flush=True)
+        await asyncio.Event().wait()
+    finally:
+        await server.stop()
+    return EXIT_OK
+
+
+class ReplaySettings(SecuritySettings):
+    """``coupler replay``'s server security: its options over ``COUPLER_REPLAY_*`` variables
+    (``COUPLER_REPLAY_TLS_CERT``, ...; docs/security.md)."""
+
+    model_config = SecuritySettings.model_config | {"env_prefix": "COUPLER_REPLAY_"}
 
 
 async def _campaign(args: argparse.Namespace, out: TextIO, session: _Session) -> int:

@@ -89,6 +89,8 @@ class Master:
         self.completed_steps = 0
         self._ended: str | None = None
         """Why a participant asked to end the run, once one did."""
+        self._request = ("", "")
+        """Who asked to end the run, and the reason given."""
         self._local: dict[str, StepNow] = {}
         """Members stepping on this thread (after Initialize), by name."""
         self._watchdog: Watchdog | None = None
@@ -152,9 +154,15 @@ class Master:
                 steps=self.completed_steps,
                 end_time=self._time_reached(),
                 wall_time=wallclock.perf_counter() - wall_start,
+                **self._requested(status),
             )
             self._finish(end)
         return end
+
+    def _requested(self, status: str) -> dict[str, str]:
+        if status != "terminated":
+            return {}
+        return {"ended_by": self._request[0], "request": self._request[1]}
 
     def _time_reached(self) -> float:
         return self.plan.grid.time(self.completed_steps)
@@ -247,6 +255,7 @@ class Master:
         if self._ended is None:
             reached = self.plan.grid.time(k + m.multiple)
             self._ended = f"{m.name} asked to end the run at t={reached:g} s: {end.reason}"
+            self._request = (m.name, end.reason)
         return end.outputs
 
     async def _step(self, m: Member, k: int) -> Values:

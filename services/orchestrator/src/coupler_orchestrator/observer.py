@@ -67,6 +67,10 @@ class RunEnd:
     """Last communication point recorded [s]."""
     wall_time: float
     """Wall-clock duration from the start of initialization [s]."""
+    ended_by: str = ""
+    """``terminated``: the component that asked to end the run; else empty."""
+    request: str = ""
+    """``terminated``: the reason that component gave, as it gave it."""
 
 
 class Observer:

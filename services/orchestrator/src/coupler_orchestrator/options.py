@@ -9,6 +9,7 @@ import uuid
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from enum import StrEnum
+from pathlib import Path
 
 from coupler.archives import DEFAULT_BUDGET_BYTES
 from coupler.security import ClientSecurity
@@ -62,6 +63,11 @@ class RunOptions:
     """Columns recorded: names or globs (``Gain.*``); empty: every output."""
     parquet: bool = False
     """Also write results.parquet (needs the pyarrow package)."""
+    record: tuple[str, ...] = ()
+    """Components whose outputs are recorded to ``recordings/COMPONENT.crec`` in the results
+    directory (docs/replay.md)."""
+    replays: Mapping[str, Path] = field(default_factory=dict)
+    """Component -> recording (a .crec file or a results directory) served in its place."""
     security: ClientSecurity = field(default_factory=ClientSecurity.from_environment)
     """TLS trust, client certificate and token for every remote participant (default: the
     ``COUPLER_TLS_*`` and ``COUPLER_TOKEN_FILE`` environment variables)."""

@@ -25,6 +25,7 @@ from coupler.participant import Participant
 from coupler.security import ClientSecurity
 from coupler_orchestrator import ssp
 from coupler_orchestrator.options import RunOptions
+from coupler_orchestrator.replay import ReplayParticipant, parse_source
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -66,6 +67,9 @@ def create(
 ) -> Participant:
     """The participant behind a component: an FMU in-process or isolated in a child process,
     or a remote one; the component's own settings (SSD annotation) over the options."""
+    replay = replay_of(component, options)
+    if replay is not None:
+        return replay
     settings = component.settings
     call_timeout = settings.call_timeout or options.call_timeout
     if component.type == ssp.FMU_TYPE:
@@ -96,6 +100,18 @@ def create(
         f"{where(component)}: component '{component.name}' has type '{component.type}'; "
         f"supported: {ssp.FMU_TYPE}, {ssp.GRPC_TYPE}"
     )
+
+
+def replay_of(component: ssp.Component, options: RunOptions) -> ReplayParticipant | None:
+    """The recording served in the component's place: ``--replay COMPONENT=PATH`` or a
+    ``replay:PATH#Component`` source; None when the component is not replayed."""
+    given = options.replays.get(component.name)
+    if given is not None:
+        return ReplayParticipant(given, component.name, name=component.name)
+    if component.source.startswith(ssp.REPLAY_SCHEME):
+        path, recorded = parse_source(component.source)
+        return ReplayParticipant(path, recorded, name=recorded or component.name)
+    return None
 
 
 def units_of(participant: Participant) -> dict[str, ssp.BaseUnit]:
@@ -130,6 +146,12 @@ async def opened(
     scenario's archive)."""
     created: dict[str, Participant] = {}
     problems: list[str] = []
+    known = [c.name for c in scenario.components]
+    for unknown in sorted(set(options.replays) - set(known)):
+        problems.append(
+            f"--replay {unknown}: no component '{unknown}' in the scenario (components: "
+            f"{', '.join(known)})"
+        )
     for component in scenario.components:
         try:
             created[component.name] = create(component, options, budget)

@@ -11,7 +11,7 @@ import asyncio
 import shutil
 import tempfile
 import threading
-from collections.abc import AsyncIterator, Sequence
+from collections.abc import AsyncIterator, Mapping, Sequence
 from contextlib import asynccontextmanager
 from dataclasses import dataclass
 from pathlib import Path
@@ -20,6 +20,7 @@ from typing import Any
 import structlog
 
 from coupler.archives import Budget
+from coupler.channels import Description
 from coupler.errors import ScenarioError
 from coupler_orchestrator import ssp
 from coupler_orchestrator.checks import Checked, check
@@ -27,7 +28,9 @@ from coupler_orchestrator.master import Master
 from coupler_orchestrator.observer import Observer, RunEnd
 from coupler_orchestrator.options import RunOptions
 from coupler_orchestrator.participants import opened
-from coupler_orchestrator.plan import build_plan
+from coupler_orchestrator.plan import Plan, build_plan
+from coupler_orchestrator.recording import SUFFIX as RECORDING_SUFFIX
+from coupler_orchestrator.recording import Recorder
 from coupler_orchestrator.results import (
     CsvRecorder,
     ParquetRecorder,
@@ -51,6 +54,8 @@ class RunOutcome:
     """What summary.json holds."""
     results_csv: Path
     summary_json: Path
+    recordings: tuple[Path, ...] = ()
+    """The ``--record`` files written."""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -124,16 +129,42 @@ async def run_scenario(
             checked = check(scenario, roster, options)
             plan = build_plan(checked, wire(checked), options)
             csv_path, summary_path = out_dir / "results.csv", out_dir / "summary.json"
-            summary = SummaryWriter(summary_path, extra=_extra(checked, roster.described()))
+            recordings = recorders_of(plan, roster.described(), out_dir, options)
+            extra = _extra(checked, roster.described())
+            if recordings:
+                extra["recordings"] = {r.component: f"recordings/{r.path.name}" for r in recordings}
+            summary = SummaryWriter(summary_path, extra=extra)
             selection = Selection(patterns=options.output_variables, every=checked.record_every)
             recorders: list[Observer] = [CsvRecorder(csv_path, selection), summary]
             if options.parquet:
                 recorders.append(ParquetRecorder(out_dir / "results.parquet", selection))
+            recorders.extend(recordings)
             recorders.extend(observers)
             end = await Master(plan, recorders).run()
     return RunOutcome(
-        end=end, summary=summary.summary, results_csv=csv_path, summary_json=summary_path
+        end=end,
+        summary=summary.summary,
+        results_csv=csv_path,
+        summary_json=summary_path,
+        recordings=tuple(r.path for r in recordings),
     )
+
+
+def recorders_of(
+    plan: Plan, descriptions: Mapping[str, Description], out_dir: Path, options: RunOptions
+) -> list[Recorder]:
+    """A recorder per ``--record`` component: ``OUT/recordings/COMPONENT.crec``."""
+    members = {m.name: m for m in plan.members}
+    return [
+        Recorder(
+            out_dir / "recordings" / f"{name}{RECORDING_SUFFIX}",
+            descriptions[name],
+            component=name,
+            multiple=members[name].multiple,
+            step=members[name].step,
+        )
+        for name in dict.fromkeys(options.record)
+    ]
 
 
 def _extra(checked: Checked, descriptions: dict[str, Any]) -> dict[str, Any]:

@@ -12,6 +12,7 @@ from .loader import load_ssp
 from .model import (
     FMU_TYPE,
     GRPC_TYPE,
+    REPLAY_SCHEME,
     Backend,
     BaseUnit,
     BooleanMappingTransformation,
@@ -37,6 +38,7 @@ from .single import scenario_of_fmu
 __all__ = [
     "FMU_TYPE",
     "GRPC_TYPE",
+    "REPLAY_SCHEME",
     "Backend",
     "BaseUnit",
     "BooleanMappingTransformation",

@@ -20,6 +20,8 @@ V = TypeVar("V")
 FMU_TYPE = "application/x-fmu-sharedlibrary"
 GRPC_TYPE = "application/x-coupler-grpc"
 SUPPORTED_COMPONENT_TYPES = (FMU_TYPE, GRPC_TYPE)
+REPLAY_SCHEME = "replay:"
+"""A source ``replay:PATH#Component`` (either type): a recording stands in (docs/replay.md)."""
 
 
 def frozen_mapping(items: Mapping[K, V] | None = None) -> Mapping[K, V]:
@@ -142,7 +144,8 @@ class Component:
     type: str
     """MIME type: ``application/x-fmu-sharedlibrary`` or ``application/x-coupler-grpc``."""
     source: str
-    """For FMUs an absolute path; for gRPC ``grpc://HOST:PORT`` with ``${VAR}`` expanded."""
+    """For FMUs an absolute path; for gRPC ``grpc://HOST:PORT`` with ``${VAR}`` expanded; for a
+    replay ``replay:PATH#Component`` with PATH absolute."""
     connectors: tuple[Connector, ...]
     parameters: Mapping[str, ParameterValue] = field(default_factory=lambda: frozen_mapping())
     """Parameter values by connector/variable name, after all bindings and mappings."""

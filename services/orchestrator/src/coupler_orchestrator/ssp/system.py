@@ -6,6 +6,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from pathlib import Path
 from urllib.parse import urlsplit
 
 from coupler.channels import ValueType
@@ -19,6 +20,7 @@ from .graph import Edge, Graph, Node
 from .model import (
     FMU_TYPE,
     GRPC_TYPE,
+    REPLAY_SCHEME,
     SUPPORTED_COMPONENT_TYPES,
     Component,
     Connector,
@@ -133,7 +135,7 @@ class SystemReader:
             )
         what = f"{here}: component '{name}'"
         source = expand(required(element, "source", self.display), self.env, what=what)
-        if mime == FMU_TYPE:
+        if mime == FMU_TYPE and not source.startswith(REPLAY_SCHEME):
             fmu = self.documents.resolve(source, element, self.display, what="FMU")
             if not fmu.is_file():
                 raise ScenarioError(
@@ -141,6 +143,12 @@ class SystemReader:
                     "to the archive/directory or fix the source attribute"
                 )
             source = str(fmu)
+        elif source.startswith(REPLAY_SCHEME):  # a recording stands in for the participant
+            raw, sep, recorded = source.removeprefix(REPLAY_SCHEME).partition("#")
+            recording = Path(raw)
+            if raw and not recording.is_absolute():
+                recording = self.documents.resolve(raw, element, self.display, what="recording")
+            source = f"{REPLAY_SCHEME}{recording if raw else ''}{sep}{recorded}"
         else:
             parts = urlsplit(source)
             try:
