@@ -6,10 +6,10 @@ C functions of the FMU's shared library are called directly (FMPy loads them and
 argument types; its status checks are redone here). A step then sets its inputs, steps and reads
 its outputs without allocating anything but the outputs' Python values.
 
-Only what is common and fixed-size is prepared: FMI 2.0 Real/Integer/Boolean/Enumeration and
-FMI 3.0 Float64/Int32/Int64/Boolean scalars. Anything else (strings, binaries, the narrower
-FMI 3.0 integer types, arrays, FMI 1.0) leaves ``prepare`` returning None and the FMU stepping
-through FMPy's own calls (``coupler.fmu``).
+Prepared: FMI 2.0 Real/Integer/Boolean/Enumeration/String and FMI 3.0
+Float64/Int32/Int64/Boolean/String scalars (strings as arrays of char pointers, decoded as
+UTF-8). Anything else (binaries, the narrower FMI 3.0 integer types, arrays, FMI 1.0) leaves
+``prepare`` returning None and the FMU stepping through FMPy's own calls (``coupler.fmu``).
 """
 
 from __future__ import annotations
@@ -28,6 +28,7 @@ _FAST: dict[str, dict[str, tuple[Any, str]]] = {
         "Integer": (ctypes.c_int, "Integer"),
         "Enumeration": (ctypes.c_int, "Integer"),
         "Boolean": (ctypes.c_int, "Boolean"),
+        "String": (ctypes.c_char_p, "String"),
     },
     "3.0": {
         "Float64": (ctypes.c_double, "Float64"),
@@ -35,6 +36,7 @@ _FAST: dict[str, dict[str, tuple[Any, str]]] = {
         "Int64": (ctypes.c_int64, "Int64"),
         "Enumeration": (ctypes.c_int64, "Int64"),
         "Boolean": (ctypes.c_bool, "Boolean"),
+        "String": (ctypes.c_char_p, "String"),
     },
 }
 _STATUS = ("OK", "Warning", "Discard", "Error", "Fatal", "Pending")
@@ -63,7 +65,8 @@ class _Group:
     count: int
     buffer: Any
     call: str
-    boolean: bool
+    kind: str
+    """The FMI type: Boolean values become bool, String values str."""
 
 
 class Calls:
@@ -115,7 +118,7 @@ class Calls:
                         len(members),
                         (element * len(members))(),
                         f"{self._prefix}Set{_FAST[self._version][fmi_type][1]}",
-                        fmi_type == "Boolean",
+                        fmi_type,
                     )
                 )
             self._input_groups[names] = groups
@@ -125,8 +128,12 @@ class Calls:
         component = self._component
         for group in groups:
             buffer = group.buffer
-            for i, name in enumerate(group.names):
-                buffer[i] = values[name]
+            if group.kind == "String":
+                for i, name in enumerate(group.names):
+                    buffer[i] = str(values[name]).encode("utf-8")
+            else:
+                for i, name in enumerate(group.names):
+                    buffer[i] = values[name]
             if self._version == "2.0":
                 status = group.function(component, group.refs, group.count, buffer)
             else:
@@ -160,8 +167,10 @@ class Calls:
             if status > 1:
                 raise CallFailed(group.call, status)
             values = group.buffer[:]
-            if group.boolean:
+            if group.kind == "Boolean":
                 values = [bool(v) for v in values]
+            elif group.kind == "String":
+                values = [v.decode("utf-8", "replace") if v else "" for v in values]
             outputs.update(zip(group.names, values, strict=True))
         return outputs
 
@@ -202,7 +211,7 @@ def prepare(
                 len(members),
                 (element * len(members))(),
                 f"{prefix}Get{suffix}",
-                fmi_type == "Boolean",
+                fmi_type,
             )
         )
     setters = {
