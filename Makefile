@@ -75,8 +75,10 @@ demo: setup
 demo-example: setup
 	$(UV) run --frozen coupler fleet examples/ramp-gain/fleet.toml $(ARGS) || [ $$? -eq 130 ]
 
+# Coupler against the gRPC floor, FMPy, libcosim and mosaik, measured in one run (the `bench`
+# dependency group; docs/performance.md). ARGS=--full for the long run.
 bench: setup
-	$(UV) run --frozen python benchmarks/step_overhead.py
+	$(UV) run --frozen --group bench python benchmarks/suite.py $(ARGS)
 
 compose-check:
 	bash scripts/compose-check.sh

@@ -7,6 +7,8 @@ through the ``coupler`` CLI.
 
 from __future__ import annotations
 
+import csv
+import io
 import json
 import os
 import shutil
@@ -16,10 +18,13 @@ from pathlib import Path
 
 import fmpy
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
 from coupler.channels import Causality, Channel, Description, RunSetup, Value, ValueType
 from coupler.messages import encode_message
 from coupler.participant import EndRun, Participant, Values
+from coupler_orchestrator.results import csv_field
 from coupler_railway.messages import TRAIN_STATE
 
 from .conftest import Coupler, serving
@@ -484,3 +489,11 @@ def test_results_as_parquet_equal_the_csv(coupler: Coupler, tmp_path: Path) -> N
     assert table.column("time").to_pylist() == [float(r["time"]) for r in rows]
     assert table.column("Integ.x").to_pylist() == [float(r["Integ.x"]) for r in rows]
     assert table.column("Source.counter").to_pylist() == [int(r["Source.counter"]) for r in rows]
+
+
+@given(st.lists(st.text(), min_size=1, max_size=5))
+def test_csv_fields_are_written_exactly_as_the_csv_module_writes_them(texts: list[str]) -> None:
+    """results.csv rows are joined by hand (faster); every byte as csv.writer would write it."""
+    written = io.StringIO()
+    csv.writer(written, lineterminator="\n").writerow(["0.5", *texts])
+    assert ",".join(["0.5", *(csv_field(t) for t in texts)]) + "\n" == written.getvalue()

@@ -241,7 +241,8 @@ class RemoteParticipant(Participant):
     ) -> wire.DoStepResponse:
         try:
             await stream.write(request)
-            response = await asyncio.wait_for(stream.read(), self.call_timeout)
+            async with asyncio.timeout(self.call_timeout):  # no task per step (wait_for's)
+                response = await stream.read()
         except asyncio.InvalidStateError:  # the stream ended before this step was written
             response = grpc.aio.EOF
         if response is grpc.aio.EOF:  # the server closed the stream: its status says why

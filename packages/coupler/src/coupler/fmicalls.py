@@ -78,6 +78,11 @@ class Calls:
         self._component = slave.component
         self._version = version
         self._outputs = outputs
+        arity = 5 if version == "3.0" else 4  # FMI 3.0 getters also take the number of values
+        self._getters = [
+            (g, (self._component, g.refs, g.count, g.buffer, g.count)[:arity]) for g in outputs
+        ]
+        """Each output group with the arguments of its getter, made once."""
         self._setters = setters
         """FMI type -> (setter function, ctypes element type)."""
         self._input_groups: dict[tuple[str, ...], list[_Group]] = {}
@@ -155,15 +160,9 @@ class Calls:
         return self._terminate.value, self._last.value
 
     def get(self) -> dict[str, Value]:
-        component = self._component
         outputs: dict[str, Value] = {}
-        for group in self._outputs:
-            if self._version == "2.0":
-                status = group.function(component, group.refs, group.count, group.buffer)
-            else:
-                status = group.function(
-                    component, group.refs, group.count, group.buffer, group.count
-                )
+        for group, arguments in self._getters:
+            status = group.function(*arguments)
             if status > 1:
                 raise CallFailed(group.call, status)
             values = group.buffer[:]
@@ -171,7 +170,7 @@ class Calls:
                 values = [bool(v) for v in values]
             elif group.kind == "String":
                 values = [v.decode("utf-8", "replace") if v else "" for v in values]
-            outputs.update(zip(group.names, values, strict=True))
+            outputs.update(zip(group.names, values, strict=False))  # equal lengths, by make
         return outputs
 
 

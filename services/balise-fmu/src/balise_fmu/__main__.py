@@ -8,7 +8,6 @@ values arrive with Initialize (``coupler.fmu.FmuParticipant`` is the host).
 from __future__ import annotations
 
 import argparse
-import asyncio
 import sys
 from pathlib import Path
 
@@ -19,6 +18,7 @@ from coupler.fmu import FmuParticipant
 from coupler.fmubuild import FmuBuildError
 from coupler.logs import configure_logging
 from coupler.server import ParticipantServer, serve
+from coupler.server import run as run_participant
 from coupler.settings import add_security_arguments
 from coupler_railway import RailMLError
 
@@ -76,7 +76,7 @@ def main(argv: list[str] | None = None) -> None:
         print(f"balise-fmu serving {path} at {server.address}", flush=True)
 
     try:
-        asyncio.run(
+        run_participant(
             serve(
                 participant,
                 host=settings.host,

@@ -16,6 +16,7 @@ import structlog
 from coupler.errors import CouplerError
 from coupler.logs import configure_logging
 from coupler.server import ParticipantServer
+from coupler.server import run as run_participant
 from coupler.settings import add_security_arguments
 from coupler_railway import Infrastructure, RailMLError, load_infrastructure
 from mapserver.config import MapServerSettings
@@ -99,7 +100,7 @@ def main(argv: list[str] | None = None) -> None:
     settings = _parse(argv)
     configure_logging(settings.log_level, json=settings.log_json)
     try:
-        asyncio.run(run(settings))
+        run_participant(run(settings))
     except CouplerError as exc:
         raise SystemExit(f"mapserver: {exc}") from exc
     except (RailMLError, FileNotFoundError) as exc:

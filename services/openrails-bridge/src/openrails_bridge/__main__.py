@@ -6,7 +6,6 @@ Options override the ``OPENRAILS_BRIDGE_*`` environment variables (see ``config.
 from __future__ import annotations
 
 import argparse
-import asyncio
 from importlib import resources
 from pathlib import Path
 
@@ -15,6 +14,7 @@ from coupler.channels import Causality
 from coupler.errors import CouplerError
 from coupler.logs import configure_logging
 from coupler.server import ParticipantServer, serve
+from coupler.server import run as run_participant
 from coupler.settings import add_security_arguments
 
 from .adapter import OpenRailsAdapter
@@ -80,7 +80,7 @@ def main(argv: list[str] | None = None) -> None:
         )
 
     try:
-        asyncio.run(
+        run_participant(
             serve(
                 participant,
                 host=settings.host,

@@ -57,6 +57,8 @@ class Master:
     def __init__(self, plan: Plan, observers: Sequence[Observer] = ()) -> None:
         self.plan = plan
         self.observers = list(observers)
+        self._output_names = {m.name: frozenset(c.name for c in m.outputs) for m in plan.order}
+        """What every answer of each member must hold, no more, no less."""
         self.feeds: dict[str, _Feed] = defaultdict(_Feed)
         for link in plan.links:
             self.feeds[link.target].entries.append(
@@ -307,7 +309,7 @@ class Master:
                 for m in local:
                     pending[k + m.multiple].append((m, self._step_here(m, self._local[m.name], k)))
             finally:
-                results = await asyncio.gather(*flying, return_exceptions=True)
+                results = await asyncio.gather(*flying, return_exceptions=True) if flying else []
             for m, result in zip(remote, results, strict=True):
                 if isinstance(result, BaseException):
                     raise result
@@ -330,7 +332,7 @@ class Master:
 
     def _store(self, m: Member, outputs: Values, call: str, time: float) -> None:
         """Keep a member's outputs; every output it describes must be there, and no other."""
-        if len(outputs) != len(m.outputs) or any(c.name not in outputs for c in m.outputs):
+        if outputs.keys() != self._output_names[m.name]:
             missing = [c.name for c in m.outputs if c.name not in outputs]
             extra = sorted(set(outputs) - {c.name for c in m.outputs})
             what = []

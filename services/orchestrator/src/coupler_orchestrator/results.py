@@ -23,7 +23,7 @@ import json
 import math
 import os
 import time as wallclock
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from importlib.metadata import version
 from pathlib import Path
@@ -55,6 +55,27 @@ def format_value(value: Value, column: Column | None = None) -> str:
             return messages.message_json(column.message_type, value) if value else ""
         return value.hex()
     return str(value)
+
+
+def formatter(column: Column) -> Callable[[Value], str]:
+    """``format_value`` for one column as a CSV field (quoted as the csv module quotes it),
+    chosen once: the CSV writer calls it for every cell."""
+    if column.type == "Real":
+        return repr
+    if column.type == "Boolean":
+        return lambda value: "1" if value else "0"
+    if column.type in ("Integer", "Enumeration", "UInt64"):
+        return str
+    return lambda value: csv_field(format_value(value, column))
+
+
+def csv_field(text: str) -> str:
+    """``text`` as a field of a CSV row, quoted when it holds a comma, a quote or a newline:
+    exactly what the csv module writes with lineterminator "\\n" (a lone carriage return is
+    left as is, as the csv module does)."""
+    if "," in text or '"' in text or "\n" in text:
+        return '"' + text.replace('"', '""') + '"'
+    return text
 
 
 def check_writable(directory: Path) -> None:
@@ -117,6 +138,7 @@ class CsvRecorder(Observer):
         self._writer: Any = None
         self._columns: list[Column] = []
         self._picked: list[int] = []
+        self._formatters: list[Callable[[Value], str]] = []
         self._count = 0
         self._flushed = 0.0
         self._good = 0
@@ -125,6 +147,7 @@ class CsvRecorder(Observer):
     def started(self, info: RunInfo) -> None:
         self._picked = self.selection.columns(info.columns)
         self._columns = [info.columns[i] for i in self._picked]
+        self._formatters = [formatter(c) for c in self._columns]
         try:
             self.path.parent.mkdir(parents=True, exist_ok=True)
             self._file = self.path.open("w", encoding="utf-8", newline="", buffering=1 << 16)
@@ -141,10 +164,9 @@ class CsvRecorder(Observer):
         if count % self.selection.every or self._file is None:
             return
         cells = [repr(time)]
-        for column, i in zip(self._columns, self._picked, strict=True):
-            cells.append(format_value(row[i], column))
+        cells += [f(row[i]) for f, i in zip(self._formatters, self._picked, strict=True)]
         try:
-            self._writer.writerow(cells)
+            self._file.write(",".join(cells) + "\n")
             now = wallclock.monotonic()
             if now - self._flushed >= FLUSH_EVERY_S:
                 self._file.flush()

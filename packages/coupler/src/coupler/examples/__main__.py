@@ -3,12 +3,12 @@
 from __future__ import annotations
 
 import argparse
-import asyncio
 
 from coupler.errors import CouplerError
 from coupler.examples.gain import GainParticipant
 from coupler.logs import configure_logging
 from coupler.server import ParticipantServer, serve
+from coupler.server import run as run_participant
 from coupler.settings import ParticipantSettings, add_security_arguments
 
 
@@ -29,7 +29,7 @@ def main() -> None:
         print(f"serving {args.name} at {server.address}", flush=True)
 
     try:
-        asyncio.run(
+        run_participant(
             serve(
                 GainParticipant(args.name),
                 host=settings.host,

@@ -1,0 +1,725 @@
+"""`make bench`: Coupler against the floors and peers, every figure measured in this one run.
+
+    make bench                  # quick (under 5 min on two cores)
+    make bench ARGS=--full      # more steps, 100 participants longer
+
+Cases (steps/s, median of the repetitions; Coupler and its reference interleaved):
+
+- in-process FMU chain xN: Source2 feeding N Feedthrough2 (real_out -> real_in), every output
+  recorded, `coupler`'s runner; against a hand-written FMPy FMU2Slave loop over the same FMUs
+  (every output read each step) and libcosim (libcosimpy, C++) with the same connections;
+- remote xN: N example gain participants, each its own process, chained y -> u in a ring,
+  Jacobi; against raw grpc.aio round trips to N trivial servers (processes answering the same
+  messages: unary DoStep and the bidi StepStream) and, for N = 1, mosaik 3 with one remote
+  simulator over its TCP API (a local source and sink around it);
+- scale: 100 gain participants in one run: steps/s, RSS per participant process, time from the
+  run's start to its first step for 1, 10 and 100 participants;
+- memory: the orchestrator's RSS after 1e4 and after 1e5 steps of remote x1 (its own process).
+
+Prints one table with each ratio, its target and PASS/FAIL, and writes build/bench.json. Not a
+test: nothing here asserts; the figures go into docs/performance.md.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import contextlib
+import json
+import os
+import platform
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import AsyncIterator, Awaitable, Callable, Iterator, Sequence
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+ROOT = Path(__file__).resolve().parents[1]
+FMUS = ROOT / "build" / "fmus"
+OUT = ROOT / "build" / "bench.json"
+STEP = 0.01
+
+
+@dataclass
+class Row:
+    case: str
+    coupler: float
+    """Coupler's steps/s."""
+    reference: str = ""
+    reference_rate: float | None = None
+    target: float | None = None
+    """Minimum ratio coupler / reference."""
+    note: str = ""
+
+    @property
+    def ratio(self) -> float | None:
+        return self.coupler / self.reference_rate if self.reference_rate else None
+
+    @property
+    def verdict(self) -> str:
+        if self.target is None or self.ratio is None:
+            return ""
+        return "PASS" if self.ratio >= self.target else "FAIL"
+
+
+def median_of(samples: Sequence[float]) -> float:
+    return float(statistics.median(samples))
+
+
+# ----------------------------------------------------------------------------- scenarios
+
+
+def _connectors(kinds: Sequence[tuple[str, str, str]]) -> str:
+    return "".join(
+        f'<ssd:Connector name="{name}" kind="{kind}"><ssc:{type_}/></ssd:Connector>'
+        for name, kind, type_ in kinds
+    )
+
+
+SOURCE = _connectors(
+    [("ramp", "output", "Real"), ("sine", "output", "Real"), ("counter", "output", "Integer")]
+)
+FEEDTHROUGH = _connectors(
+    [("real_in", "input", "Real")]
+    + [(f"{k}_out", "output", t) for k, t in (("real", "Real"), ("int", "Integer"),
+                                              ("bool", "Boolean"), ("string", "String"))]
+)  # fmt: skip
+GAIN = _connectors(
+    [("u", "input", "Real"), ("y", "output", "Real"), ("x", "output", "Real"),
+     ("count", "output", "Integer"), ("inverted", "output", "Boolean"),
+     ("echo", "output", "String"), ("blob_out", "output", "Binary")]
+)  # fmt: skip
+
+
+def chain_ssd(folder: Path, n: int) -> Path:
+    """Source2 -> Feedthrough2 x n, real_out -> real_in."""
+    elements = [
+        f'<ssd:Component name="Source" source="{FMUS / "Source2.fmu"}">'
+        f"<ssd:Connectors>{SOURCE}</ssd:Connectors></ssd:Component>"
+    ]
+    connections = []
+    before = ("Source", "ramp")
+    for k in range(1, n + 1):
+        elements.append(
+            f'<ssd:Component name="Feed{k}" source="{FMUS / "Feedthrough2.fmu"}">'
+            f"<ssd:Connectors>{FEEDTHROUGH}</ssd:Connectors></ssd:Component>"
+        )
+        connections.append(
+            f'<ssd:Connection startElement="{before[0]}" startConnector="{before[1]}" '
+            f'endElement="Feed{k}" endConnector="real_in"/>'
+        )
+        before = (f"Feed{k}", "real_out")
+    return _ssd(folder / f"chain{n}.ssd", elements, connections)
+
+
+def ring_ssd(folder: Path, ports: Sequence[int]) -> Path:
+    """Gain participants at ``ports``, Gain_k.y -> Gain_k+1.u, the last one's y -> the first's u."""
+    n = len(ports)
+    elements = [
+        f'<ssd:Component name="Gain{k}" type="application/x-coupler-grpc" '
+        f'source="grpc://127.0.0.1:{port}"><ssd:Connectors>{GAIN}</ssd:Connectors>'
+        "</ssd:Component>"
+        for k, port in enumerate(ports, start=1)
+    ]
+    connections = [
+        f'<ssd:Connection startElement="Gain{k}" startConnector="y" '
+        f'endElement="Gain{k % n + 1}" endConnector="u"/>'
+        for k in range(1, n + 1)
+    ]
+    return _ssd(folder / f"ring{n}.ssd", elements, connections)
+
+
+def _ssd(path: Path, elements: Sequence[str], connections: Sequence[str]) -> Path:
+    path.write_text(
+        f"""<?xml version="1.0" encoding="UTF-8"?>
+<ssd:SystemStructureDescription version="1.0" name="{path.stem}"
+    xmlns:ssd="http://ssp-standard.org/SSP1/SystemStructureDescription"
+    xmlns:ssc="http://ssp-standard.org/SSP1/SystemStructureCommon">
+  <ssd:System name="{path.stem}">
+    <ssd:Elements>
+      {chr(10).join(elements)}
+    </ssd:Elements>
+    <ssd:Connections>
+      {chr(10).join(connections)}
+    </ssd:Connections>
+  </ssd:System>
+  <ssd:DefaultExperiment startTime="0.0" stopTime="1.0"/>
+</ssd:SystemStructureDescription>
+""",
+        encoding="utf-8",
+    )
+    return path
+
+
+# ------------------------------------------------------------------------------ Coupler
+
+
+class _Clock:
+    """Times a run from its first to its last communication point, and the first one."""
+
+    def __init__(self, begun: float) -> None:
+        from coupler_orchestrator.observer import Observer
+
+        class Observe(Observer):
+            def stepped(inner, time_s: float, row: Sequence[Any]) -> None:
+                now = time.perf_counter()
+                if self.first is None:
+                    self.first = now
+                self.last, self.points = now, self.points + 1
+
+        self.begun = begun
+        self.first: float | None = None
+        self.last = 0.0
+        self.points = 0
+        self.observer = Observe()
+
+    @property
+    def rate(self) -> float:
+        assert self.first is not None
+        return (self.points - 1) / (self.last - self.first)
+
+
+async def coupler_run(ssd: Path, steps: int, out: Path) -> _Clock:
+    from coupler_orchestrator.options import RunOptions
+    from coupler_orchestrator.runner import run_scenario
+
+    clock = _Clock(time.perf_counter())
+    options = RunOptions(stop_time=steps * STEP, step_size=STEP, run_id=f"bench-{time.time_ns()}")
+    outcome = await run_scenario(ssd, options, out_dir=out, observers=[clock.observer])
+    if outcome.end.status != "completed":
+        raise RuntimeError(f"{ssd.name}: {outcome.end.status}: {outcome.end.reason}")
+    return clock
+
+
+# ------------------------------------------------------------------------- FMPy and libcosim
+
+
+def fmpy_loop(n: int, steps: int) -> float:
+    """Steps/s of a hand-written FMPy loop: Source2 -> Feedthrough2 x n, every output read."""
+    from fmpy import extract, read_model_description
+    from fmpy.fmi2 import FMU2Slave
+
+    slaves = []
+    for k, name in enumerate(["Source2"] + ["Feedthrough2"] * n):
+        path = FMUS / f"{name}.fmu"
+        description = read_model_description(path)
+        unzipped = extract(path)
+        slave = FMU2Slave(
+            guid=description.guid,
+            unzipDirectory=unzipped,
+            modelIdentifier=description.coSimulation.modelIdentifier,
+            instanceName=f"{name}{k}",
+        )
+        slave.instantiate()
+        slave.setupExperiment(startTime=0.0)
+        slave.enterInitializationMode()
+        slave.exitInitializationMode()
+        outputs = [v for v in description.modelVariables if v.causality == "output"]
+        by_type: dict[str, list[int]] = {}
+        for variable in outputs:
+            by_type.setdefault(variable.type, []).append(variable.valueReference)
+        ramp = next(v.valueReference for v in outputs if v.name in ("ramp", "real_out"))
+        slaves.append((slave, by_type, ramp))
+    real_in = 3  # Feedthrough2's real_in
+    getters = {"Real": "getReal", "Integer": "getInteger", "Boolean": "getBoolean"}
+    t = 0.0
+    started = time.perf_counter()
+    for k in range(steps):
+        t = k * STEP
+        values = []
+        for slave, by_type, ramp in slaves:
+            for kind, refs in by_type.items():
+                if kind == "String":
+                    slave.getString(refs)
+                else:
+                    getattr(slave, getters[kind])(refs)
+            values.append(slave.getReal([ramp])[0])
+        for (slave, _, _), value in zip(slaves[1:], values, strict=False):
+            slave.setReal([real_in], [value])
+        for slave, _, _ in slaves:
+            slave.doStep(currentCommunicationPoint=t, communicationStepSize=STEP)
+    rate = steps / (time.perf_counter() - started)
+    for slave, _, _ in slaves:
+        slave.terminate()
+        slave.freeInstance()
+    return rate
+
+
+def libcosim_loop(n: int, steps: int) -> float | None:
+    """Steps/s of libcosim (C++) on the same chain, last values of every slave observed."""
+    try:
+        from libcosimpy.CosimExecution import CosimExecution
+        from libcosimpy.CosimLogging import CosimLogLevel, log_output_level
+        from libcosimpy.CosimObserver import CosimObserver
+        from libcosimpy.CosimSlave import CosimLocalSlave
+    except ImportError:
+        return None
+    log_output_level(CosimLogLevel.ERROR)
+    execution = CosimExecution.from_step_size(step_size=int(STEP * 1e9))
+    indices = []
+    for k, name in enumerate(["Source2"] + ["Feedthrough2"] * n):
+        slave = CosimLocalSlave(fmu_path=str(FMUS / f"{name}.fmu"), instance_name=f"{name}{k}")
+        indices.append(execution.add_local_slave(slave))
+    ramp, real_out, real_in = 5, 8, 3
+    for k in range(1, len(indices)):
+        output = ramp if k == 1 else real_out
+        execution.connect_real_variables(indices[k - 1], output, indices[k], real_in)
+    execution.add_observer(CosimObserver.create_last_value())
+    execution.step(10)
+    started = time.perf_counter()
+    execution.step(steps)
+    return steps / (time.perf_counter() - started)
+
+
+# --------------------------------------------------------------------------- processes
+
+
+@contextlib.contextmanager
+def processes(commands: Sequence[Sequence[str]]) -> Iterator[list[subprocess.Popen[bytes]]]:
+    started = [
+        subprocess.Popen(c, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, cwd=ROOT)
+        for c in commands
+    ]
+    try:
+        yield started
+    finally:
+        for process in started:
+            process.terminate()
+        for process in started:
+            try:
+                process.wait(10)
+            except subprocess.TimeoutExpired:
+                process.kill()
+
+
+def free_ports(count: int) -> list[int]:
+    from coupler_orchestrator.fleet import free_port
+
+    return [free_port() for _ in range(count)]
+
+
+async def serving(ports: Sequence[int], within: float = 180.0) -> None:
+    from coupler.errors import CouplerError
+    from coupler.health import probe
+
+    async def one(port: int) -> None:
+        deadline = time.monotonic() + within
+        while True:
+            try:
+                await probe(f"grpc://127.0.0.1:{port}", connect_timeout=2.0)
+                return
+            except CouplerError:
+                if time.monotonic() > deadline:
+                    raise
+                await asyncio.sleep(0.2)
+
+    await asyncio.gather(*(one(p) for p in ports))
+
+
+def gains(ports: Sequence[int]) -> list[list[str]]:
+    return [[sys.executable, "-m", "coupler.examples", "gain", "--port", str(p)] for p in ports]
+
+
+def rss_mb(pid: int) -> float:
+    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+        if line.startswith("VmRSS:"):
+            return int(line.split()[1]) / 1024
+    return 0.0
+
+
+# ---------------------------------------------------------------------------- raw gRPC floor
+
+
+def _raw_messages() -> tuple[Any, Any]:
+    """A request and a response of the sizes the gain participant exchanges."""
+    from coupler.v1 import component_pb2 as pb
+
+    request = pb.DoStepRequest(current_time=0.0, step_size=STEP, run_id="bench")
+    request.inputs.add(channel="u", real=1.0)
+    response = pb.DoStepResponse()
+    for name, kind, value in [
+        ("y", "real", 4.0),
+        ("x", "real", 0.01),
+        ("count", "integer", 0),
+        ("inverted", "boolean", True),
+        ("echo", "text", ""),
+        ("blob_out", "binary", b""),
+    ]:
+        response.outputs.add(channel=name, **{kind: value})
+    return request, response
+
+
+async def raw_server(port: int) -> None:
+    """A trivial GRPCComponentService: every step answered with the same outputs."""
+    import grpc
+
+    from coupler.v1 import component_pb2_grpc as rpc
+
+    _, response = _raw_messages()
+
+    class Trivial(rpc.GRPCComponentServiceServicer):  # type: ignore[misc]
+        async def DoStep(self, request: Any, context: Any) -> Any:
+            return response
+
+        async def StepStream(self, requests: Any, context: Any) -> AsyncIterator[Any]:
+            async for _ in requests:
+                yield response
+
+    server = grpc.aio.server()
+    rpc.add_GRPCComponentServiceServicer_to_server(Trivial(), server)
+    server.add_insecure_port(f"127.0.0.1:{port}")
+    await server.start()
+    await server.wait_for_termination()
+
+
+async def raw_floor(ports: Sequence[int], steps: int, *, stream: bool) -> float:
+    """Steps/s of bare grpc.aio round trips to every server per step (gathered)."""
+    import grpc
+
+    from coupler.v1 import component_pb2_grpc as rpc
+
+    request, _ = _raw_messages()
+    channels = [grpc.aio.insecure_channel(f"127.0.0.1:{p}") for p in ports]
+    try:
+        for channel in channels:
+            await asyncio.wait_for(channel.channel_ready(), 30)
+        stubs = [rpc.GRPCComponentServiceStub(c) for c in channels]
+        if stream:
+            calls = [stub.StepStream() for stub in stubs]
+
+            async def trip(call: Any) -> Any:
+                await call.write(request)
+                return await call.read()
+
+            async def once() -> None:
+                if len(calls) == 1:
+                    await trip(calls[0])
+                else:
+                    await asyncio.gather(*(trip(c) for c in calls))
+        else:
+
+            async def once() -> None:
+                if len(stubs) == 1:
+                    await stubs[0].DoStep(request)
+                else:
+                    await asyncio.gather(*(s.DoStep(request) for s in stubs))
+
+        for _ in range(50):
+            await once()
+        started = time.perf_counter()
+        for _ in range(steps):
+            await once()
+        rate = steps / (time.perf_counter() - started)
+        if stream:
+            for call in calls:
+                await call.done_writing()
+        return rate
+    finally:
+        for channel in channels:
+            await channel.close()
+
+
+# -------------------------------------------------------------------------------- mosaik
+
+
+def mosaik_rate(steps: int) -> float | None:
+    """Steps/s of mosaik 3: a local source -> the gain simulator (its own process, TCP) -> a
+    local sink, time-based, one step per time unit."""
+    try:
+        import mosaik
+        from loguru import logger
+    except ImportError:
+        return None
+    logger.remove()
+    script = Path(__file__).with_name("mosaik_gain.py")
+    sys.path.insert(0, str(script.parent))
+    config = {
+        "Local": {"python": "mosaik_gain:Simulator"},
+        "Local2": {"python": "mosaik_gain:Simulator"},
+        "Remote": {"cmd": f"{sys.executable} {script} %(addr)s"},
+    }
+    world = mosaik.World(config, debug=False)
+    source = world.start("Local").Source()
+    gain = world.start("Remote").Gain()
+    sink = world.start("Local2").Sink()
+    world.connect(source, gain, ("value", "u"))
+    world.connect(gain, sink, "y")
+    started = time.perf_counter()
+    world.run(until=steps, print_progress=False)
+    return steps / (time.perf_counter() - started)
+
+
+# -------------------------------------------------------------------------------- memory
+
+
+async def rss_probe(port: int, steps: int, sample_at: int) -> dict[str, float]:
+    """In this process (the orchestrator's): remote x1 for ``steps`` steps; RSS at
+    ``sample_at`` steps and at the end."""
+    from coupler_orchestrator.observer import Observer
+    from coupler_orchestrator.options import RunOptions
+    from coupler_orchestrator.runner import run_scenario
+
+    samples: dict[str, float] = {}
+
+    class Sample(Observer):
+        count = 0
+
+        def stepped(self, time_s: float, row: Sequence[Any]) -> None:
+            self.count += 1
+            if self.count in (sample_at, steps):
+                samples[str(self.count)] = rss_mb(os.getpid())
+
+    with tempfile.TemporaryDirectory() as folder:
+        ssd = ring_ssd(Path(folder), [port])
+        options = RunOptions(stop_time=(steps - 1) * STEP, step_size=STEP)
+        await run_scenario(ssd, options, out_dir=Path(folder) / "out", observers=[Sample()])
+    return samples
+
+
+# ---------------------------------------------------------------------------------- suite
+
+
+@dataclass(frozen=True)
+class Sizes:
+    chain_steps: int
+    remote_steps: int
+    repeats: int
+    scale_steps: int
+    rss_steps: int
+
+
+QUICK = Sizes(chain_steps=2000, remote_steps=1000, repeats=3, scale_steps=100, rss_steps=100_000)
+FULL = Sizes(chain_steps=10000, remote_steps=5000, repeats=5, scale_steps=1000, rss_steps=100_000)
+
+
+async def interleaved(
+    repeats: int, *measures: Callable[[], Awaitable[float | None]]
+) -> list[float | None]:
+    """Medians of each measure, run in turns (so a busy moment hits them alike)."""
+    samples: list[list[float]] = [[] for _ in measures]
+    for _ in range(repeats):
+        for found, measure in zip(samples, measures, strict=True):
+            value = await measure()
+            if value is not None:
+                found.append(value)
+    return [median_of(s) if s else None for s in samples]
+
+
+async def suite(sizes: Sizes, log: Callable[[str], None]) -> tuple[list[Row], dict[str, Any]]:
+    rows: list[Row] = []
+    extra: dict[str, Any] = {}
+    work = Path(tempfile.mkdtemp(prefix="coupler-bench-"))
+
+    for n in (2, 10):
+        log(f"in-process FMU chain x{n}")
+        ssd = chain_ssd(work, n)
+        steps = sizes.chain_steps if n == 2 else sizes.chain_steps // 2
+
+        async def coupler_chain(ssd: Path = ssd, steps: int = steps) -> float:
+            return (await coupler_run(ssd, steps, work / "out")).rate
+
+        async def fmpy_chain(n: int = n, steps: int = steps) -> float:
+            return fmpy_loop(n, steps)
+
+        async def cosim_chain(n: int = n, steps: int = steps) -> float | None:
+            return libcosim_loop(n, steps * 5)
+
+        coupler, fmpy, cosim = await interleaved(
+            sizes.repeats, coupler_chain, fmpy_chain, cosim_chain
+        )
+        assert coupler is not None and fmpy is not None
+        rows.append(Row(f"in-process FMU chain x{n}", coupler, "FMPy loop", fmpy, 1.0))
+        if cosim is not None:
+            rows.append(Row(f"in-process FMU chain x{n}", coupler, "libcosim (C++)", cosim, 0.5,
+                            note="stretch target"))  # fmt: skip
+
+    for n, target in ((1, 0.8), (3, 0.9), (10, 0.8)):
+        log(f"remote x{n}")
+        gain_ports, raw_ports = free_ports(n), free_ports(n)
+        raw = [[sys.executable, __file__, "--raw-server", str(p)] for p in raw_ports]
+        with processes(gains(gain_ports) + raw):
+            await serving(gain_ports)  # the raw servers: channel_ready in raw_floor
+            ssd = ring_ssd(work, gain_ports)
+            steps = sizes.remote_steps if n < 10 else sizes.remote_steps // 2
+
+            async def coupler_remote(ssd: Path = ssd, steps: int = steps) -> float:
+                return (await coupler_run(ssd, steps, work / "out")).rate
+
+            async def stream(ports: list[int] = raw_ports, steps: int = steps) -> float:
+                return await raw_floor(ports, steps, stream=True)
+
+            async def unary(ports: list[int] = raw_ports, steps: int = steps) -> float:
+                return await raw_floor(ports, steps, stream=False)
+
+            coupler, floor, unary_floor = await interleaved(
+                sizes.repeats, coupler_remote, stream, unary
+            )
+        assert coupler is not None and floor is not None and unary_floor is not None
+        rows.append(Row(f"remote x{n}", coupler, f"raw grpc.aio stream x{n}", floor, target))
+        rows.append(Row(f"remote x{n}", coupler, f"raw grpc.aio unary x{n}", unary_floor))
+        if n == 1:
+            log("mosaik 3, one remote simulator")
+
+            async def mosaik_once() -> float | None:
+                return await asyncio.to_thread(mosaik_rate, sizes.remote_steps)
+
+            [mosaik_figure] = await interleaved(sizes.repeats, mosaik_once)
+            if mosaik_figure is not None:
+                rows.append(Row("remote x1", coupler, "mosaik 3 (TCP)", mosaik_figure, 1.25))
+
+    log("scale: 1, 10, 100 participants (time to the first step; 100 in one run)")
+    first_step: dict[str, float] = {}
+    for n in (1, 10, 100):
+        ports = free_ports(n)
+        launched = time.perf_counter()
+        with processes(gains(ports)) as started:
+            await serving(ports)
+            up = time.perf_counter() - launched
+            clock = await coupler_run(ring_ssd(work, ports), sizes.scale_steps, work / "out")
+            first_step[str(n)] = round(clock.first - clock.begun, 3) if clock.first else -1
+            if n == 100:
+                rss = [rss_mb(p.pid) for p in started]
+                extra["scale_100"] = {
+                    "steps_per_s": round(clock.rate, 1),
+                    "participants_up_s": round(up, 1),
+                    "participant_rss_mb_median": round(median_of(rss), 1),
+                    "participant_rss_mb_max": round(max(rss), 1),
+                }
+                rows.append(
+                    Row("remote x100 (completes)", clock.rate, note=f"{n} processes, "
+                        f"{median_of(rss):.0f} MB RSS each (median)")
+                )  # fmt: skip
+    extra["time_to_first_step_s"] = first_step
+
+    log(f"memory: orchestrator RSS at 1e4 and {sizes.rss_steps:.0e} steps (remote x1)")
+    [port] = free_ports(1)
+    with processes(gains([port])):
+        await serving([port])
+        probe = await asyncio.to_thread(
+            subprocess.run,
+            [sys.executable, __file__, "--rss-probe", str(port), str(sizes.rss_steps)],
+            capture_output=True,
+            text=True,
+            check=True,
+            cwd=ROOT,
+        )
+    samples = json.loads(probe.stdout.strip().splitlines()[-1])
+    early, late = samples["10000"], samples[str(sizes.rss_steps)]
+    extra["orchestrator_rss_mb"] = samples
+    rows.append(
+        Row(
+            "orchestrator RSS 1e4 -> 1e5 steps",
+            late,
+            "RSS at 1e4 steps",
+            early,
+            note="MB, not steps/s; target: within 5 %",
+        )
+    )
+    return rows, extra
+
+
+async def only(case: str, steps: int) -> float:
+    work = Path(tempfile.mkdtemp(prefix="coupler-bench-"))
+    n = int(case.removeprefix("chain").removeprefix("remote"))
+    if case.startswith("chain"):
+        return (await coupler_run(chain_ssd(work, n), steps, work / "out")).rate
+    ports = free_ports(n)
+    with processes(gains(ports)):
+        await serving(ports)
+        return (await coupler_run(ring_ssd(work, ports), steps, work / "out")).rate
+
+
+def rss_verdict(row: Row) -> str:
+    assert row.reference_rate
+    return "PASS" if abs(row.coupler / row.reference_rate - 1) <= 0.05 else "FAIL"
+
+
+def table(rows: Sequence[Row]) -> str:
+    lines = [
+        f"{'case':<34} {'Coupler':>10} {'reference':<26} {'reference':>10} {'ratio':>7} "
+        f"{'target':>7}  verdict",
+        "-" * 110,
+    ]
+    for row in rows:
+        ratio = f"{row.ratio:.2f}" if row.ratio is not None else ""
+        target = f">={row.target:g}" if row.target is not None else ""
+        verdict = rss_verdict(row) if row.case.startswith("orchestrator RSS") else row.verdict
+        if row.case.startswith("orchestrator RSS"):
+            target = "1+-0.05"
+        reference = f"{row.reference_rate:,.0f}" if row.reference_rate else ""
+        lines.append(
+            f"{row.case:<34} {row.coupler:>10,.1f} {row.reference:<26} {reference:>10} "
+            f"{ratio:>7} {target:>7}  {verdict}{'  (' + row.note + ')' if row.note else ''}"
+        )
+    return "\n".join(lines)
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--full", action="store_true", help="more steps and repetitions")
+    parser.add_argument("--out", type=Path, default=OUT, help=f"JSON (default {OUT})")
+    parser.add_argument(
+        "--only",
+        metavar="CASE",
+        help="run one Coupler case alone and print its steps/s (for a profiler): chainN or "
+        "remoteN, e.g. py-spy record -o chain10.txt --format raw -- .venv/bin/python "
+        "benchmarks/suite.py --only chain10",
+    )
+    parser.add_argument("--steps", type=int, default=20000, help="steps of --only")
+    parser.add_argument("--raw-server", type=int, help=argparse.SUPPRESS)
+    parser.add_argument("--rss-probe", nargs=2, type=int, help=argparse.SUPPRESS)
+    args = parser.parse_args()
+    from coupler.logs import configure_logging
+
+    configure_logging("ERROR")
+    if args.raw_server:
+        asyncio.run(raw_server(args.raw_server))
+        return 0
+    if args.rss_probe:
+        port, steps = args.rss_probe
+        print(json.dumps(asyncio.run(rss_probe(port, steps, 10_000))))
+        return 0
+    if args.only:
+        print(f"{args.only}: {asyncio.run(only(args.only, args.steps)):,.0f} steps/s")
+        return 0
+    if not (FMUS / "Feedthrough2.fmu").exists():
+        print("error: build/fmus is empty: run make setup (make bench does)", file=sys.stderr)
+        return 1
+    sizes = FULL if args.full else QUICK
+    started = time.perf_counter()
+
+    def log(text: str) -> None:
+        print(f"[{time.perf_counter() - started:6.1f} s] {text}", file=sys.stderr, flush=True)
+
+    rows, extra = asyncio.run(suite(sizes, log))
+    print()
+    print(
+        f"Coupler benchmark ({'full' if args.full else 'quick'}; steps/s, median of "
+        f"{sizes.repeats}, Coupler and reference interleaved in this run; {os.cpu_count()} cores, "
+        f"Python {platform.python_version()})"
+    )
+    print(table(rows))
+    print(f"time from run start to first step [s]: {extra['time_to_first_step_s']}")
+    print(f"100 participants: {extra['scale_100']}")
+    print(f"took {time.perf_counter() - started:.0f} s")
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(
+        json.dumps(
+            {
+                "mode": "full" if args.full else "quick",
+                "rows": [asdict(r) | {"ratio": r.ratio, "verdict": r.verdict} for r in rows],
+                **extra,
+            },
+            indent=2,
+        )
+    )
+    print(f"written: {args.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
