@@ -430,7 +430,7 @@ def mosaik_rate(steps: int) -> float | None:
     """Steps/s of mosaik 3: a local source -> the gain simulator (its own process, TCP) -> a
     local sink, time-based, one step per time unit."""
     try:
-        import mosaik
+        import mosaik  # noqa: F401  (installed? the bench group brings it)
         from loguru import logger
     except ImportError:
         return None
@@ -442,6 +442,13 @@ def mosaik_rate(steps: int) -> float | None:
         "Local2": {"python": "mosaik_gain:Simulator"},
         "Remote": {"cmd": f"{sys.executable} {script} %(addr)s"},
     }
+    with _quiet():  # mosaik's banner and its simulators' log lines
+        return _mosaik_world(config, steps)
+
+
+def _mosaik_world(config: dict[str, Any], steps: int) -> float:
+    import mosaik
+
     world = mosaik.World(config, debug=False)
     source = world.start("Local").Source()
     gain = world.start("Remote").Gain()
@@ -451,6 +458,24 @@ def mosaik_rate(steps: int) -> float | None:
     started = time.perf_counter()
     world.run(until=steps, print_progress=False)
     return steps / (time.perf_counter() - started)
+
+
+@contextlib.contextmanager
+def _quiet() -> Iterator[None]:
+    """stdout and stderr of this process and its children to /dev/null (file descriptors)."""
+    sys.stdout.flush()
+    sys.stderr.flush()
+    saved = [os.dup(1), os.dup(2)]
+    null = os.open(os.devnull, os.O_WRONLY)
+    try:
+        os.dup2(null, 1)
+        os.dup2(null, 2)
+        yield
+    finally:
+        os.dup2(saved[0], 1)
+        os.dup2(saved[1], 2)
+        for fd in (*saved, null):
+            os.close(fd)
 
 
 # -------------------------------------------------------------------------------- memory
@@ -492,8 +517,8 @@ class Sizes:
     rss_steps: int
 
 
-QUICK = Sizes(chain_steps=2000, remote_steps=1000, repeats=3, scale_steps=100, rss_steps=100_000)
-FULL = Sizes(chain_steps=10000, remote_steps=5000, repeats=5, scale_steps=1000, rss_steps=100_000)
+QUICK = Sizes(chain_steps=20000, remote_steps=3000, repeats=3, scale_steps=100, rss_steps=100_000)
+FULL = Sizes(chain_steps=60000, remote_steps=10000, repeats=5, scale_steps=1000, rss_steps=100_000)
 
 
 async def interleaved(
