@@ -1,4 +1,4 @@
-"""The ``coupler`` command: run, validate, describe, fleet, campaign, plot, replay.
+"""The ``coupler`` command: run, validate, describe, fleet, campaign, plot, replay, export-fmu.
 
 Exit codes: 0 the run completed (or a participant ended it early: ``terminated``; or Ctrl-C
 stopped a fleet's services after its run completed), 1 any problem (bad input, a participant
@@ -38,6 +38,7 @@ from coupler_orchestrator.campaign import (
     format_table,
     run_campaign,
 )
+from coupler_orchestrator.export import export_fmu
 from coupler_orchestrator.fleet import Fleet, FleetSpec
 from coupler_orchestrator.monitor import MonitorServer
 from coupler_orchestrator.observer import Observer, RunEnd, RunInfo
@@ -173,6 +174,25 @@ def parser() -> argparse.ArgumentParser:
     replay.add_argument("--host", default="127.0.0.1", help="bind address (default: 127.0.0.1)")
     replay.add_argument("--port", type=int, default=0, help="gRPC port (default: any free one)")
     add_security_arguments(replay)
+
+    export = commands.add_parser(
+        "export-fmu",
+        help="write an FMU (FMI 2.0/3.0 co-simulation) that drives a running participant, for "
+        "any FMI tool (docs/export-fmu.md)",
+    )
+    export.add_argument("address", help="the participant: grpc://HOST:PORT or grpcs://HOST:PORT")
+    export.add_argument("--out", type=Path, required=True, help="NAME.fmu to write")
+    export.add_argument(
+        "--fmi", type=int, choices=(2, 3), default=2, help="FMI version (default 2)"
+    )
+    export.add_argument(
+        "--call-timeout",
+        type=float,
+        default=30.0,
+        help="[s] deadline of every call the FMU makes to the participant (default 30)",
+    )
+    export.add_argument("--timeout", type=float, default=10.0, help="connect timeout [s]")
+    _security_options(export)
 
     describe = commands.add_parser("describe", help="print a participant's channels")
     describe.add_argument("target", help="grpc://HOST:PORT, grpcs://HOST:PORT or an .fmu file")
@@ -506,6 +526,8 @@ class _Signals:
 async def _dispatch(args: argparse.Namespace, out: TextIO, session: _Session) -> int:
     if args.command == "describe":
         return await _describe(args.target, args.timeout, security_of(args), out=out)
+    if args.command == "export-fmu":
+        return await _export_fmu(args, out)
     if args.command == "fleet":
         return await _fleet(args, out, session)
     if args.command == "plot":
@@ -685,6 +707,25 @@ def _plot(args: argparse.Namespace, out: TextIO) -> int:
         )
     written = plot(runs, channels, args.output, title=args.title)
     print(f"plot: {written}", file=out)
+    return EXIT_OK
+
+
+async def _export_fmu(args: argparse.Namespace, out: TextIO) -> int:
+    exported = await export_fmu(
+        args.address,
+        args.out,
+        fmi_version=args.fmi,
+        call_timeout=args.call_timeout,
+        connect_timeout=args.timeout,
+        security=security_of(args),
+    )
+    for warning in exported.warnings:
+        print(f"warning: {warning}", file=sys.stderr)
+    print(
+        f"exported {_shown(exported.path)}: FMI {exported.fmi_version}.0 co-simulation, "
+        f"{exported.variables} variables, driving the participant at {args.address}",
+        file=out,
+    )
     return EXIT_OK
 
 

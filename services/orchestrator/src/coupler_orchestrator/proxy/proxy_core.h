@@ -1,0 +1,107 @@
+// The part of an exported FMU's binary that is the same for FMI 2.0 and FMI 3.0: a client of
+// the participant's GRPCComponentService (proto/coupler/v1/component.proto) holding the values
+// of the exported channels between FMI calls. fmi2_proxy.cc and fmi3_proxy.cc map the FMI
+// calls onto it; `coupler export-fmu` writes what it reads (resources/coupler-proxy.txt).
+
+#pragma once
+
+#include <functional>
+#include <map>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <grpcpp/grpcpp.h>
+
+#include "coupler/v1/component.grpc.pb.h"
+
+namespace coupler_proxy {
+
+// How a channel looks to the FMU: the FMI type it is exported as, or HIDDEN (FMI 2's binary
+// channels: described, so a change is noticed, but never sent or read).
+enum class Kind { REAL, INTEGER, BOOLEAN, STRING, BINARY, HIDDEN };
+
+struct Channel {
+  unsigned vr = 0;
+  std::string name;
+  Kind kind = Kind::REAL;
+  int causality = 0;  // proto Causality: 1 input, 2 output, 3 parameter
+  int type = 0;       // proto ValueType, as described at export
+  std::string unit;
+  double real = 0.0;
+  int integer = 0;
+  bool boolean = false;
+  std::string bytes;  // String (UTF-8) and Binary values
+};
+
+// `error` is true for a failure (the caller answers fmiError), false for information.
+using Logger = std::function<void(bool error, const std::string& message)>;
+
+enum class StepResult { OK, TERMINATED, FAILED };
+
+constexpr unsigned ADDRESS_VR = 0;  // the String parameter coupler_address
+
+class Proxy {
+ public:
+  explicit Proxy(Logger logger) : log_(std::move(logger)) {}
+  ~Proxy();
+
+  // Reads coupler-proxy.txt from the resource folder (a path or a file: URI).
+  bool load(const std::string& resources);
+  const std::string& fingerprint() const { return fingerprint_; }
+  // Connects to the exported address (or COUPLER_PROXY_ADDRESS) and checks its description.
+  bool connect();
+  // The coupler_address parameter: connect to `address` instead (before initialization).
+  bool set_address(const std::string& address);
+  const std::string& address() const { return address_; }
+
+  bool initialize(double start_time, std::optional<double> stop_time);
+  StepResult step(double time, double step_size);
+  void terminate(const char* reason);
+  void reset();
+
+  Channel* find(unsigned vr);
+  // FMI 3's independent variable: its value reference (from the export) and value.
+  bool is_time(unsigned vr) const { return has_time_vr_ && vr == time_vr_; }
+  double time() const { return time_; }
+  bool initialized() const { return initialized_; }
+  // Whether the participant ended the run itself (DoStepResponse.terminate).
+  bool ended() const { return ended_; }
+
+ private:
+  void info(const std::string& message) const { log_(false, message); }
+  bool error(const std::string& message) const {
+    log_(true, message);
+    return false;
+  }
+  bool failed(const char* call, const grpc::Status& status) const;
+  void prepare(grpc::ClientContext* context) const;
+  std::string changes(const coupler::v1::DescribeResponse& description) const;
+  void keep(const google::protobuf::RepeatedPtrField<coupler::v1::VariableBinding>& outputs);
+
+  Logger log_;
+  std::string address_;
+  std::string fingerprint_;
+  double timeout_ = 30.0;
+  double step_size_ = 0.0;
+  std::vector<Channel> channels_;
+  std::map<unsigned, size_t> by_vr_;
+  std::map<std::string, size_t> by_name_;
+  std::shared_ptr<grpc::Channel> channel_;
+  std::unique_ptr<coupler::v1::GRPCComponentService::Stub> stub_;
+  std::string token_;
+  std::string run_id_;
+  bool initialized_ = false;
+  bool terminated_ = false;
+  bool ended_ = false;
+  bool has_time_vr_ = false;
+  unsigned time_vr_ = 0;
+  double time_ = 0.0;
+};
+
+// The description's fingerprint, as coupler_orchestrator.export computes it: FNV-1a 64 (hex)
+// of the sorted lines "name|causality|type|unit" of every channel, joined by newlines.
+std::string fingerprint_of(const coupler::v1::DescribeResponse& description);
+
+}  // namespace coupler_proxy
