@@ -6,7 +6,7 @@ FMU_DIR := build/fmus
 RAILML := scenarios/railway/data/annaberg-schwarzenberg.railml
 
 .PHONY: setup sync proto proto-check lint test demo demo-example fmus faulty-fmus track-fmu \
-        assets browser bench compose-check swarm-check k8s-check clean
+        assets browser grpc-dev bench compose-check swarm-check k8s-check clean
 
 $(UV):
 	python3 -m venv .venv-uv && .venv-uv/bin/pip install --quiet uv
@@ -58,12 +58,16 @@ assets:
 browser:
 	@bash scripts/install-chromium.sh
 
+# Debian's C++ gRPC tool chain for `coupler export-fmu` (root only; its tests skip without it).
+grpc-dev:
+	@bash scripts/install-grpc-dev.sh
+
 lint: sync
 	$(UV) run --frozen ruff check .
 	$(UV) run --frozen ruff format --check .
 	$(UV) run --frozen mypy packages/coupler/src packages/railway/src services/*/src
 
-test: setup browser
+test: setup browser grpc-dev
 	$(UV) run --frozen pytest
 
 # The railway scenario end to end on local processes (no Docker). ARGS=--exit to not wait.

@@ -132,9 +132,7 @@ def _protocol_descriptor() -> bytes:
 
 
 def _run(command: Sequence[str], what: str, cwd: Path | None = None) -> str:
-    done = subprocess.run(
-        list(command), capture_output=True, text=True, check=False, cwd=cwd
-    )
+    done = subprocess.run(list(command), capture_output=True, text=True, check=False, cwd=cwd)
     if done.returncode != 0:
         raise ExportError(f"{what} failed ({' '.join(command[:3])} ...):\n{done.stderr[-4000:]}")
     return done.stdout
@@ -477,8 +475,10 @@ def write_fmu(
                 f"the name the FMU's address parameter takes; rename the channel"
             )
         if any(ch in channel.name for ch in "\t\n\\"):
-            raise ExportError(f"channel {channel.name!r}: tabs, newlines and backslashes in a "
-                              f"channel name cannot be exported")
+            raise ExportError(
+                f"channel {channel.name!r}: tabs, newlines and backslashes in a "
+                f"channel name cannot be exported"
+            )
         if channel.type is ValueType.BINARY and fmi_version == 2:
             kept = (
                 "the participant's output is not readable"

@@ -1,0 +1,425 @@
+"""``coupler export-fmu``: the exported FMU driven by FMPy, by Coupler itself and by libcosim.
+
+The proxy binary is really built (g++, Debian's gRPC; scripts/install-grpc-dev.sh, which `make
+test` runs) and really talks to a real gRPC participant on loopback. FMUs are driven by FMPy
+in a process of their own (fmpy_driver.py): a failing FMU cannot take the test session along.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import os
+import re
+import shutil
+import subprocess
+import sys
+import time
+import zipfile
+from collections.abc import Iterator, Mapping
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from coupler.channels import Description, Value
+from coupler.examples.gain import GainParticipant
+from coupler.participant import Values
+from coupler.server import ParticipantServer
+from coupler_orchestrator.export import ExportError, build_proxy, fingerprint, write_fmu
+from coupler_orchestrator.fleet import free_port
+
+from .conftest import Coupler, serving
+
+DRIVER = Path(__file__).parent / "fmpy_driver.py"
+OUTPUTS = ["y", "x", "count", "inverted"]  # FMPy records no String or Binary values
+STARTS = {"u": 1.1, "gain": 3.0, "offset": 2, "n": 4, "flag": True, "label": "hi"}
+Y = 3.0 * 1.1  # the gain participant's y for STARTS
+# FMPy steps from n*h to (n+1)*h with h = difference of the two: with h = 0.1 its steps differ
+# from 0.1 in the last bits (Coupler's are exactly 0.1), with h = 1/8 they are the same.
+STEP = 0.125
+
+GAIN_SSD = """<?xml version="1.0" encoding="UTF-8"?>
+<ssd:SystemStructureDescription version="1.0" name="G"
+    xmlns:ssd="http://ssp-standard.org/SSP1/SystemStructureDescription"
+    xmlns:ssc="http://ssp-standard.org/SSP1/SystemStructureCommon">
+  <ssd:System name="G">
+    <ssd:Elements>
+      <ssd:Component name="Gain" type="{type}" source="{source}">
+        <ssd:Connectors>
+          <ssd:Connector name="gain" kind="parameter"><ssc:Real/></ssd:Connector>
+          <ssd:Connector name="offset" kind="parameter"><ssc:Integer/></ssd:Connector>
+          <ssd:Connector name="u" kind="input"><ssc:Real/></ssd:Connector>
+          <ssd:Connector name="n" kind="input"><ssc:Integer/></ssd:Connector>
+          <ssd:Connector name="flag" kind="input"><ssc:Boolean/></ssd:Connector>
+          <ssd:Connector name="label" kind="input"><ssc:String/></ssd:Connector>
+          <ssd:Connector name="y" kind="output"><ssc:Real/></ssd:Connector>
+          <ssd:Connector name="x" kind="output"><ssc:Real/></ssd:Connector>
+          <ssd:Connector name="count" kind="output"><ssc:Integer/></ssd:Connector>
+          <ssd:Connector name="inverted" kind="output"><ssc:Boolean/></ssd:Connector>
+          <ssd:Connector name="echo" kind="output"><ssc:String/></ssd:Connector>
+        </ssd:Connectors>
+      </ssd:Component>
+    </ssd:Elements>
+  </ssd:System>
+  <ssd:DefaultExperiment startTime="0.0" stopTime="1.0"/>
+</ssd:SystemStructureDescription>
+"""
+
+
+@pytest.fixture(scope="session")
+def proxy_binaries(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The proxy binary and its libraries, built once (skipped without the C++ tool chain)."""
+    try:
+        return build_proxy(log=False)
+    except ExportError as exc:
+        if "install" in str(exc) and shutil.which("grpc_cpp_plugin") is None:
+            pytest.skip(f"no C++ gRPC tool chain: {exc}")
+        raise
+
+
+@pytest.fixture(scope="session")
+def gain_description() -> Description:
+    return asyncio.run(GainParticipant().describe())
+
+
+@pytest.fixture(scope="session")
+def exported(
+    proxy_binaries: Path, gain_description: Description, tmp_path_factory: pytest.TempPathFactory
+) -> dict[int, Path]:
+    """The gain participant exported as FMI 2 and FMI 3 FMUs, its address left to
+    COUPLER_PROXY_ADDRESS (the baked-in one is a port nobody listens on)."""
+    out = tmp_path_factory.mktemp("exported")
+    nobody = f"grpc://127.0.0.1:{free_port()}"
+    return {
+        fmi: write_fmu(
+            gain_description,
+            address=nobody,
+            out=out / f"Gain{fmi}.fmu",
+            fmi_version=fmi,
+            call_timeout=5.0,
+            binaries=proxy_binaries,
+        ).path
+        for fmi in (2, 3)
+    }
+
+
+@pytest.fixture
+def gain() -> Iterator[ParticipantServer]:
+    with serving(GainParticipant()) as server:
+        yield server
+
+
+class CountingGain(GainParticipant):
+    """The gain participant, counting the steps it was asked for."""
+
+    steps = 0
+
+    async def do_step(self, time: float, step: float, inputs: Mapping[str, Value]) -> Values:
+        self.steps += 1
+        return await super().do_step(time, step, inputs)
+
+
+def address(server: ParticipantServer) -> str:
+    return f"grpc://127.0.0.1:{server.port}"
+
+
+def drive(
+    tmp_path: Path,
+    runs: list[dict[str, Any]],
+    *,
+    env: dict[str, str] | None = None,
+    timeout: float = 120.0,
+) -> tuple[dict[str, Any], str]:
+    """Run the FMUs under FMPy in a child process: (its JSON answer, everything it printed)."""
+    spec = tmp_path / f"spec-{time.monotonic_ns()}.json"
+    spec.write_text(json.dumps({"runs": runs}))
+    done = subprocess.run(
+        [sys.executable, str(DRIVER), str(spec)],
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        env={**os.environ, **(env or {})},
+        check=False,
+    )
+    printed = done.stdout + done.stderr
+    last = done.stdout.strip().splitlines()[-1] if done.stdout.strip() else "{}"
+    try:
+        answer = json.loads(last)
+    except json.JSONDecodeError:
+        answer = {"error": f"no answer (exit {done.returncode})"}
+    return answer, printed
+
+
+def gain_run(fmu: Path, stop: float = 1.0, step: float = STEP) -> dict[str, Any]:
+    return {"fmu": str(fmu), "stop": stop, "step": step, "start_values": STARTS, "outputs": OUTPUTS}
+
+
+def direct_run(coupler: Coupler, tmp_path: Path, source: str, kind: str) -> list[dict[str, str]]:
+    """`coupler run` of the gain participant alone, with STARTS, steps of STEP to 1.0."""
+    short = kind.rsplit("-", 1)[-1]
+    ssd = tmp_path / f"{short}.ssd"
+    ssd.write_text(GAIN_SSD.format(type=kind, source=source))
+    out = tmp_path / f"results-{short}"
+    params = [
+        f"--param=Gain.{k}={str(v).lower() if isinstance(v, bool) else v}"
+        for k, v in STARTS.items()
+    ]
+    outcome = coupler("run", ssd, "--step", str(STEP), "--out", out, *params)
+    assert outcome.code == 0, outcome.err
+    return coupler.results(out)
+
+
+@pytest.mark.parametrize("fmi", [2, 3])
+def test_exported_fmu_under_fmpy_gives_coupler_runs_numbers(
+    fmi: int,
+    exported: dict[int, Path],
+    gain: ParticipantServer,
+    coupler: Coupler,
+    tmp_path: Path,
+) -> None:
+    answer, printed = drive(
+        tmp_path, [gain_run(exported[fmi])], env={"COUPLER_PROXY_ADDRESS": address(gain)}
+    )
+    assert "results" in answer, printed
+    fmpy = answer["results"][0]
+    rows = direct_run(coupler, tmp_path, address(gain), "application/x-coupler-grpc")
+    assert [float(r["time"]) for r in rows] == fmpy["time"]
+    # bit for bit: the same floats, not merely close ones
+    assert [float(r["Gain.y"]) for r in rows] == fmpy["y"]
+    assert [float(r["Gain.x"]) for r in rows] == fmpy["x"]
+    assert [int(r["Gain.count"]) for r in rows] == fmpy["count"] == [6] * 9
+    assert [r["Gain.inverted"] for r in rows] == ["0"] * 9
+    assert [r["Gain.echo"] for r in rows] == ["hi"] * 9  # FMPy records no strings
+    assert fmpy["inverted"] == [False] * 9
+
+
+def test_exported_fmus_validate_clean(exported: dict[int, Path]) -> None:
+    from fmpy.validation import validate_fmu
+
+    for fmi, fmu in exported.items():
+        assert validate_fmu(str(fmu)) == [], fmi
+        with zipfile.ZipFile(fmu) as archive:
+            md = archive.read("modelDescription.xml").decode()
+            platform = "linux64" if fmi == 2 else "x86_64-linux"
+            names = archive.namelist()
+        assert f"binaries/{platform}/CouplerProxy.so" in names
+        assert re.search(r'(guid|instantiationToken)="\{coupler-proxy-[0-9a-f]{16}\}"', md)
+        assert 'name="coupler_address"' in md
+        assert ('name="blob"' in md) == (fmi == 3)  # FMI 2 has no binary type
+
+
+def test_two_exported_fmus_in_one_process_and_a_second_run(
+    exported: dict[int, Path], gain: ParticipantServer, tmp_path: Path
+) -> None:
+    """FMI 2 and FMI 3 proxies in one process (one protocol library loaded), each run twice:
+    the participant is free again after each run (Terminate sent at fmi*Terminate)."""
+    runs = [gain_run(exported[2]), gain_run(exported[3]), gain_run(exported[2])]
+    answer, printed = drive(tmp_path, runs, env={"COUPLER_PROXY_ADDRESS": address(gain)})
+    assert "results" in answer, printed
+    assert answer["results"][0]["x"] == answer["results"][1]["x"] == answer["results"][2]["x"]
+
+
+def test_exported_fmu_inside_an_ssd_runs_like_the_participant(
+    exported: dict[int, Path],
+    gain: ParticipantServer,
+    coupler: Coupler,
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Coupler runs the proxy FMU (FMI 3, with the binary channel) in-process: an FMU that
+    itself calls a gRPC participant. results.csv is byte-identical to Coupler driving the
+    participant directly."""
+    monkeypatch.setenv("COUPLER_PROXY_ADDRESS", address(gain))
+    direct = direct_run(coupler, tmp_path, address(gain), "application/x-coupler-grpc")
+    proxied = direct_run(coupler, tmp_path, str(exported[3]), "application/x-fmu-sharedlibrary")
+    assert proxied == direct
+    assert (tmp_path / "results-grpc" / "results.csv").read_bytes() == (
+        tmp_path / "results-sharedlibrary" / "results.csv"
+    ).read_bytes()
+
+
+def test_exported_from_the_command_line_with_the_address_baked_in(
+    gain: ParticipantServer, coupler: Coupler, tmp_path: Path, proxy_binaries: Path
+) -> None:
+    out = tmp_path / "Gain.fmu"
+    outcome = coupler("export-fmu", address(gain), "--out", out, "--fmi", "2")
+    assert outcome.code == 0, outcome.err
+    assert f"exported {out}: FMI 2.0 co-simulation, 13 variables" in outcome.out
+    assert "binary channel 'blob' is left out" in outcome.err
+    answer, printed = drive(tmp_path, [gain_run(out)])
+    assert "results" in answer, printed
+    assert answer["results"][0]["y"][-1] == Y
+
+
+def test_a_changed_participant_is_refused_at_instantiation(
+    gain_description: Description,
+    gain: ParticipantServer,
+    proxy_binaries: Path,
+    tmp_path: Path,
+) -> None:
+    """Exported when `y` was in km/h and `x` did not exist: the participant answers
+    otherwise, and the FMU says what changed."""
+    from dataclasses import replace
+
+    then = replace(
+        gain_description,
+        channels=tuple(
+            replace(c, unit="km/h") if c.name == "y" else c
+            for c in gain_description.channels
+            if c.name != "x"
+        ),
+    )
+    assert fingerprint(then) != fingerprint(gain_description)
+    fmu = write_fmu(
+        then, address=address(gain), out=tmp_path / "Old.fmu", binaries=proxy_binaries
+    ).path
+    answer, printed = drive(tmp_path, [gain_run(fmu)])
+    assert "instantiate" in answer.get("error", ""), printed
+    assert f"participant at {address(gain)} is not the one this FMU was exported from" in printed
+    assert "'y' changed unit 'km/h' -> 'm/s'" in printed
+    assert "'x' is new" in printed
+    assert "export the FMU again" in printed
+
+
+def test_a_participant_that_is_down_is_an_error_naming_its_address(
+    exported: dict[int, Path], tmp_path: Path
+) -> None:
+    down = f"grpc://127.0.0.1:{free_port()}"
+    started = time.monotonic()
+    answer, printed = drive(
+        tmp_path, [gain_run(exported[2])], env={"COUPLER_PROXY_ADDRESS": down}, timeout=60
+    )
+    took = time.monotonic() - started
+    assert "instantiate" in answer.get("error", ""), printed
+    assert f"participant at {down}: Describe failed [" in printed
+    assert took < 30  # the exported call deadline (5 s), not a hang
+
+
+def test_the_address_parameter_moves_the_fmu_to_another_participant(
+    exported: dict[int, Path], gain: ParticipantServer, tmp_path: Path
+) -> None:
+    other_participant = CountingGain()
+    with serving(other_participant) as other:
+        run = gain_run(exported[3])
+        run["start_values"] = {**STARTS, "coupler_address": address(other)}
+        answer, printed = drive(tmp_path, [run], env={"COUPLER_PROXY_ADDRESS": address(gain)})
+    assert "results" in answer, printed
+    assert other_participant.steps == 8
+    bad = gain_run(exported[2])
+    bad["start_values"] = {**STARTS, "coupler_address": "http://example"}
+    answer, printed = drive(tmp_path, [bad], env={"COUPLER_PROXY_ADDRESS": address(gain)})
+    assert "coupler_address 'http://example' is not grpc://HOST:PORT" in printed
+
+
+def test_the_fmu_carries_every_library_it_needs(proxy_binaries: Path) -> None:
+    """Everything the binary loads that is not glibc or the C++ runtime resolves inside the
+    FMU's own folder, with an empty environment (no LD_LIBRARY_PATH)."""
+    done = subprocess.run(
+        ["ldd", str(proxy_binaries / "CouplerProxy.so")],
+        capture_output=True,
+        text=True,
+        env={},
+        check=True,
+    )
+    base = re.compile(
+        r"^(linux-vdso|ld-linux|libc|libm|libdl|libpthread|librt|libstdc\+\+|"
+        r"libgcc_s)[.-]"
+    )
+    loaded = [line.split() for line in done.stdout.splitlines() if "=>" in line]
+    assert not [line for line in loaded if "not" in line], done.stdout
+    outside = [
+        words[0]
+        for words in loaded
+        if not base.match(words[0]) and not words[2].startswith(str(proxy_binaries))
+    ]
+    assert outside == [], done.stdout
+    assert any(words[0].startswith("libgrpc++") for words in loaded)
+
+
+@pytest.mark.skipif(os.geteuid() != 0 or shutil.which("unshare") is None, reason="needs root")
+def test_the_fmu_runs_where_grpc_is_not_installed(
+    exported: dict[int, Path], gain: ParticipantServer, tmp_path: Path
+) -> None:
+    """The system's gRPC and protobuf libraries hidden (bind-mounted over with /dev/null in a
+    mount namespace of the FMPy process): the FMU still runs, on its own libraries."""
+    system = [
+        p
+        for p in Path("/usr/lib/x86_64-linux-gnu").glob("lib*.so*")
+        if re.match(r"lib(grpc|gpr|protobuf|upb|absl|cares|re2|address_sorting)", p.name)
+        and not p.is_symlink()
+    ]
+    assert system, "the system has no gRPC libraries to hide"
+    spec = tmp_path / "hidden.json"
+    spec.write_text(json.dumps({"runs": [gain_run(exported[2])]}))
+    mounts = " && ".join(f"mount --bind /dev/null {p}" for p in system)
+    done = subprocess.run(
+        [
+            "unshare",
+            "--mount",
+            "--propagation",
+            "private",
+            "sh",
+            "-c",
+            f"{mounts} && exec {sys.executable} {DRIVER} {spec}",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=False,
+        env={**os.environ, "COUPLER_PROXY_ADDRESS": address(gain)},
+    )
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert json.loads(done.stdout.strip().splitlines()[-1])["results"][0]["y"][-1] == Y
+
+
+def test_export_errors_are_sentences(
+    coupler: Coupler, tmp_path: Path, proxy_binaries: Path, gain: ParticipantServer
+) -> None:
+    down = f"grpc://127.0.0.1:{free_port()}"
+    outcome = coupler("export-fmu", down, "--out", tmp_path / "x.fmu", "--timeout", "1")
+    assert outcome.code == 1
+    assert down in outcome.err and "Traceback" not in outcome.err
+    outcome = coupler("export-fmu", address(gain), "--out", tmp_path / "x.zip")
+    assert outcome.code == 1
+    assert "must end in .fmu" in outcome.err
+    assert not (tmp_path / "x.fmu").exists()
+
+
+def test_libcosim_runs_the_exported_fmu(
+    exported: dict[int, Path], gain: ParticipantServer, tmp_path: Path
+) -> None:
+    """libcosim (OSP's C++ master) steps the exported FMU: the participant's numbers."""
+    pytest.importorskip("libcosimpy")
+    script = f"""
+import json
+from libcosimpy.CosimExecution import CosimExecution
+from libcosimpy.CosimLogging import CosimLogLevel, log_output_level
+from libcosimpy.CosimManipulator import CosimManipulator
+from libcosimpy.CosimObserver import CosimObserver
+from libcosimpy.CosimSlave import CosimLocalSlave
+log_output_level(CosimLogLevel.ERROR)
+ex = CosimExecution.from_step_size(step_size=125_000_000)
+i = ex.add_local_slave(CosimLocalSlave(fmu_path={str(exported[2])!r}, instance_name="Gain"))
+m = CosimManipulator.create_override()
+ex.add_manipulator(m)
+o = CosimObserver.create_last_value()
+ex.add_observer(o)
+m.slave_real_values(i, [4], [1.1])
+ex.step(8)
+print(json.dumps(o.last_real_values(i, [8, 9])))
+"""
+    done = subprocess.run(
+        [sys.executable, "-c", script],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        env={**os.environ, "COUPLER_PROXY_ADDRESS": address(gain)},
+        check=False,
+    )
+    assert done.returncode == 0, done.stdout + done.stderr
+    y, x = json.loads(done.stdout.strip().splitlines()[-1])
+    expected_x = 0.0
+    for _ in range(8):  # the participant's explicit Euler, h = 1/8
+        expected_x += 1.1 * STEP
+    assert (y, x) == (2.0 * 1.1, expected_x)  # gain's start value 2.0
