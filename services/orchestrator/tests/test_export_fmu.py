@@ -23,8 +23,10 @@ from typing import Any
 import pytest
 
 from coupler.channels import Description, Value
+from coupler.devcerts import write_pki
 from coupler.examples.gain import GainParticipant
 from coupler.participant import Values
+from coupler.security import ServerSecurity
 from coupler.server import ParticipantServer
 from coupler_orchestrator.export import ExportError, build_proxy, fingerprint, write_fmu
 from coupler_orchestrator.fleet import free_port
@@ -423,3 +425,32 @@ print(json.dumps(o.last_real_values(i, [8, 9])))
     for _ in range(8):  # the participant's explicit Euler, h = 1/8
         expected_x += 1.1 * STEP
     assert (y, x) == (2.0 * 1.1, expected_x)  # gain's start value 2.0
+
+
+def test_mutual_tls_and_a_token_through_the_orchestrators_variables(
+    tmp_path: Path, coupler: Coupler, proxy_binaries: Path
+) -> None:
+    """A grpcs:// participant requiring a client certificate and a token: exported with the
+    command line's TLS options, run with COUPLER_TLS_* and COUPLER_TOKEN_FILE; without the
+    token the FMU's error names the address and UNAUTHENTICATED."""
+    pki = write_pki(tmp_path / "pki")
+    security = ServerSecurity(
+        cert=pki.server_cert, key=pki.server_key, client_ca=pki.ca, token_file=pki.token
+    )
+    with serving(GainParticipant(), security) as server:
+        secure = f"grpcs://127.0.0.1:{server.port}"
+        tls = ["--tls-ca", pki.ca, "--tls-cert", pki.client_cert, "--tls-key", pki.client_key]
+        out = tmp_path / "Secure.fmu"
+        outcome = coupler("export-fmu", secure, "--out", out, *tls, "--token-file", pki.token)
+        assert outcome.code == 0, outcome.err
+        env = {
+            "COUPLER_TLS_CA": str(pki.ca),
+            "COUPLER_TLS_CERT": str(pki.client_cert),
+            "COUPLER_TLS_KEY": str(pki.client_key),
+        }
+        answer, printed = drive(tmp_path, [gain_run(out)], env=env)
+        assert "UNAUTHENTICATED" in printed and secure in printed, printed
+        env["COUPLER_TOKEN_FILE"] = str(pki.token)
+        answer, printed = drive(tmp_path, [gain_run(out)], env=env)
+    assert "results" in answer, printed
+    assert answer["results"][0]["y"][-1] == Y

@@ -1,0 +1,185 @@
+"""The OpenRails bridge exported as an FMU and driven by FMPy against the mock, 60 s of
+simulated time: the train's distance equals the same run under ``coupler run``.
+
+    FMPy --FMI 2--> OpenRails.fmu (proxy) --gRPC--> python -m openrails_bridge --HTTP--> mock
+    coupler run --------------------------gRPC--> python -m openrails_bridge --HTTP--> mock
+
+Each run gets a fresh mock and bridge (the mock, like OpenRails, cannot be reset).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import csv
+import json
+import os
+import subprocess
+import sys
+from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from coupler_orchestrator.export import ExportError, build_proxy
+from coupler_orchestrator.fleet import Fleet, FleetSpec, ServiceSpec, free_port
+
+ROOT = Path(__file__).resolve().parents[2]
+RAILML = ROOT / "scenarios" / "railway" / "data" / "annaberg-schwarzenberg.railml"
+DRIVER = ROOT / "services" / "orchestrator" / "tests" / "fmpy_driver.py"
+STARTS = {"throttle": 0.8, "brake": 0.0, "direction": 1}
+STOP, STEP = 60.0, 1.0  # whole multiples of the lockstep 0.2 s, exact in binary
+
+BRIDGE_SSD = """<?xml version="1.0" encoding="UTF-8"?>
+<ssd:SystemStructureDescription version="1.0" name="Bridge"
+    xmlns:ssd="http://ssp-standard.org/SSP1/SystemStructureDescription"
+    xmlns:ssc="http://ssp-standard.org/SSP1/SystemStructureCommon">
+  <ssd:System name="Bridge">
+    <ssd:Elements>
+      <ssd:Component name="OpenRails" type="application/x-coupler-grpc" source="{address}">
+        <ssd:Connectors>
+          <ssd:Connector name="throttle" kind="input"><ssc:Real/></ssd:Connector>
+          <ssd:Connector name="brake" kind="input"><ssc:Real/></ssd:Connector>
+          <ssd:Connector name="direction" kind="input"><ssc:Integer/></ssd:Connector>
+          <ssd:Connector name="distance" kind="output"><ssc:Real unit="m"/></ssd:Connector>
+          <ssd:Connector name="speed" kind="output"><ssc:Real unit="m/s"/></ssd:Connector>
+        </ssd:Connectors>
+      </ssd:Component>
+    </ssd:Elements>
+  </ssd:System>
+  <ssd:Units>
+    <ssc:Unit name="m"><ssc:BaseUnit m="1"/></ssc:Unit>
+    <ssc:Unit name="m/s"><ssc:BaseUnit m="1" s="-1"/></ssc:Unit>
+  </ssd:Units>
+  <ssd:DefaultExperiment startTime="0.0" stopTime="{stop}"/>
+</ssd:SystemStructureDescription>
+"""
+
+pytestmark = pytest.mark.timeout(300)
+
+
+@pytest.fixture(scope="module")
+def proxy_binaries() -> Path:
+    try:
+        return build_proxy(log=False)
+    except ExportError as exc:
+        pytest.skip(f"no C++ gRPC tool chain: {exc}")
+
+
+@asynccontextmanager
+async def openrails(tmp_path: Path) -> AsyncIterator[str]:
+    """A fresh mock (lockstep, the railway's railML) and bridge; the bridge's address."""
+    mock, bridge = free_port(), free_port()
+    spec = FleetSpec(
+        root=ROOT,
+        ssp=tmp_path / "unused.ssd",
+        out=tmp_path / "unused",
+        services=(
+            ServiceSpec(
+                name="export-openrails-mock",
+                command=(
+                    sys.executable,
+                    "-m",
+                    "openrails_mock",
+                    "--port",
+                    str(mock),
+                    "--mode",
+                    "lockstep",
+                    "--railml",
+                    str(RAILML),
+                ),
+                health=f"http://127.0.0.1:{mock}/API/READY",
+            ),
+            ServiceSpec(
+                name="export-openrails-bridge",
+                command=(
+                    sys.executable,
+                    "-m",
+                    "openrails_bridge",
+                    "--port",
+                    str(bridge),
+                    "--openrails-url",
+                    f"http://127.0.0.1:{mock}",
+                ),
+                health=f"grpc://127.0.0.1:{bridge}",
+            ),
+        ),
+    )
+    async with Fleet(spec, health_timeout=60):
+        yield f"grpc://127.0.0.1:{bridge}"
+
+
+async def command(argv: list[str], **options: Any) -> subprocess.CompletedProcess[str]:
+    """``subprocess.run`` off the event loop (the fleet's services stay watched)."""
+    return await asyncio.to_thread(
+        subprocess.run, argv, capture_output=True, text=True, check=False, **options
+    )
+
+
+async def test_bridge_exported_under_fmpy_drives_the_train_as_coupler_run_does(
+    tmp_path: Path, proxy_binaries: Path
+) -> None:
+    fmu = tmp_path / "OpenRails.fmu"
+    async with openrails(tmp_path) as bridge:
+        exported = await command(
+            [sys.executable, "-m", "coupler_orchestrator", "export-fmu", bridge, "--out", str(fmu)],
+            timeout=120,
+        )
+        assert exported.returncode == 0, exported.stderr
+        spec = tmp_path / "spec.json"
+        spec.write_text(
+            json.dumps(
+                {
+                    "runs": [
+                        {
+                            "fmu": str(fmu),
+                            "stop": STOP,
+                            "step": STEP,
+                            "start_values": STARTS,
+                            "outputs": ["distance", "speed"],
+                        }
+                    ]
+                }
+            )
+        )
+        driven = await command(
+            [sys.executable, str(DRIVER), str(spec)],
+            timeout=180,
+            env=dict(os.environ),
+        )
+    answer = json.loads(driven.stdout.strip().splitlines()[-1])
+    assert "results" in answer, driven.stdout + driven.stderr
+    fmpy = answer["results"][0]
+
+    async with openrails(tmp_path) as bridge:
+        ssd = tmp_path / "bridge.ssd"
+        ssd.write_text(BRIDGE_SSD.format(address=bridge, stop=STOP))
+        params = [f"--param=OpenRails.{k}={v}" for k, v in STARTS.items()]
+        run = await command(
+            [
+                sys.executable,
+                "-m",
+                "coupler_orchestrator",
+                "run",
+                str(ssd),
+                "--step",
+                str(STEP),
+                "--out",
+                str(tmp_path / "direct"),
+                *params,
+            ],
+            timeout=180,
+        )
+        assert run.returncode == 0, run.stderr
+    with (tmp_path / "direct" / "results.csv").open(newline="") as file:
+        rows = list(csv.DictReader(file))
+    distance = [float(r["OpenRails.distance"]) for r in rows]
+    print(
+        f"distance after {STOP:g} s: FMPy via the FMU {fmpy['distance'][-1]:.3f} m, "
+        f"coupler run {distance[-1]:.3f} m"
+    )
+    assert distance[-1] > 50  # the train did move
+    assert fmpy["time"] == [float(r["time"]) for r in rows]
+    assert fmpy["distance"] == distance
+    assert fmpy["speed"] == [float(r["OpenRails.speed"]) for r in rows]
