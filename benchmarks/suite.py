@@ -12,6 +12,9 @@ Cases (steps/s, median of the repetitions; Coupler and its reference interleaved
   Jacobi; against raw grpc.aio round trips to N trivial servers (processes answering the same
   messages: unary DoStep and the bidi StepStream) and, for N = 1, mosaik 3 with one remote
   simulator over its TCP API (a local source and sink around it);
+- proxy FMU x1: the gain participant exported by `coupler export-fmu` (FMI 2, its C++ binary
+  calling the participant with unary DoStep) run in-process by Coupler and by a hand-written
+  FMPy loop, against `coupler run` driving the same participant directly (its stream);
 - scale: 100 gain participants in one run: steps/s, RSS per participant process, time from the
   run's start to its first step for 1, 10 and 100 participants;
 - memory: the orchestrator's RSS after 1e4 and after 1e5 steps of remote x1 (its own process).
@@ -87,6 +90,11 @@ FEEDTHROUGH = _connectors(
     [("real_in", "input", "Real")]
     + [(f"{k}_out", "output", t) for k, t in (("real", "Real"), ("int", "Integer"),
                                               ("bool", "Boolean"), ("string", "String"))]
+)  # fmt: skip
+GAIN_FMI2 = _connectors(
+    [("u", "input", "Real"), ("y", "output", "Real"), ("x", "output", "Real"),
+     ("count", "output", "Integer"), ("inverted", "output", "Boolean"),
+     ("echo", "output", "String")]
 )  # fmt: skip
 GAIN = _connectors(
     [("u", "input", "Real"), ("y", "output", "Real"), ("x", "output", "Real"),
@@ -273,6 +281,71 @@ def libcosim_loop(n: int, steps: int) -> float | None:
     started = time.perf_counter()
     execution.step(steps)
     return steps / (time.perf_counter() - started)
+
+
+# ------------------------------------------------------------------- the exported proxy FMU
+
+
+def export_gain(folder: Path, port: int) -> Path | None:
+    """The example gain participant exported as an FMI 2 FMU (coupler export-fmu), pointing at
+    ``port``; None without the C++ gRPC tool chain."""
+    from coupler.examples.gain import GainParticipant
+    from coupler_orchestrator.export import ExportError, build_proxy, write_fmu
+
+    try:
+        binaries = build_proxy(log=False)
+    except ExportError:
+        return None
+    description = asyncio.run(GainParticipant().describe())
+    address = f"grpc://127.0.0.1:{port}"
+    return write_fmu(description, address=address, out=folder / "GainProxy.fmu",
+                     binaries=binaries).path  # fmt: skip
+
+
+def proxy_ssd(folder: Path, fmu: Path) -> Path:
+    """The exported gain FMU in-process, its y fed back to its u (remote x1's ring)."""
+    element = (
+        f'<ssd:Component name="Gain1" type="application/x-fmu-sharedlibrary" source="{fmu}">'
+        f"<ssd:Connectors>{GAIN_FMI2}</ssd:Connectors></ssd:Component>"
+    )
+    connection = (
+        '<ssd:Connection startElement="Gain1" startConnector="y" endElement="Gain1" '
+        'endConnector="u"/>'
+    )
+    return _ssd(folder / "proxy1.ssd", [element], [connection])
+
+
+def fmpy_proxy_loop(fmu: Path, steps: int) -> float:
+    """Steps/s of a hand-written FMPy loop over the exported gain FMU: set u, step, read
+    every output (what remote x1 exchanges, less the binary channel FMI 2 has not)."""
+    from fmpy import extract, read_model_description
+    from fmpy.fmi2 import FMU2Slave
+
+    description = read_model_description(fmu)
+    slave = FMU2Slave(
+        guid=description.guid,
+        unzipDirectory=extract(fmu),
+        modelIdentifier=description.coSimulation.modelIdentifier,
+        instanceName="Gain1",
+    )
+    refs = {v.name: v.valueReference for v in description.modelVariables}
+    slave.instantiate()
+    slave.setupExperiment(startTime=0.0)
+    slave.enterInitializationMode()
+    slave.exitInitializationMode()
+    y = 0.0
+    started = time.perf_counter()
+    for k in range(steps):
+        slave.setReal([refs["u"]], [y])
+        slave.doStep(currentCommunicationPoint=k * STEP, communicationStepSize=STEP)
+        y, _ = slave.getReal([refs["y"], refs["x"]])
+        slave.getInteger([refs["count"]])
+        slave.getBoolean([refs["inverted"]])
+        slave.getString([refs["echo"]])
+    rate = steps / (time.perf_counter() - started)
+    slave.terminate()
+    slave.freeInstance()
+    return rate
 
 
 # --------------------------------------------------------------------------- processes
@@ -595,6 +668,42 @@ async def suite(sizes: Sizes, log: Callable[[str], None]) -> tuple[list[Row], di
             [mosaik_figure] = await interleaved(sizes.repeats, mosaik_once)
             if mosaik_figure is not None:
                 rows.append(Row("remote x1", coupler, "mosaik 3 (TCP)", mosaik_figure, 1.25))
+
+    log("the exported proxy FMU (coupler export-fmu) vs coupler run driving the participant")
+    [port] = free_ports(1)
+    with processes(gains([port])):
+        await serving([port])
+        fmu = await asyncio.to_thread(export_gain, work, port)
+        if fmu is None:
+            log("  skipped: no C++ gRPC tool chain (scripts/install-grpc-dev.sh)")
+        else:
+            direct_ssd, through_ssd = ring_ssd(work, [port]), proxy_ssd(work, fmu)
+            steps = sizes.remote_steps
+
+            async def direct(ssd: Path = direct_ssd, steps: int = steps) -> float:
+                return (await coupler_run(ssd, steps, work / "out")).rate
+
+            async def proxied(ssd: Path = through_ssd, steps: int = steps) -> float:
+                return (await coupler_run(ssd, steps, work / "out")).rate
+
+            async def fmpy_proxied(fmu: Path = fmu, steps: int = steps) -> float:
+                return await asyncio.to_thread(fmpy_proxy_loop, fmu, steps)
+
+            coupler_direct, through, by_fmpy = await interleaved(
+                sizes.repeats, direct, proxied, fmpy_proxied
+            )
+            assert coupler_direct and through and by_fmpy
+            per_step = {name: round(1e6 / rate, 1) for name, rate in (
+                ("coupler_direct", coupler_direct), ("coupler_proxy_fmu", through),
+                ("fmpy_proxy_fmu", by_fmpy))}  # fmt: skip
+            extra["proxy_fmu_us_per_step"] = per_step
+            rows.append(Row("proxy FMU in Coupler (x1)", through, "coupler run, direct x1",
+                            coupler_direct,
+                            note=f"{per_step['coupler_proxy_fmu']:.0f} vs "
+                                 f"{per_step['coupler_direct']:.0f} us/step"))  # fmt: skip
+            rows.append(Row("proxy FMU under FMPy loop (x1)", by_fmpy, "coupler run, direct x1",
+                            coupler_direct,
+                            note=f"{per_step['fmpy_proxy_fmu']:.0f} us/step"))  # fmt: skip
 
     log("scale: 1, 10, 100 participants (time to the first step; 100 in one run)")
     first_step: dict[str, float] = {}

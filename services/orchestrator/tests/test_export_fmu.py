@@ -17,12 +17,13 @@ import sys
 import time
 import zipfile
 from collections.abc import Iterator, Mapping
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
 import pytest
 
-from coupler.channels import Description, Value
+from coupler.channels import Capabilities, Description, Value
 from coupler.devcerts import write_pki
 from coupler.examples.gain import GainParticipant
 from coupler.participant import Values
@@ -262,8 +263,6 @@ def test_a_changed_participant_is_refused_at_instantiation(
 ) -> None:
     """Exported when `y` was in km/h and `x` did not exist: the participant answers
     otherwise, and the FMU says what changed."""
-    from dataclasses import replace
-
     then = replace(
         gain_description,
         channels=tuple(
@@ -454,3 +453,48 @@ def test_mutual_tls_and_a_token_through_the_orchestrators_variables(
         answer, printed = drive(tmp_path, [gain_run(out)], env=env)
     assert "results" in answer, printed
     assert answer["results"][0]["y"][-1] == Y
+
+
+class HangingGain(GainParticipant):
+    """The gain participant, never answering the step that starts at t >= 0.25 s."""
+
+    async def do_step(self, time: float, step: float, inputs: Mapping[str, Value]) -> Values:
+        if time >= 0.25:
+            await asyncio.sleep(3600)
+        return await super().do_step(time, step, inputs)
+
+
+class UnaryGain(GainParticipant):
+    """The gain participant, declaring that it does not stream its steps."""
+
+    async def describe(self) -> Description:
+        described = await super().describe()
+        return replace(described, capabilities=Capabilities(streaming=False))
+
+
+def test_a_step_that_outlives_the_deadline_is_an_error_not_a_hang(
+    exported: dict[int, Path], tmp_path: Path
+) -> None:
+    """Steps travel over one StepStream: its deadline per step is kept by the proxy's watchdog
+    (the exported call timeout, 5 s here)."""
+    with serving(HangingGain()) as hanging:
+        started = time.monotonic()
+        answer, printed = drive(
+            tmp_path, [gain_run(exported[2])], env={"COUPLER_PROXY_ADDRESS": address(hanging)}
+        )
+        took = time.monotonic() - started
+    assert "fmi2DoStep failed" in answer.get("error", ""), printed
+    assert f"participant at {address(hanging)}: StepStream failed [DEADLINE_EXCEEDED]" in printed
+    assert took < 30
+
+
+def test_a_participant_that_does_not_stream_gets_dostep_calls(
+    exported: dict[int, Path], coupler: Coupler, tmp_path: Path
+) -> None:
+    with serving(UnaryGain()) as unary:
+        answer, printed = drive(
+            tmp_path, [gain_run(exported[3])], env={"COUPLER_PROXY_ADDRESS": address(unary)}
+        )
+        rows = direct_run(coupler, tmp_path, address(unary), "application/x-coupler-grpc")
+    assert "results" in answer, printed
+    assert answer["results"][0]["x"] == [float(r["Gain.x"]) for r in rows]

@@ -128,6 +128,51 @@ std::string fingerprint_of(const pb::DescribeResponse& description) {
   return hex;
 }
 
+Watchdog::Watchdog() : thread_([this] { run(); }) {}
+
+Watchdog::~Watchdog() {
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    stop_ = true;
+  }
+  wake_.notify_all();
+  thread_.join();
+}
+
+void Watchdog::arm(grpc::ClientContext* context, double seconds) {
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    context_ = context;
+    deadline_ = std::chrono::steady_clock::now() +
+                std::chrono::microseconds(static_cast<int64_t>(seconds * 1e6));
+    armed_ = true;
+    fired_ = false;
+  }
+  wake_.notify_all();
+}
+
+bool Watchdog::disarm() {
+  std::lock_guard<std::mutex> lock(mutex_);
+  armed_ = false;
+  return fired_;
+}
+
+void Watchdog::run() {
+  std::unique_lock<std::mutex> lock(mutex_);
+  while (!stop_) {
+    if (!armed_) {
+      wake_.wait(lock);
+      continue;
+    }
+    if (wake_.wait_until(lock, deadline_) == std::cv_status::timeout && armed_ && !stop_ &&
+        std::chrono::steady_clock::now() >= deadline_) {
+      context_->TryCancel();
+      fired_ = true;
+      armed_ = false;
+    }
+  }
+}
+
 Proxy::~Proxy() { terminate("the FMU instance was freed"); }
 
 bool Proxy::failed(const char* call, const grpc::Status& status) const {
@@ -264,7 +309,9 @@ bool Proxy::set_address(const std::string& address) {
     return error("participant at " + address_ + " is not the one this FMU was exported from:" +
                  changes(description) + " export the FMU again (coupler export-fmu " + address_ +
                  " --out ...)");
-  info("connected to participant '" + description.name() + "' at " + address_);
+  streaming_ = description.capabilities().streaming();
+  info("connected to participant '" + description.name() + "' at " + address_ +
+       (streaming_ ? " (steps over one StepStream)" : " (steps as DoStep calls)"));
   return true;
 }
 
@@ -306,13 +353,7 @@ StepResult Proxy::step(double time, double step_size) {
   for (const auto& c : channels_)
     if (c.causality == pb::CAUSALITY_INPUT && c.kind != Kind::HIDDEN) bind(request.add_inputs(), c);
   pb::DoStepResponse response;
-  grpc::ClientContext context;
-  prepare(&context);
-  grpc::Status status = stub_->DoStep(&context, request, &response);
-  if (!status.ok()) {
-    failed("DoStep", status);
-    return StepResult::FAILED;
-  }
+  if (!exchange(request, &response)) return StepResult::FAILED;
   keep(response.outputs());
   time_ = time + step_size;
   if (response.terminate()) {
@@ -321,9 +362,50 @@ StepResult Proxy::step(double time, double step_size) {
             << " s: " << response.terminate_reason();
     info(message.str());
     terminated_ = ended_ = true;  // the participant has ended the run itself
+    close_stream();
     return StepResult::TERMINATED;
   }
   return StepResult::OK;
+}
+
+// One step: over the run's StepStream when the participant streams (opened at the first
+// step), else one DoStep call.
+bool Proxy::exchange(const pb::DoStepRequest& request, pb::DoStepResponse* response) {
+  if (!streaming_) {
+    grpc::ClientContext context;
+    prepare(&context);
+    grpc::Status status = stub_->DoStep(&context, request, response);
+    return status.ok() || failed("DoStep", status);
+  }
+  if (!stream_) {
+    stream_context_ = std::make_unique<grpc::ClientContext>();
+    if (!token_.empty()) stream_context_->AddMetadata("authorization", "Bearer " + token_);
+    if (!watchdog_) watchdog_ = std::make_unique<Watchdog>();
+    stream_ = stub_->StepStream(stream_context_.get());
+  }
+  watchdog_->arm(stream_context_.get(), timeout_);
+  bool ok = stream_->Write(request) && stream_->Read(response);
+  bool late = watchdog_->disarm();
+  if (ok) return true;
+  grpc::Status status = stream_->Finish();
+  stream_.reset();
+  stream_context_.reset();
+  if (late) {
+    std::ostringstream message;
+    message << "no answer within the call deadline of " << timeout_ << " s";
+    status = grpc::Status(grpc::DEADLINE_EXCEEDED, message.str());
+  }
+  return failed("StepStream", status);
+}
+
+void Proxy::close_stream() {
+  if (!stream_) return;
+  watchdog_->arm(stream_context_.get(), timeout_);
+  stream_->WritesDone();
+  stream_->Finish();
+  watchdog_->disarm();
+  stream_.reset();
+  stream_context_.reset();
 }
 
 void Proxy::terminate(const char* reason) {
@@ -337,6 +419,7 @@ void Proxy::terminate(const char* reason) {
   prepare(&context);
   grpc::Status status = stub_->Terminate(&context, request, &response);
   if (!status.ok()) failed("Terminate", status);
+  close_stream();
 }
 
 void Proxy::reset() {

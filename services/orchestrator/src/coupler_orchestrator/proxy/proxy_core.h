@@ -5,11 +5,15 @@
 
 #pragma once
 
+#include <chrono>
+#include <condition_variable>
 #include <functional>
 #include <map>
 #include <memory>
 #include <optional>
+#include <mutex>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include <grpcpp/grpcpp.h>
@@ -41,6 +45,28 @@ using Logger = std::function<void(bool error, const std::string& message)>;
 enum class StepResult { OK, TERMINATED, FAILED };
 
 constexpr unsigned ADDRESS_VR = 0;  // the String parameter coupler_address
+
+// Cancels a call that outlives its deadline: a stream has one context for all its steps, so
+// each step's deadline is kept by this thread, not by gRPC.
+class Watchdog {
+ public:
+  Watchdog();
+  ~Watchdog();
+  void arm(grpc::ClientContext* context, double seconds);
+  // Whether the deadline passed (and the call was cancelled) since arm().
+  bool disarm();
+
+ private:
+  void run();
+  std::mutex mutex_;
+  std::condition_variable wake_;
+  grpc::ClientContext* context_ = nullptr;
+  std::chrono::steady_clock::time_point deadline_;
+  bool armed_ = false;
+  bool fired_ = false;
+  bool stop_ = false;
+  std::thread thread_;
+};
 
 class Proxy {
  public:
@@ -79,6 +105,8 @@ class Proxy {
   void prepare(grpc::ClientContext* context) const;
   std::string changes(const coupler::v1::DescribeResponse& description) const;
   void keep(const google::protobuf::RepeatedPtrField<coupler::v1::VariableBinding>& outputs);
+  bool exchange(const coupler::v1::DoStepRequest& request, coupler::v1::DoStepResponse* response);
+  void close_stream();
 
   Logger log_;
   std::string address_;
@@ -91,6 +119,11 @@ class Proxy {
   std::shared_ptr<grpc::Channel> channel_;
   std::unique_ptr<coupler::v1::GRPCComponentService::Stub> stub_;
   std::string token_;
+  bool streaming_ = false;  // the participant's capabilities.streaming
+  std::unique_ptr<grpc::ClientContext> stream_context_;
+  std::unique_ptr<grpc::ClientReaderWriter<coupler::v1::DoStepRequest,
+                                           coupler::v1::DoStepResponse>> stream_;
+  std::unique_ptr<Watchdog> watchdog_;
   std::string run_id_;
   bool initialized_ = false;
   bool terminated_ = false;
