@@ -6,7 +6,7 @@ FMU_DIR := build/fmus
 RAILML := scenarios/railway/data/annaberg-schwarzenberg.railml
 
 .PHONY: setup sync proto proto-check lint test demo demo-example fmus faulty-fmus track-fmu \
-        assets browser grpc-dev bench compose-check swarm-check k8s-check clean
+        assets browser grpc-dev bench compose-check swarm-check k8s-check export-fmu-check clean
 
 $(UV):
 	python3 -m venv .venv-uv && .venv-uv/bin/pip install --quiet uv
@@ -90,6 +90,10 @@ compose-check:
 # The railway stack on a one-node Docker Swarm (TLS, docker secrets) vs the local run.
 swarm-check:
 	bash scripts/swarm-check.sh
+
+# An exported FMU run in a container of the bare base image (no gRPC installed) vs the host.
+export-fmu-check:
+	bash scripts/export-fmu-check.sh
 
 # deploy/k8s rendered with kustomize and validated against the Kubernetes schema (no cluster).
 k8s-check: sync
