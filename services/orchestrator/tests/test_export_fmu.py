@@ -246,7 +246,8 @@ def test_exported_from_the_command_line_with_the_address_baked_in(
     gain: ParticipantServer, coupler: Coupler, tmp_path: Path, proxy_binaries: Path
 ) -> None:
     out = tmp_path / "Gain.fmu"
-    outcome = coupler("export-fmu", address(gain), "--out", out, "--fmi", "2")
+    # a bare HOST:PORT is baked in as grpc://HOST:PORT
+    outcome = coupler("export-fmu", f"127.0.0.1:{gain.port}", "--out", out, "--fmi", "2")
     assert outcome.code == 0, outcome.err
     assert f"exported {out}: FMI 2.0 co-simulation, 13 variables" in outcome.out
     assert "binary channel 'blob' is left out" in outcome.err
@@ -310,7 +311,7 @@ def test_the_address_parameter_moves_the_fmu_to_another_participant(
     bad = gain_run(exported[2])
     bad["start_values"] = {**STARTS, "coupler_address": "http://example"}
     answer, printed = drive(tmp_path, [bad], env={"COUPLER_PROXY_ADDRESS": address(gain)})
-    assert "coupler_address 'http://example' is not grpc://HOST:PORT" in printed
+    assert "coupler_address 'http://example' is not grpc://HOST:PORT" in printed, printed
 
 
 def test_the_fmu_carries_every_library_it_needs(proxy_binaries: Path) -> None:

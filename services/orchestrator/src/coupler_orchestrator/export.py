@@ -38,7 +38,7 @@ from google.protobuf import descriptor_pb2
 
 from coupler import wire
 from coupler.channels import Causality, Channel, Description, ValueType
-from coupler.client import RemoteParticipant
+from coupler.client import RemoteParticipant, parse_address
 from coupler.errors import CouplerError
 from coupler.fmubuild import fmi_headers
 from coupler.security import ClientSecurity
@@ -533,6 +533,9 @@ async def export_fmu(
     """Ask the participant at ``address`` for its description and write its FMU to ``out``."""
     if fmi_version not in _PLATFORM:
         raise ExportError(f"--fmi {fmi_version}: write 2 or 3")
+    parse_address(address)  # a clear error for anything that is not an address
+    if "://" not in address:
+        address = f"grpc://{address}"  # what the binary reads: always with its scheme
     binaries = build_proxy()  # before connecting: the tool chain is the likelier problem
     participant = RemoteParticipant(
         address, connect_timeout=connect_timeout, call_timeout=call_timeout, security=security

@@ -273,7 +273,10 @@ bool Proxy::set_address(const std::string& address) {
   bool tls = target.rfind("grpcs://", 0) == 0;
   if (tls) target = target.substr(8);
   else if (target.rfind("grpc://", 0) == 0) target = target.substr(7);
-  else return error("coupler_address '" + address + "' is not grpc://HOST:PORT or grpcs://HOST:PORT");
+  else if (target.rfind("unix:///", 0) == 0) target = "unix:" + target.substr(7);
+  else
+    return error("coupler_address '" + address + "' is not grpc://HOST:PORT, grpcs://HOST:PORT "
+                 "or unix:///PATH");
   std::shared_ptr<grpc::ChannelCredentials> credentials;
   if (tls) {
     grpc::SslCredentialsOptions options;
