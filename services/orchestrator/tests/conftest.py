@@ -103,13 +103,16 @@ def coupler(capsys: pytest.CaptureFixture[str]) -> Coupler:
 
 @contextlib.contextmanager
 def serving(
-    participant: Participant, security: ServerSecurity | None = None
+    participant: Participant, security: ServerSecurity | None = None, **options: Any
 ) -> Iterator[ParticipantServer]:
-    """``participant`` served on 127.0.0.1, port 0, by a loop in a background thread."""
+    """``participant`` served on 127.0.0.1, port 0 (or as ``options`` say, e.g. on a
+    ``unix_socket``), by a loop in a background thread."""
     loop = asyncio.new_event_loop()
     thread = threading.Thread(target=loop.run_forever, name="participant-server", daemon=True)
     thread.start()
-    server = ParticipantServer(participant, host="127.0.0.1", port=0, security=security)
+    server = ParticipantServer(
+        participant, **{"host": "127.0.0.1", "port": 0, "security": security, **options}
+    )
     try:
         asyncio.run_coroutine_threadsafe(server.start(), loop).result(10)
         yield server

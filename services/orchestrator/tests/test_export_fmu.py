@@ -499,3 +499,16 @@ def test_a_participant_that_does_not_stream_gets_dostep_calls(
         rows = direct_run(coupler, tmp_path, address(unary), "application/x-coupler-grpc")
     assert "results" in answer, printed
     assert answer["results"][0]["x"] == [float(r["Gain.x"]) for r in rows]
+
+
+def test_a_participant_on_a_unix_socket(
+    exported: dict[int, Path], tmp_path: Path, coupler: Coupler
+) -> None:
+    """Same host, no TCP: ``unix:///PATH`` as the address."""
+    with serving(GainParticipant(), unix_socket=tmp_path / "gain.sock") as local:
+        assert local.address.startswith("unix:///")
+        answer, printed = drive(
+            tmp_path, [gain_run(exported[2])], env={"COUPLER_PROXY_ADDRESS": local.address}
+        )
+    assert "results" in answer, printed
+    assert answer["results"][0]["y"][-1] == Y
