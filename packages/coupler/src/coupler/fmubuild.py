@@ -29,7 +29,7 @@ import subprocess
 import sys
 import tempfile
 import zipfile
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
@@ -39,7 +39,15 @@ import fmpy
 
 from coupler.errors import ScenarioError
 
-__all__ = ["FmuBuildError", "build_all", "build_fmu", "find_model_folders", "main"]
+__all__ = [
+    "FmuBuildError",
+    "build_all",
+    "build_fmu",
+    "compile_library",
+    "find_model_folders",
+    "main",
+    "write_archive",
+]
 
 CFLAGS: tuple[str, ...] = ("-shared", "-fPIC", "-O2", "-std=c99", "-Wall", "-Wextra", "-Werror")
 """Flags every model is compiled with (plus -I for FMPy's headers and -D for the model)."""
@@ -151,44 +159,63 @@ def build_fmu(source_dir: Path, out_path: Path, *, resources: Path | None = None
     if _up_to_date(out_path, _inputs(source_dir, sources, resources)):
         return out_path
 
-    gcc = shutil.which("gcc")
-    if gcc is None:
-        raise FmuBuildError("gcc not found on PATH; install gcc to build FMUs")
     binary = f"binaries/{_PLATFORM[desc.fmi_version]}/{desc.model_identifier}.so"
     with tempfile.TemporaryDirectory(prefix="fmubuild-") as tmp:
         library = Path(tmp) / f"{desc.model_identifier}.so"
-        command = [
-            gcc,
-            *CFLAGS,
-            f"-I{fmi_headers()}",
-            f"-I{source_dir}",
-            f"-DMODEL_IDENTIFIER={desc.model_identifier}",
-            f'-DINSTANTIATION_TOKEN="{desc.token}"',
-            "-o",
-            str(library),
-            *(str(s) for s in sources),
-            "-lm",
-        ]
-        result = subprocess.run(command, capture_output=True, text=True, check=False)
-        if result.returncode != 0:
-            raise FmuBuildError(
-                f"gcc failed (exit {result.returncode}) building {source_dir.name}:\n"
-                f"{result.stdout}{result.stderr}".rstrip()
-            )
+        compile_library(
+            "gcc",
+            [
+                *CFLAGS,
+                f"-I{fmi_headers()}",
+                f"-I{source_dir}",
+                f"-DMODEL_IDENTIFIER={desc.model_identifier}",
+                f'-DINSTANTIATION_TOKEN="{desc.token}"',
+                "-o",
+                str(library),
+                *(str(s) for s in sources),
+                "-lm",
+            ],
+            what=source_dir.name,
+        )
+        members: dict[str, Path | bytes] = {"modelDescription.xml": md_path, binary: library}
+        if resources is not None:
+            for path in sorted(p for p in resources.rglob("*") if p.is_file()):
+                members[f"resources/{path.relative_to(resources).as_posix()}"] = path
+        write_archive(out_path, members)
+    return out_path
 
-        out_path.parent.mkdir(parents=True, exist_ok=True)
-        partial = out_path.with_name(out_path.name + ".part")
-        try:
-            with zipfile.ZipFile(partial, "w", zipfile.ZIP_DEFLATED) as fmu:
-                fmu.write(md_path, "modelDescription.xml")
-                fmu.write(library, binary)
-                if resources is not None:
-                    for path in sorted(p for p in resources.rglob("*") if p.is_file()):
-                        fmu.write(path, f"resources/{path.relative_to(resources).as_posix()}")
-            partial.replace(out_path)
-        except OSError as exc:
-            partial.unlink(missing_ok=True)
-            raise FmuBuildError(f"cannot write {out_path}: {exc}") from exc
+
+def compile_library(compiler: str, arguments: Sequence[str], *, what: str) -> None:
+    """Run ``compiler`` (gcc, g++) with ``arguments``; FmuBuildError with its output naming
+    ``what`` was built when it is missing or fails."""
+    found = shutil.which(compiler)
+    if found is None:
+        raise FmuBuildError(f"{compiler} not found on PATH; install {compiler} to build FMUs")
+    result = subprocess.run([found, *arguments], capture_output=True, text=True, check=False)
+    if result.returncode != 0:
+        raise FmuBuildError(
+            f"{compiler} failed (exit {result.returncode}) building {what}:\n"
+            f"{result.stdout}{result.stderr}".rstrip()
+        )
+
+
+def write_archive(out_path: Path, members: Mapping[str, Path | bytes]) -> Path:
+    """The FMU ``out_path`` holding ``members`` (archive name -> file, kept with its mode, or
+    bytes), written whole or not at all."""
+    out_path = Path(out_path)
+    out_path.parent.mkdir(parents=True, exist_ok=True)
+    partial = out_path.with_name(out_path.name + ".part")
+    try:
+        with zipfile.ZipFile(partial, "w", zipfile.ZIP_DEFLATED) as fmu:
+            for name, member in members.items():
+                if isinstance(member, bytes):
+                    fmu.writestr(name, member)
+                else:
+                    fmu.write(member, name)
+        partial.replace(out_path)
+    except OSError as exc:
+        partial.unlink(missing_ok=True)
+        raise FmuBuildError(f"cannot write {out_path}: {exc}") from exc
     return out_path
 
 

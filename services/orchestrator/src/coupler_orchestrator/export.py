@@ -7,7 +7,8 @@ run a Coupler participant as if it were an FMU. The FMU holds:
   variable per channel (value references 1..N in the description's order) plus the String
   parameter ``coupler_address`` (value reference 0) whose start is the exported address;
 - ``binaries/<platform>/CouplerProxy.so``, built once per machine from the C++ sources in
-  ``proxy/`` with Debian's gRPC and protobuf (``scripts/install-grpc-dev.sh``), and beside it
+  ``proxy/`` with Debian's gRPC and protobuf (``scripts/install-grpc-dev.sh``) by the FMU
+  builder's compiler step and packed by its archive writer (``coupler.fmubuild``), and beside it
   every shared library it needs that is not part of the base system (``$ORIGIN`` run path), so
   the FMU runs where gRPC is not installed;
 - ``resources/coupler-proxy.txt``: the address, the call deadline, the description's
@@ -28,7 +29,6 @@ import re
 import shutil
 import subprocess
 import tempfile
-import zipfile
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -40,7 +40,7 @@ from coupler import wire
 from coupler.channels import Causality, Channel, Description, ValueType
 from coupler.client import RemoteParticipant, parse_address
 from coupler.errors import CouplerError
-from coupler.fmubuild import fmi_headers
+from coupler.fmubuild import compile_library, fmi_headers, write_archive
 from coupler.security import ClientSecurity
 from coupler.v1 import component_pb2
 
@@ -193,13 +193,14 @@ def build_proxy(*, cache: Path | None = None, log: bool = True) -> Path:
         bin_dir = work / "bin"
         bin_dir.mkdir()
         flags = _run(["pkg-config", "--cflags", "--libs", "grpc++", "protobuf"], "pkg-config")
-        common = ["g++", "-shared", "-fPIC", "-O2", "-std=c++17", "-Wall", "-Wextra"]
+        common = ["-shared", "-fPIC", "-O2", "-std=c++17", "-Wall", "-Wextra"]
         includes = [f"-I{work / 'gen'}", f"-I{fmi_headers()}", f"-I{SOURCES}"]
         # The protocol (generated code) and the gRPC client in one library with a versioned
         # soname: a process loading several exported FMUs loads it once, as protobuf requires
         # (a .proto registered twice in one process is fatal).
         core = f"libcoupler-proxy-{key.hexdigest()[:12]}.so"
-        _run(
+        compile_library(
+            "g++",
             [
                 *common,
                 *includes,
@@ -211,10 +212,11 @@ def build_proxy(*, cache: Path | None = None, log: bool = True) -> Path:
                 "-o",
                 str(bin_dir / core),
             ],
-            "compiling the proxy's gRPC client",
+            what="the proxy's gRPC client",
         )
         out = bin_dir / f"{MODEL_IDENTIFIER}.so"
-        _run(
+        compile_library(
+            "g++",
             [
                 *common,
                 "-fvisibility=hidden",
@@ -227,7 +229,7 @@ def build_proxy(*, cache: Path | None = None, log: bool = True) -> Path:
                 "-o",
                 str(out),
             ],
-            "compiling the proxy binary",
+            what="the proxy binary",
         )
         for library in _bundled_libraries(out):
             copy = bin_dir / library.name
@@ -492,30 +494,22 @@ def write_fmu(
             continue
         exported.append((len(exported) + 1, channel))
     guid = "{coupler-proxy-" + fingerprint(description) + "}"
-    binaries = binaries or build_proxy()
     out = Path(out)
     if out.suffix != ".fmu":
         raise ExportError(f"--out {out}: the file name must end in .fmu")
-    out.parent.mkdir(parents=True, exist_ok=True)
+    binaries = binaries or build_proxy()
     platform = _PLATFORM[fmi_version]
-    partial = out.with_name(f".{out.name}.partial")
-    with zipfile.ZipFile(partial, "w", zipfile.ZIP_DEFLATED) as archive:
-        archive.writestr(
-            "modelDescription.xml",
-            _model_description(
-                description, exported, address=address, fmi_version=fmi_version, guid=guid
-            ),
-        )
-        archive.writestr(
-            "resources/coupler-proxy.txt",
-            _resources(description, exported, address=address, call_timeout=call_timeout),
-        )
-        for library in sorted(binaries.iterdir()):
-            info = zipfile.ZipInfo(f"binaries/{platform}/{library.name}")
-            info.external_attr = 0o755 << 16
-            info.compress_type = zipfile.ZIP_DEFLATED
-            archive.writestr(info, library.read_bytes())
-    partial.replace(out)
+    members: dict[str, Path | bytes] = {
+        "modelDescription.xml": _model_description(
+            description, exported, address=address, fmi_version=fmi_version, guid=guid
+        ),
+        "resources/coupler-proxy.txt": _resources(
+            description, exported, address=address, call_timeout=call_timeout
+        ).encode(),
+    }
+    for library in sorted(binaries.iterdir()):
+        members[f"binaries/{platform}/{library.name}"] = library
+    write_archive(out, members)
     return Exported(
         path=out, fmi_version=fmi_version, variables=len(exported) + 1, warnings=tuple(warnings)
     )
@@ -534,6 +528,8 @@ async def export_fmu(
     if fmi_version not in _PLATFORM:
         raise ExportError(f"--fmi {fmi_version}: write 2 or 3")
     parse_address(address)  # a clear error for anything that is not an address
+    if Path(out).suffix != ".fmu":
+        raise ExportError(f"--out {out}: the file name must end in .fmu")
     if "://" not in address:
         address = f"grpc://{address}"  # what the binary reads: always with its scheme
     binaries = build_proxy()  # before connecting: the tool chain is the likelier problem
