@@ -51,33 +51,16 @@ Instance* instance(fmi2Component c) { return static_cast<Instance*>(c); }
 template <typename T, typename Read>
 fmi2Status get(fmi2Component c, const fmi2ValueReference vr[], size_t n, T value[], Kind kind,
                Read read) {
-  auto* inst = instance(c);
-  for (size_t i = 0; i < n; ++i) {
-    Channel* ch = inst->proxy->find(vr[i]);
-    if (ch == nullptr || ch->kind != kind) {
-      log(inst, fmi2Error, "no variable of this type with value reference " +
-                               std::to_string(vr[i]));
-      return fmi2Error;
-    }
-    value[i] = read(*ch);
-  }
-  return fmi2OK;
+  return coupler_proxy::read_values(*instance(c)->proxy, vr, n, value, kind, read) ? fmi2OK
+                                                                                  : fmi2Error;
 }
 
 template <typename T, typename Write>
 fmi2Status set(fmi2Component c, const fmi2ValueReference vr[], size_t n, const T value[],
                Kind kind, Write write) {
-  auto* inst = instance(c);
-  for (size_t i = 0; i < n; ++i) {
-    Channel* ch = inst->proxy->find(vr[i]);
-    if (ch == nullptr || ch->kind != kind || ch->causality == 2) {
-      log(inst, fmi2Error, "no settable variable of this type with value reference " +
-                               std::to_string(vr[i]));
-      return fmi2Error;
-    }
-    write(*ch, value[i]);
-  }
-  return fmi2OK;
+  return coupler_proxy::write_values(*instance(c)->proxy, vr, n, value, kind, write)
+             ? fmi2OK
+             : fmi2Error;
 }
 
 }  // namespace

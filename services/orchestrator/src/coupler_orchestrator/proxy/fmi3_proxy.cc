@@ -46,33 +46,16 @@ Instance* instance(fmi3Instance c) { return static_cast<Instance*>(c); }
 template <typename T, typename Read>
 fmi3Status get(fmi3Instance c, const fmi3ValueReference vr[], size_t n, T value[], Kind kind,
                Read read) {
-  auto* inst = instance(c);
-  for (size_t i = 0; i < n; ++i) {
-    Channel* ch = inst->proxy->find(vr[i]);
-    if (ch == nullptr || ch->kind != kind) {
-      log(inst, fmi3Error, "no variable of this type with value reference " +
-                               std::to_string(vr[i]));
-      return fmi3Error;
-    }
-    value[i] = read(*ch);
-  }
-  return fmi3OK;
+  return coupler_proxy::read_values(*instance(c)->proxy, vr, n, value, kind, read) ? fmi3OK
+                                                                                  : fmi3Error;
 }
 
 template <typename T, typename Write>
 fmi3Status set(fmi3Instance c, const fmi3ValueReference vr[], size_t n, const T value[],
                Kind kind, Write write) {
-  auto* inst = instance(c);
-  for (size_t i = 0; i < n; ++i) {
-    Channel* ch = inst->proxy->find(vr[i]);
-    if (ch == nullptr || ch->kind != kind || ch->causality == 2) {
-      log(inst, fmi3Error, "no settable variable of this type with value reference " +
-                               std::to_string(vr[i]));
-      return fmi3Error;
-    }
-    write(*ch, value[i]);
-  }
-  return fmi3OK;
+  return coupler_proxy::write_values(*instance(c)->proxy, vr, n, value, kind, write)
+             ? fmi3OK
+             : fmi3Error;
 }
 
 }  // namespace

@@ -88,6 +88,8 @@ class Proxy {
   void reset();
 
   Channel* find(unsigned vr);
+  // A failure of the FMU's caller (a wrong value reference): logged, false.
+  bool refuse(const std::string& message) const { return error(message); }
   // FMI 3's independent variable: its value reference (from the export) and value.
   bool is_time(unsigned vr) const { return has_time_vr_ && vr == time_vr_; }
   double time() const { return time_; }
@@ -132,6 +134,34 @@ class Proxy {
   unsigned time_vr_ = 0;
   double time_ = 0.0;
 };
+
+// The FMI getters and setters of both versions: `n` values of the channels `vr` of `kind`
+// read into `value` (written from it); false, with a logged error, for a reference that is no
+// variable of that kind (or, for a setter, an output).
+template <typename T, typename Read>
+bool read_values(Proxy& proxy, const unsigned vr[], size_t n, T value[], Kind kind, Read read) {
+  for (size_t i = 0; i < n; ++i) {
+    Channel* ch = proxy.find(vr[i]);
+    if (ch == nullptr || ch->kind != kind)
+      return proxy.refuse("no variable of this type with value reference " +
+                          std::to_string(vr[i]));
+    value[i] = read(*ch);
+  }
+  return true;
+}
+
+template <typename T, typename Write>
+bool write_values(Proxy& proxy, const unsigned vr[], size_t n, const T value[], Kind kind,
+                  Write write) {
+  for (size_t i = 0; i < n; ++i) {
+    Channel* ch = proxy.find(vr[i]);
+    if (ch == nullptr || ch->kind != kind || ch->causality == 2 /* output */)
+      return proxy.refuse("no settable variable of this type with value reference " +
+                          std::to_string(vr[i]));
+    write(*ch, value[i]);
+  }
+  return true;
+}
 
 // The description's fingerprint, as coupler_orchestrator.export computes it: FNV-1a 64 (hex)
 // of the sorted lines "name|causality|type|unit" of every channel, joined by newlines.
