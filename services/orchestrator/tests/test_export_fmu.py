@@ -26,7 +26,7 @@ import pytest
 from coupler.channels import Capabilities, Description, Value
 from coupler.devcerts import write_pki
 from coupler.examples.gain import GainParticipant
-from coupler.participant import Values
+from coupler.participant import EndRun, Values
 from coupler.security import ServerSecurity
 from coupler.server import ParticipantServer
 from coupler_orchestrator.export import ExportError, build_proxy, fingerprint, write_fmu
@@ -512,3 +512,36 @@ def test_a_participant_on_a_unix_socket(
         )
     assert "results" in answer, printed
     assert answer["results"][0]["y"][-1] == Y
+
+
+class EndingGain(GainParticipant):
+    """The gain participant, ending the run after the step that reaches t = 0.5 s."""
+
+    async def do_step(self, time: float, step: float, inputs: Mapping[str, Value]) -> Values:
+        outputs = await super().do_step(time, step, inputs)
+        if time + step >= 0.5:
+            raise EndRun("the tank is empty", outputs)
+        return outputs
+
+
+@pytest.mark.parametrize("fmi", [2, 3])
+def test_a_participant_ending_the_run_ends_it_through_the_fmu(
+    fmi: int,
+    exported: dict[int, Path],
+    coupler: Coupler,
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """DoStepResponse.terminate becomes FMI 3's terminateSimulation or FMI 2's Discard with
+    fmi2Terminated: Coupler, running the FMU, ends the run `terminated` at 0.5 s."""
+    with serving(EndingGain()) as ending:
+        monkeypatch.setenv("COUPLER_PROXY_ADDRESS", address(ending))
+        ssd = tmp_path / "ending.ssd"
+        ssd.write_text(
+            GAIN_SSD.format(type="application/x-fmu-sharedlibrary", source=exported[fmi])
+        )
+        outcome = coupler("run", ssd, "--step", str(STEP), "--out", tmp_path / "out")
+    assert outcome.code == 0, outcome.err
+    summary = coupler.summary(tmp_path / "out")
+    assert summary["status"] == "terminated", summary
+    assert float(coupler.results(tmp_path / "out")[-1]["time"]) == 0.5

@@ -238,8 +238,10 @@ fmi2Status fmi2GetRealOutputDerivatives(fmi2Component, const fmi2ValueReference[
   return fmi2Error;
 }
 fmi2Status fmi2GetStatus(fmi2Component, const fmi2StatusKind, fmi2Status*) { return fmi2Discard; }
-fmi2Status fmi2GetRealStatus(fmi2Component, const fmi2StatusKind, fmi2Real*) {
-  return fmi2Discard;
+fmi2Status fmi2GetRealStatus(fmi2Component c, const fmi2StatusKind kind, fmi2Real* value) {
+  if (kind != fmi2LastSuccessfulTime) return fmi2Discard;
+  *value = instance(c)->proxy->time();  // the end of the last step the participant made
+  return fmi2OK;
 }
 fmi2Status fmi2GetIntegerStatus(fmi2Component, const fmi2StatusKind, fmi2Integer*) {
   return fmi2Discard;

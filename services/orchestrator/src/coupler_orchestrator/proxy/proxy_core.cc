@@ -345,8 +345,9 @@ bool Proxy::initialize(double start_time, std::optional<double> stop_time) {
 }
 
 StepResult Proxy::step(double time, double step_size) {
-  if (!initialized_ || terminated_) {
-    error("DoStep outside a run (participant at " + address_ + ")");
+  if (!initialized_ || terminated_ || ended_) {
+    error("DoStep outside a run (participant at " + address_ + ")" +
+          (ended_ ? ": the participant has ended the run" : ""));
     return StepResult::FAILED;
   }
   pb::DoStepRequest request;
@@ -364,8 +365,7 @@ StepResult Proxy::step(double time, double step_size) {
     message << "participant at " << address_ << " ended the run at t=" << time + step_size
             << " s: " << response.terminate_reason();
     info(message.str());
-    terminated_ = ended_ = true;  // the participant has ended the run itself
-    close_stream();
+    ended_ = true;  // Terminate (fmiTerminate) still follows, as the protocol asks
     return StepResult::TERMINATED;
   }
   return StepResult::OK;
