@@ -278,7 +278,8 @@ def test_a_changed_participant_is_refused_at_instantiation(
     ).path
     answer, printed = drive(tmp_path, [gain_run(fmu)])
     assert "instantiate" in answer.get("error", ""), printed
-    assert f"participant at {address(gain)} is not the one this FMU was exported from" in printed
+    who = f"participant 'Gain' at {address(gain)}"
+    assert f"{who} is not the one this FMU was exported from" in printed
     assert "'y' changed unit 'km/h' -> 'm/s'" in printed
     assert "'x' is new" in printed
     assert "export the FMU again" in printed
@@ -294,7 +295,7 @@ def test_a_participant_that_is_down_is_an_error_naming_its_address(
     )
     took = time.monotonic() - started
     assert "instantiate" in answer.get("error", ""), printed
-    assert f"participant at {down}: Describe failed [" in printed
+    assert f"participant 'Gain' at {down}: Describe failed [" in printed
     assert took < 30  # the exported call deadline (5 s), not a hang
 
 
@@ -485,7 +486,8 @@ def test_a_step_that_outlives_the_deadline_is_an_error_not_a_hang(
         )
         took = time.monotonic() - started
     assert "fmi2DoStep failed" in answer.get("error", ""), printed
-    assert f"participant at {address(hanging)}: StepStream failed [DEADLINE_EXCEEDED]" in printed
+    who = f"participant 'Gain' at {address(hanging)}"
+    assert f"{who}: StepStream failed [DEADLINE_EXCEEDED]" in printed
     assert took < 30
 
 

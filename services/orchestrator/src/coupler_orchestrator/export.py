@@ -427,6 +427,7 @@ def _resources(
 ) -> str:
     lines = [
         "# read by the FMU's binary at instantiation; written by coupler export-fmu",
+        f"name\t{_escape(description.name)}",
         f"address\t{address}",
         f"fingerprint\t{fingerprint(description)}",
         f"timeout\t{call_timeout!r}",

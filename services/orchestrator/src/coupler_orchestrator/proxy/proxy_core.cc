@@ -176,7 +176,7 @@ void Watchdog::run() {
 Proxy::~Proxy() { terminate("the FMU instance was freed"); }
 
 bool Proxy::failed(const char* call, const grpc::Status& status) const {
-  return error("participant at " + address_ + ": " + call + " failed [" +
+  return error(who() + ": " + call + " failed [" +
                status_name(status.error_code()) + "]: " + status.error_message());
 }
 
@@ -200,6 +200,7 @@ bool Proxy::load(const std::string& resources) {
     auto f = split(line);
     if (f.size() < 2) continue;
     if (f[0] == "address") address_ = f[1];
+    else if (f[0] == "name") name_ = unescape(f[1]);
     else if (f[0] == "fingerprint") fingerprint_ = f[1];
     else if (f[0] == "timeout") timeout_ = to_double(f[1]);
     else if (f[0] == "step_size") step_size_ = to_double(f[1]);
@@ -267,7 +268,7 @@ bool Proxy::connect() {
 
 bool Proxy::set_address(const std::string& address) {
   if (initialized_ && !terminated_)
-    return error("coupler_address cannot change during a run (participant at " + address_ + ")");
+    return error("coupler_address cannot change during a run (" + who() + ")");
   address_ = address;
   std::string target = address;
   bool tls = target.rfind("grpcs://", 0) == 0;
@@ -309,7 +310,7 @@ bool Proxy::set_address(const std::string& address) {
   grpc::Status status = stub_->Describe(&context, request, &description);
   if (!status.ok()) return failed("Describe", status);
   if (fingerprint_of(description) != fingerprint_)
-    return error("participant at " + address_ + " is not the one this FMU was exported from:" +
+    return error(who() + " is not the one this FMU was exported from:" +
                  changes(description) + " export the FMU again (coupler export-fmu " + address_ +
                  " --out ...)");
   streaming_ = description.capabilities().streaming();
@@ -346,7 +347,7 @@ bool Proxy::initialize(double start_time, std::optional<double> stop_time) {
 
 StepResult Proxy::step(double time, double step_size) {
   if (!initialized_ || terminated_ || ended_) {
-    error("DoStep outside a run (participant at " + address_ + ")" +
+    error("DoStep outside a run (" + who() + ")" +
           (ended_ ? ": the participant has ended the run" : ""));
     return StepResult::FAILED;
   }
@@ -362,7 +363,7 @@ StepResult Proxy::step(double time, double step_size) {
   time_ = time + step_size;
   if (response.terminate()) {
     std::ostringstream message;
-    message << "participant at " << address_ << " ended the run at t=" << time + step_size
+    message << who() << " ended the run at t=" << time + step_size
             << " s: " << response.terminate_reason();
     info(message.str());
     ended_ = true;  // Terminate (fmiTerminate) still follows, as the protocol asks

@@ -104,6 +104,8 @@ class Proxy {
     return false;
   }
   bool failed(const char* call, const grpc::Status& status) const;
+  // "participant 'NAME' at ADDRESS", for messages.
+  std::string who() const { return "participant '" + name_ + "' at " + address_; }
   void prepare(grpc::ClientContext* context) const;
   std::string changes(const coupler::v1::DescribeResponse& description) const;
   void keep(const google::protobuf::RepeatedPtrField<coupler::v1::VariableBinding>& outputs);
@@ -111,6 +113,7 @@ class Proxy {
   void close_stream();
 
   Logger log_;
+  std::string name_;  // the participant's name at export
   std::string address_;
   std::string fingerprint_;
   double timeout_ = 30.0;
