@@ -206,26 +206,30 @@ async def coupler_run(ssd: Path, steps: int, out: Path) -> _Clock:
 # ------------------------------------------------------------------------- FMPy and libcosim
 
 
-def fmpy_loop(n: int, steps: int) -> float:
-    """Steps/s of a hand-written FMPy loop: Source2 -> Feedthrough2 x n, every output read."""
+def fmpy_slave(path: Path, name: str) -> tuple[Any, Any]:
+    """An FMI 2 FMU initialized at t = 0 by FMPy's FMU2Slave, and its model description."""
     from fmpy import extract, read_model_description
     from fmpy.fmi2 import FMU2Slave
 
+    description = read_model_description(path)
+    slave = FMU2Slave(
+        guid=description.guid,
+        unzipDirectory=extract(path),
+        modelIdentifier=description.coSimulation.modelIdentifier,
+        instanceName=name,
+    )
+    slave.instantiate()
+    slave.setupExperiment(startTime=0.0)
+    slave.enterInitializationMode()
+    slave.exitInitializationMode()
+    return slave, description
+
+
+def fmpy_loop(n: int, steps: int) -> float:
+    """Steps/s of a hand-written FMPy loop: Source2 -> Feedthrough2 x n, every output read."""
     slaves = []
     for k, name in enumerate(["Source2"] + ["Feedthrough2"] * n):
-        path = FMUS / f"{name}.fmu"
-        description = read_model_description(path)
-        unzipped = extract(path)
-        slave = FMU2Slave(
-            guid=description.guid,
-            unzipDirectory=unzipped,
-            modelIdentifier=description.coSimulation.modelIdentifier,
-            instanceName=f"{name}{k}",
-        )
-        slave.instantiate()
-        slave.setupExperiment(startTime=0.0)
-        slave.enterInitializationMode()
-        slave.exitInitializationMode()
+        slave, description = fmpy_slave(FMUS / f"{name}.fmu", f"{name}{k}")
         outputs = [v for v in description.modelVariables if v.causality == "output"]
         by_type: dict[str, list[int]] = {}
         for variable in outputs:
@@ -318,21 +322,8 @@ def proxy_ssd(folder: Path, fmu: Path) -> Path:
 def fmpy_proxy_loop(fmu: Path, steps: int) -> float:
     """Steps/s of a hand-written FMPy loop over the exported gain FMU: set u, step, read
     every output (what remote x1 exchanges, less the binary channel FMI 2 has not)."""
-    from fmpy import extract, read_model_description
-    from fmpy.fmi2 import FMU2Slave
-
-    description = read_model_description(fmu)
-    slave = FMU2Slave(
-        guid=description.guid,
-        unzipDirectory=extract(fmu),
-        modelIdentifier=description.coSimulation.modelIdentifier,
-        instanceName="Gain1",
-    )
+    slave, description = fmpy_slave(fmu, "Gain1")
     refs = {v.name: v.valueReference for v in description.modelVariables}
-    slave.instantiate()
-    slave.setupExperiment(startTime=0.0)
-    slave.enterInitializationMode()
-    slave.exitInitializationMode()
     y = 0.0
     started = time.perf_counter()
     for k in range(steps):

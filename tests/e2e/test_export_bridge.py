@@ -17,16 +17,17 @@ import subprocess
 import sys
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
 import pytest
 
-from coupler_orchestrator.export import ExportError, build_proxy
-from coupler_orchestrator.fleet import Fleet, FleetSpec, ServiceSpec, free_port
+from coupler_orchestrator.export import ToolchainMissing, build_proxy
+from coupler_orchestrator.fleet import Fleet, FleetSpec, free_port
 
 ROOT = Path(__file__).resolve().parents[2]
-RAILML = ROOT / "scenarios" / "railway" / "data" / "annaberg-schwarzenberg.railml"
+FLEET = ROOT / "scenarios" / "railway" / "fleet.toml"
 DRIVER = ROOT / "services" / "orchestrator" / "tests" / "fmpy_driver.py"
 STARTS = {"throttle": 0.8, "brake": 0.0, "direction": 1}
 STOP, STEP = 60.0, 1.0  # whole multiples of the lockstep 0.2 s, exact in binary
@@ -63,51 +64,24 @@ pytestmark = pytest.mark.timeout(300)
 def proxy_binaries() -> Path:
     try:
         return build_proxy(log=False)
-    except ExportError as exc:
-        pytest.skip(f"no C++ gRPC tool chain: {exc}")
+    except ToolchainMissing as exc:
+        pytest.skip(str(exc))
 
 
 @asynccontextmanager
 async def openrails(tmp_path: Path) -> AsyncIterator[str]:
-    """A fresh mock (lockstep, the railway's railML) and bridge; the bridge's address."""
-    mock, bridge = free_port(), free_port()
-    spec = FleetSpec(
-        root=ROOT,
-        ssp=tmp_path / "unused.ssd",
-        out=tmp_path / "unused",
-        services=(
-            ServiceSpec(
-                name="export-openrails-mock",
-                command=(
-                    sys.executable,
-                    "-m",
-                    "openrails_mock",
-                    "--port",
-                    str(mock),
-                    "--mode",
-                    "lockstep",
-                    "--railml",
-                    str(RAILML),
-                ),
-                health=f"http://127.0.0.1:{mock}/API/READY",
-            ),
-            ServiceSpec(
-                name="export-openrails-bridge",
-                command=(
-                    sys.executable,
-                    "-m",
-                    "openrails_bridge",
-                    "--port",
-                    str(bridge),
-                    "--openrails-url",
-                    f"http://127.0.0.1:{mock}",
-                ),
-                health=f"grpc://127.0.0.1:{bridge}",
-            ),
-        ),
+    """A fresh mock and bridge as the railway fleet (`make demo`) starts them, on free ports;
+    the bridge's address."""
+    ports = {"MOCK_PORT": str(free_port()), "BRIDGE_PORT": str(free_port())}
+    railway = FleetSpec.load(FLEET, root=ROOT, env={**os.environ, **ports})
+    spec = replace(
+        railway,
+        out=tmp_path / "fleet",
+        services=tuple(s for s in railway.services if s.name.startswith("openrails-")),
     )
+    assert len(spec.services) == 2, spec.services
     async with Fleet(spec, health_timeout=60):
-        yield f"grpc://127.0.0.1:{bridge}"
+        yield f"grpc://127.0.0.1:{ports['BRIDGE_PORT']}"
 
 
 async def command(argv: list[str], **options: Any) -> subprocess.CompletedProcess[str]:

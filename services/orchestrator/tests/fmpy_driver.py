@@ -5,8 +5,8 @@
 SPEC: ``{"runs": [{"fmu": PATH, "stop": S, "step": H, "start_values": {...},
 "outputs": [...]}, ...]}``. The runs happen one after the other in this one process (several
 exported FMUs share it, as in any FMI tool). Prints one JSON line: ``{"results": [{"name":
-[values...]}, ...]}`` (floats as JSON numbers: exact), or ``{"error": TEXT}``; the FMUs' log
-lines go to stdout before it.
+[values...]}, ...]}`` (floats as JSON numbers: exact; FMPy records no String or Binary), or
+``{"error": TEXT}``; the FMUs' log lines go to stdout before it.
 """
 
 from __future__ import annotations
@@ -29,14 +29,7 @@ def simulate(run: dict[str, Any]) -> dict[str, list[Any]]:
         start_values=run.get("start_values", {}),
         output=run["outputs"],
     )
-    return {
-        name: [v.hex() if isinstance(v, bytes) else _plain(v) for v in result[name]]
-        for name in result.dtype.names
-    }
-
-
-def _plain(value: Any) -> Any:
-    return value.item() if hasattr(value, "item") else value
+    return {name: result[name].tolist() for name in result.dtype.names}
 
 
 def main() -> int:

@@ -29,7 +29,13 @@ from coupler.examples.gain import GainParticipant
 from coupler.participant import EndRun, Values
 from coupler.security import ServerSecurity
 from coupler.server import ParticipantServer
-from coupler_orchestrator.export import ExportError, build_proxy, fingerprint, write_fmu
+from coupler_orchestrator.export import (
+    BASE_SYSTEM,
+    ToolchainMissing,
+    build_proxy,
+    fingerprint,
+    write_fmu,
+)
 from coupler_orchestrator.fleet import free_port
 
 from .conftest import Coupler, serving
@@ -71,14 +77,12 @@ GAIN_SSD = """<?xml version="1.0" encoding="UTF-8"?>
 
 
 @pytest.fixture(scope="session")
-def proxy_binaries(tmp_path_factory: pytest.TempPathFactory) -> Path:
+def proxy_binaries() -> Path:
     """The proxy binary and its libraries, built once (skipped without the C++ tool chain)."""
     try:
         return build_proxy(log=False)
-    except ExportError as exc:
-        if "install" in str(exc) and shutil.which("grpc_cpp_plugin") is None:
-            pytest.skip(f"no C++ gRPC tool chain: {exc}")
-        raise
+    except ToolchainMissing as exc:
+        pytest.skip(str(exc))
 
 
 @pytest.fixture(scope="session")
@@ -325,16 +329,12 @@ def test_the_fmu_carries_every_library_it_needs(proxy_binaries: Path) -> None:
         env={},
         check=True,
     )
-    base = re.compile(
-        r"^(linux-vdso|ld-linux|libc|libm|libdl|libpthread|librt|libstdc\+\+|"
-        r"libgcc_s)[.-]"
-    )
     loaded = [line.split() for line in done.stdout.splitlines() if "=>" in line]
     assert not [line for line in loaded if "not" in line], done.stdout
     outside = [
         words[0]
         for words in loaded
-        if not base.match(words[0]) and not words[2].startswith(str(proxy_binaries))
+        if not BASE_SYSTEM.match(words[0]) and not words[2].startswith(str(proxy_binaries))
     ]
     assert outside == [], done.stdout
     assert any(words[0].startswith("libgrpc++") for words in loaded)

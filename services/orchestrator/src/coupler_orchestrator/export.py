@@ -28,6 +28,7 @@ import os
 import re
 import shutil
 import subprocess
+import sys
 import tempfile
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -45,9 +46,11 @@ from coupler.security import ClientSecurity
 from coupler.v1 import component_pb2
 
 __all__ = [
+    "BASE_SYSTEM",
     "MODEL_IDENTIFIER",
     "ExportError",
     "Exported",
+    "ToolchainMissing",
     "build_proxy",
     "export_fmu",
     "fingerprint",
@@ -62,15 +65,19 @@ INSTALL_HINT = (
     "install g++ pkg-config libgrpc++-dev protobuf-compiler-grpc patchelf)"
 )
 
-# Libraries every Linux the FMU runs on has (glibc, the C++ runtime); all others are bundled.
-_BASE_SYSTEM = re.compile(
+BASE_SYSTEM = re.compile(
     r"^(linux-vdso|ld-linux|libc|libm|libdl|libpthread|librt|libstdc\+\+|libgcc_s)[.-]"
 )
+"""Libraries every Linux the FMU runs on has (glibc, the C++ runtime); all others are bundled."""
 _PLATFORM = {2: "linux64", 3: "x86_64-linux"}
 
 
 class ExportError(CouplerError):
     """The FMU cannot be exported: no tool chain, a participant that cannot be exported."""
+
+
+class ToolchainMissing(ExportError):
+    """The C++ gRPC tool chain the proxy binary is built with is not installed."""
 
 
 @dataclass(frozen=True)
@@ -143,11 +150,13 @@ def _bundled_libraries(binary: Path) -> list[Path]:
     found = []
     for line in _run(["ldd", str(binary)], "ldd").splitlines():
         name, arrow, rest = line.strip().partition(" => ")
-        if not arrow or _BASE_SYSTEM.match(name):
+        if not arrow or BASE_SYSTEM.match(name):
             continue
         path = rest.split(" (")[0].strip()
         if path == "not found":
-            raise ExportError(f"{binary.name} needs {name}, which is not installed; {INSTALL_HINT}")
+            raise ToolchainMissing(
+                f"{binary.name} needs {name}, which is not installed; {INSTALL_HINT}"
+            )
         found.append(Path(path))
     return found
 
@@ -157,7 +166,7 @@ def build_proxy(*, cache: Path | None = None, log: bool = True) -> Path:
     built on first use and cached (``$COUPLER_CACHE``, else ``~/.cache/coupler``) under a key
     of the sources, the protocol and the compiler."""
     if problem := _toolchain_problem():
-        raise ExportError(f"cannot build the proxy binary: {problem}; {INSTALL_HINT}")
+        raise ToolchainMissing(f"cannot build the proxy binary: {problem}; {INSTALL_HINT}")
     sources = sorted(SOURCES.glob("*.cc")) + sorted(SOURCES.glob("*.h"))
     protocol = _protocol_descriptor()
     key = hashlib.sha256()
@@ -171,7 +180,7 @@ def build_proxy(*, cache: Path | None = None, log: bool = True) -> Path:
     if (folder / f"{MODEL_IDENTIFIER}.so").is_file():
         return folder
     if log:
-        print("building the proxy binary (once per machine, about a minute)", flush=True)
+        print("building the proxy binary (once per machine, about a minute)", file=sys.stderr)
     folder.parent.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory(dir=folder.parent, prefix=".build-") as scratch:
         work = Path(scratch)
@@ -283,15 +292,8 @@ _FMI3_TYPE = {
     ValueType.STRING: "String",
     ValueType.BINARY: "Binary",
 }
-# the proxy's names for its value kinds (proxy_core.cc, Kind)
-_KIND = {
-    ValueType.REAL: "Real",
-    ValueType.INTEGER: "Integer",
-    ValueType.ENUMERATION: "Integer",
-    ValueType.BOOLEAN: "Boolean",
-    ValueType.STRING: "String",
-    ValueType.BINARY: "Binary",
-}
+# the proxy's names for its value kinds (proxy_core.cc, Kind): FMI 2's, and Binary
+_KIND = {**_FMI2_TYPE, ValueType.BINARY: "Binary"}
 
 
 def _model_description(

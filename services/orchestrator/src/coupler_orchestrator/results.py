@@ -16,7 +16,6 @@ steps costs what a run of ten does.
 from __future__ import annotations
 
 import contextlib
-import csv
 import fnmatch
 import io
 import json
@@ -135,8 +134,6 @@ class CsvRecorder(Observer):
         self.path = path
         self.selection = selection or Selection()
         self._file: IO[str] | None = None
-        self._writer: Any = None
-        self._columns: list[Column] = []
         self._picked: list[int] = []
         self._formatters: list[Callable[[Value], str]] = []
         self._count = 0
@@ -146,13 +143,13 @@ class CsvRecorder(Observer):
 
     def started(self, info: RunInfo) -> None:
         self._picked = self.selection.columns(info.columns)
-        self._columns = [info.columns[i] for i in self._picked]
-        self._formatters = [formatter(c) for c in self._columns]
+        columns = [info.columns[i] for i in self._picked]
+        self._formatters = [formatter(c) for c in columns]
         try:
             self.path.parent.mkdir(parents=True, exist_ok=True)
             self._file = self.path.open("w", encoding="utf-8", newline="", buffering=1 << 16)
-            self._writer = csv.writer(self._file, lineterminator="\n")
-            self._writer.writerow(["time", *(c.name for c in self._columns)])
+            header = ["time", *(csv_field(c.name) for c in columns)]
+            self._file.write(",".join(header) + "\n")
             self._file.flush()
             self._good = self._file.tell()
         except OSError as exc:

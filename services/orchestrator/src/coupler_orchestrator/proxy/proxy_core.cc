@@ -204,10 +204,8 @@ bool Proxy::load(const std::string& resources) {
     else if (f[0] == "fingerprint") fingerprint_ = f[1];
     else if (f[0] == "timeout") timeout_ = to_double(f[1]);
     else if (f[0] == "step_size") step_size_ = to_double(f[1]);
-    else if (f[0] == "time_vr") {
-      has_time_vr_ = true;
+    else if (f[0] == "time_vr")
       time_vr_ = static_cast<unsigned>(std::strtoul(f[1].c_str(), nullptr, 10));
-    }
     else if (f[0] == "channel" && f.size() >= 8) {
       Channel c;
       c.vr = static_cast<unsigned>(std::strtoul(f[1].c_str(), nullptr, 10));

@@ -88,21 +88,19 @@ class Proxy {
   void reset();
 
   Channel* find(unsigned vr);
-  // A failure of the FMU's caller (a wrong value reference): logged, false.
-  bool refuse(const std::string& message) const { return error(message); }
+  // A failure: logged as an error; false, for `return error(...)`.
+  bool error(const std::string& message) const {
+    log_(true, message);
+    return false;
+  }
   // FMI 3's independent variable: its value reference (from the export) and value.
-  bool is_time(unsigned vr) const { return has_time_vr_ && vr == time_vr_; }
+  bool is_time(unsigned vr) const { return time_vr_ && vr == *time_vr_; }
   double time() const { return time_; }
-  bool initialized() const { return initialized_; }
   // Whether the participant ended the run itself (DoStepResponse.terminate).
   bool ended() const { return ended_; }
 
  private:
   void info(const std::string& message) const { log_(false, message); }
-  bool error(const std::string& message) const {
-    log_(true, message);
-    return false;
-  }
   bool failed(const char* call, const grpc::Status& status) const;
   // "participant 'NAME' at ADDRESS", for messages.
   std::string who() const { return "participant '" + name_ + "' at " + address_; }
@@ -133,8 +131,7 @@ class Proxy {
   bool initialized_ = false;
   bool terminated_ = false;
   bool ended_ = false;
-  bool has_time_vr_ = false;
-  unsigned time_vr_ = 0;
+  std::optional<unsigned> time_vr_;  // FMI 3 only
   double time_ = 0.0;
 };
 
@@ -146,7 +143,7 @@ bool read_values(Proxy& proxy, const unsigned vr[], size_t n, T value[], Kind ki
   for (size_t i = 0; i < n; ++i) {
     Channel* ch = proxy.find(vr[i]);
     if (ch == nullptr || ch->kind != kind)
-      return proxy.refuse("no variable of this type with value reference " +
+      return proxy.error("no variable of this type with value reference " +
                           std::to_string(vr[i]));
     value[i] = read(*ch);
   }
@@ -159,7 +156,7 @@ bool write_values(Proxy& proxy, const unsigned vr[], size_t n, const T value[], 
   for (size_t i = 0; i < n; ++i) {
     Channel* ch = proxy.find(vr[i]);
     if (ch == nullptr || ch->kind != kind || ch->causality == 2 /* output */)
-      return proxy.refuse("no settable variable of this type with value reference " +
+      return proxy.error("no settable variable of this type with value reference " +
                           std::to_string(vr[i]));
     write(*ch, value[i]);
   }
