@@ -81,7 +81,7 @@ demo-example: setup
 
 # Coupler against the gRPC floor, FMPy, libcosim and mosaik, measured in one run (the `bench`
 # dependency group; docs/performance.md). ARGS=--full for the long run.
-bench: setup
+bench: setup grpc-dev
 	$(UV) run --frozen --group bench python benchmarks/suite.py $(ARGS)
 
 compose-check:

@@ -29,6 +29,8 @@ import pytest
 from coupler.client import parse_address
 from coupler.v1 import component_pb2 as pb
 from coupler.v1 import component_pb2_grpc as pb_grpc
+from coupler_orchestrator import steps
+from coupler_orchestrator.export import ToolchainMissing
 
 from .conftest import Coupler
 
@@ -64,6 +66,20 @@ SSD = """<?xml version="1.0" encoding="UTF-8"?>
 </ssd:SystemStructureDescription>
 """
 RUN = ("--step", "0.1")
+
+
+@pytest.fixture(params=["native", "grpc.aio"])
+def step_path(request: pytest.FixtureRequest, monkeypatch: pytest.MonkeyPatch) -> str:
+    """Remote steps over the native step channel (built here; only a missing tool chain
+    skips it) and over Python's grpc.aio."""
+    if request.param == "native":
+        try:
+            steps.build(log_to_stderr=False)
+        except ToolchainMissing as exc:
+            pytest.skip(str(exc))
+    else:
+        monkeypatch.setenv(steps.ENVIRONMENT, "0")
+    return str(request.param)
 
 
 def free_port() -> int:
@@ -157,6 +173,7 @@ def assert_rows_kept(out: Path) -> list[dict[str, str]]:
     return recorded
 
 
+@pytest.mark.usefixtures("step_path")
 def test_a_killed_participant_fails_the_run_rows_kept(
     coupler: Coupler, ssd: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
@@ -171,6 +188,7 @@ def test_a_killed_participant_fails_the_run_rows_kept(
     assert 1 < len(assert_rows_kept(tmp_path)) < 201
 
 
+@pytest.mark.usefixtures("step_path")
 def test_a_stopped_participant_says_it_is_shutting_down(
     coupler: Coupler, ssd: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
@@ -185,6 +203,7 @@ def test_a_stopped_participant_says_it_is_shutting_down(
 
 
 @pytest.mark.parametrize("flag", ["--hang-at", "--block-at"])
+@pytest.mark.usefixtures("step_path")
 def test_a_hung_participant_fails_within_the_deadline(
     coupler: Coupler, ssd: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, flag: str
 ) -> None:

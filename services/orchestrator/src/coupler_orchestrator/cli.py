@@ -252,6 +252,13 @@ def _run_options(command: argparse.ArgumentParser) -> None:
         "cleanly instead of the orchestrator (per component: SSD annotation "
         "org.coupler.component isolate)",
     )
+    command.add_argument(
+        "--no-native-steps",
+        dest="native_steps",
+        action="store_false",
+        help="step remote participants through Python's grpc.aio instead of the native step "
+        "channel (used when the C++ gRPC tool chain is installed; also COUPLER_NATIVE_STEPS=0)",
+    )
     _security_options(command)
 
 
@@ -315,6 +322,7 @@ def options_of(args: argparse.Namespace) -> RunOptions:
         connect_timeout=args.connect_timeout,
         call_timeout=args.call_timeout,
         isolate_fmus=args.isolate_fmus,
+        native_steps=args.native_steps,
         unpack_limit=args.unpack_limit * 1024 * 1024,
         lease=args.lease,
         security=security_of(args),

@@ -52,8 +52,10 @@ __all__ = [
     "Exported",
     "ToolchainMissing",
     "build_proxy",
+    "cache_root",
     "export_fmu",
     "fingerprint",
+    "toolchain_problem",
     "write_fmu",
 ]
 
@@ -107,23 +109,23 @@ def fingerprint(description: Description) -> str:
 # --- the proxy binary -------------------------------------------------------------------------
 
 
-def _toolchain_problem() -> str | None:
-    missing = [
-        tool
-        for tool in ("g++", "pkg-config", "protoc", "grpc_cpp_plugin", "patchelf", "ldd")
-        if shutil.which(tool) is None
-    ]
+def toolchain_problem(
+    tools: Sequence[str] = ("g++", "pkg-config", "protoc", "grpc_cpp_plugin", "patchelf", "ldd"),
+    packages: Sequence[str] = ("grpc++", "protobuf"),
+) -> str | None:
+    """What is missing to build against C++ gRPC (``tools`` on PATH, ``packages`` known to
+    pkg-config); None when nothing is."""
+    missing = [tool for tool in tools if shutil.which(tool) is None]
     if missing:
         return f"{', '.join(missing)} not found"
-    probe = subprocess.run(
-        ["pkg-config", "--exists", "grpc++", "protobuf"], capture_output=True, check=False
-    )
+    probe = subprocess.run(["pkg-config", "--exists", *packages], capture_output=True, check=False)
     if probe.returncode != 0:
-        return "pkg-config finds no grpc++/protobuf (libgrpc++-dev)"
+        return f"pkg-config finds no {'/'.join(packages)} (libgrpc++-dev)"
     return None
 
 
-def _cache_root() -> Path:
+def cache_root() -> Path:
+    """Where built binaries are kept: ``$COUPLER_CACHE``, else ``~/.cache/coupler``."""
     if explicit := os.environ.get("COUPLER_CACHE"):
         return Path(explicit)
     base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
@@ -165,7 +167,7 @@ def build_proxy(*, cache: Path | None = None, log: bool = True) -> Path:
     """A folder holding CouplerProxy.so and every library it needs (RUNPATH ``$ORIGIN``),
     built on first use and cached (``$COUPLER_CACHE``, else ``~/.cache/coupler``) under a key
     of the sources, the protocol and the compiler."""
-    if problem := _toolchain_problem():
+    if problem := toolchain_problem():
         raise ToolchainMissing(f"cannot build the proxy binary: {problem}; {INSTALL_HINT}")
     sources = sorted(SOURCES.glob("*.cc")) + sorted(SOURCES.glob("*.h"))
     protocol = _protocol_descriptor()
@@ -176,7 +178,7 @@ def build_proxy(*, cache: Path | None = None, log: bool = True) -> Path:
     key.update(inspect.getsource(build_proxy).encode())  # how it is built
     key.update(_run(["g++", "--version"], "g++ --version").encode())
     key.update(_run(["pkg-config", "--modversion", "grpc++", "protobuf"], "pkg-config").encode())
-    folder = (cache or _cache_root()) / f"proxy-{key.hexdigest()[:16]}"
+    folder = (cache or cache_root()) / f"proxy-{key.hexdigest()[:16]}"
     if (folder / f"{MODEL_IDENTIFIER}.so").is_file():
         return folder
     if log:

@@ -7,7 +7,9 @@ after another in the plan's order, each seeing what its predecessors just produc
 
 Members that compute in this process (in-process FMUs, ``Participant.synchronous``) step on
 this thread without awaiting — while the remote members' steps are in flight — under the eye
-of a ``Watchdog`` that ends the run when such a step outlives its deadline.
+of a ``Watchdog`` that ends the run when such a step outlives its deadline. Remote members on
+the native step channel (``Participant.split``) are sent their requests first and answered
+last, on this thread too; the others are awaited.
 t_k = t_0 + k*h; each member steps from t_k by exactly its configured step (its deltaTime,
 else h), never by a difference of two communication points.
 """
@@ -26,7 +28,7 @@ import structlog
 
 from coupler.channels import RunSetup, Value
 from coupler.errors import CouplerError, ParticipantError, ParticipantTimeout
-from coupler.participant import EndRun, StepNow, Values
+from coupler.participant import EndRun, Split, StepNow, Values
 from coupler_orchestrator.checks import Member
 from coupler_orchestrator.observer import Column, Observer, RunEnd, RunInfo
 from coupler_orchestrator.options import Algorithm
@@ -35,6 +37,15 @@ from coupler_orchestrator.watchdog import Watchdog
 from coupler_orchestrator.wiring import Converter
 
 log = structlog.get_logger("coupler.master")
+
+NATIVE_STUCK = (
+    "the native step channel did not come back from its own deadline (the run had reached "
+    "t={time:g} s); run with --no-native-steps and report it"
+)
+YIELD_EVERY = 0.02
+"""Longest stretch [s] the step loop keeps the event loop to itself when no step awaits (only
+in-process and native members): an interrupt, the live monitor and the progress line get
+their turn in between."""
 Key = tuple[str, str]
 
 
@@ -95,6 +106,10 @@ class Master:
         """Who asked to end the run, and the reason given."""
         self._local: dict[str, StepNow] = {}
         """Members stepping on this thread (after Initialize), by name."""
+        self._split: dict[str, Split] = {}
+        """Members stepping in two halves on this thread (after Initialize), by name."""
+        self._sent: dict[str, float] = {}
+        """When each split member's request under way was sent [perf_counter]."""
         self._watchdog: Watchdog | None = None
         self._wall_start = 0.0
         self._abandoned = False
@@ -122,6 +137,7 @@ class Master:
             self._record(grid.start)
             pending: dict[int, list[tuple[Member, Values]]] = defaultdict(list)
             held: dict[str, Values] = {}
+            yielded = wallclock.perf_counter()
             for k in range(grid.steps):
                 if plan.algorithm is Algorithm.JACOBI:
                     await self._jacobi_step(k, pending)
@@ -134,6 +150,9 @@ class Master:
                     break
                 if plan.realtime_factor:
                     await self._pace(wall_start, grid.time(k + 1) - grid.start)
+                elif (now := wallclock.perf_counter()) - yielded > YIELD_EVERY:
+                    await asyncio.sleep(0)
+                    yielded = now
         except CouplerError as exc:
             status, reason = "failed", f"{exc} (the run had reached t={self._time_reached():g} s)"
             log.error("run_failed", run_id=plan.run_id, reason=reason)
@@ -223,7 +242,11 @@ class Master:
             stepper = m.participant.synchronous()
             if stepper is not None:
                 self._local[m.name] = stepper
-        if self._local:
+                continue
+            halves = m.participant.split()
+            if halves is not None:
+                self._split[m.name] = halves
+        if self._local or self._split:
             self._watchdog = Watchdog(self._abandon)
             self._watchdog.start()
 
@@ -291,23 +314,52 @@ class Master:
             raise asyncio.CancelledError
         return outputs
 
+    def _send(self, m: Member, k: int) -> None:
+        """The first half of a split member's step: its request on the way."""
+        self._sent[m.name] = wallclock.perf_counter()
+        self._split[m.name].send(self.plan.grid.time(k), m.step, self._inputs(m))
+
+    def _receive(self, m: Member, k: int) -> Values:
+        """The second half: its answer, waited for on this thread (watched)."""
+        watchdog = self._watchdog
+        assert watchdog is not None
+        watchdog.arm(f"{m.name}.DoStep", self.plan.grid.time(k), m.deadline + 10, NATIVE_STUCK)
+        try:
+            outputs = self._split[m.name].receive()
+        except EndRun as end:
+            outputs = self._ask_to_end(m, k, end)
+        finally:
+            watchdog.disarm()
+        self._timing[self._slot[m.name]] = wallclock.perf_counter() - self._sent[m.name]
+        if self._abandoned:
+            raise asyncio.CancelledError
+        return outputs
+
     async def _jacobi_step(self, k: int, pending: dict[int, list[tuple[Member, Values]]]) -> None:
         """Every due member on the outputs of t_k: the remote ones in flight while the local
         ones compute here; everyone's outputs stored for the time they reach."""
         local: list[Member] = []
+        split: list[Member] = []
         remote: list[Member] = []
         for m in self.plan.order:
             if k % m.multiple == 0:
-                (local if m.name in self._local else remote).append(m)
-        if len(remote) == 1 and not local:
+                if m.name in self._local:
+                    local.append(m)
+                else:
+                    (split if m.name in self._split else remote).append(m)
+        if len(remote) == 1 and not local and not split:
             pending[k + remote[0].multiple].append((remote[0], await self._step(remote[0], k)))
         else:
+            for m in split:
+                self._send(m, k)
             flying = [asyncio.ensure_future(self._step(m, k)) for m in remote]
             if flying:
                 await asyncio.sleep(0)  # let the requests leave before computing here
             try:
                 for m in local:
                     pending[k + m.multiple].append((m, self._step_here(m, self._local[m.name], k)))
+                for m in split:
+                    pending[k + m.multiple].append((m, self._receive(m, k)))
             finally:
                 results = await asyncio.gather(*flying, return_exceptions=True) if flying else []
             for m, result in zip(remote, results, strict=True):
@@ -325,6 +377,9 @@ class Master:
                 stepper = self._local.get(m.name)
                 if stepper is not None:
                     held[m.name] = self._step_here(m, stepper, k)
+                elif m.name in self._split:
+                    self._send(m, k)
+                    held[m.name] = self._receive(m, k)
                 else:
                     held[m.name] = await self._step(m, k)
             if (k + 1) % m.multiple == 0 and m.name in held:

@@ -48,6 +48,10 @@ class RunOptions:
     call_timeout: float = 30.0
     """Deadline of each call to a participant [s]; per component: the SSD annotation
     ``org.coupler.component callTimeout``."""
+    native_steps: bool = True
+    """Step remote participants over the native step channel (C++ gRPC on the master's
+    thread; built once per machine when the tool chain is installed, ``steps``); False, or
+    without the tool chain, or with ``COUPLER_NATIVE_STEPS=0``: Python's grpc.aio."""
     exit_when_stuck: bool = False
     """When an in-process FMU hangs on the master's thread past its deadline (or through an
     interrupt), end the process after the run's results are written (the command line does;

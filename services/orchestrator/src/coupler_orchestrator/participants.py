@@ -23,9 +23,10 @@ from coupler.fmu import FmuParticipant
 from coupler.fmuhost import IsolatedFmu
 from coupler.participant import Participant
 from coupler.security import ClientSecurity
-from coupler_orchestrator import ssp
+from coupler_orchestrator import ssp, steps
 from coupler_orchestrator.options import RunOptions
 from coupler_orchestrator.replay import ReplayParticipant, parse_source
+from coupler_orchestrator.steps import NativeRemote
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -84,7 +85,8 @@ def create(
             key=settings.tls_key,
             token_file=settings.token_file,
         )
-        return RemoteParticipant(
+        remote = NativeRemote if steps.enabled(options.native_steps) else RemoteParticipant
+        return remote(
             component.source,
             name=component.name,
             connect_timeout=options.connect_timeout,

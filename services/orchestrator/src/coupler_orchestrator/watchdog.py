@@ -15,6 +15,11 @@ import time
 from collections.abc import Callable
 
 _active: Watchdog | None = None
+IN_PROCESS = (
+    "the FMU hangs in-process (the run had reached t={time:g} s; isolate it with "
+    "--isolate-fmus to keep the orchestrator in charge)"
+)
+"""What a call past its deadline means, by default (``arm(cause=...)``)."""
 
 
 def active() -> Watchdog | None:
@@ -28,8 +33,9 @@ class Watchdog:
     def __init__(self, on_stuck: Callable[[str, str], None], *, poll: float = 0.2) -> None:
         self.on_stuck = on_stuck
         self.poll = poll
-        self._armed: tuple[str, float, float, float] | None = None
-        """(what, simulated time, deadline [s], since [monotonic]) of the call under way."""
+        self._armed: tuple[str, float, float, float, str] | None = None
+        """(what, simulated time, deadline [s], since [monotonic], cause) of the call under
+        way."""
         self._stop = threading.Event()
         self._fired = False
         self._thread = threading.Thread(target=self._watch, name="coupler-watchdog", daemon=True)
@@ -45,9 +51,10 @@ class Watchdog:
             _active = None
         self._stop.set()
 
-    def arm(self, what: str, time_s: float, deadline: float) -> None:
-        """A synchronous call (``what``, e.g. ``Plant.DoStep``) begins at simulated ``time_s``."""
-        self._armed = (what, time_s, deadline, time.monotonic())
+    def arm(self, what: str, time_s: float, deadline: float, cause: str = IN_PROCESS) -> None:
+        """A synchronous call (``what``, e.g. ``Plant.DoStep``) begins at simulated ``time_s``;
+        ``cause`` says what it means when it outlives ``deadline`` ({time} is ``time_s``)."""
+        self._armed = (what, time_s, deadline, time.monotonic(), cause)
 
     def disarm(self) -> None:
         self._armed = None
@@ -69,12 +76,11 @@ class Watchdog:
             armed = self._armed
             if armed is None:
                 continue
-            what, time_s, deadline, since = armed
+            what, time_s, deadline, since, cause = armed
             if time.monotonic() - since > deadline:
                 self.end(
                     "failed",
-                    f"{what} [DEADLINE_EXCEEDED]: no answer within {deadline:g} s; the FMU "
-                    f"hangs in-process (the run had reached t={time_s:g} s; isolate it with "
-                    f"--isolate-fmus to keep the orchestrator in charge)",
+                    f"{what} [DEADLINE_EXCEEDED]: no answer within {deadline:g} s; "
+                    + cause.format(time=time_s),
                 )
                 return

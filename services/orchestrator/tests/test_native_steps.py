@@ -1,0 +1,164 @@
+"""The native step channel (coupler_orchestrator.steps): built here, chosen by default, the
+same bytes in results.csv as Python's grpc.aio, and the same answers to a participant that
+ends the run or answers outside its description.
+
+test_faults.py runs the killed, stopped and hung participants over both step paths,
+test_secure_run.py mutual TLS with a token.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator, Mapping
+from pathlib import Path
+
+import pytest
+
+from coupler.client import RemoteParticipant
+from coupler.examples.gain import GainParticipant
+from coupler.participant import EndRun, Values
+from coupler_orchestrator import participants, ssp, steps
+from coupler_orchestrator.export import ToolchainMissing
+from coupler_orchestrator.options import RunOptions
+
+from .conftest import Coupler, serving
+from .test_faults import SSD, gain
+
+pytestmark = pytest.mark.usefixtures("fmus")
+
+
+@pytest.fixture(scope="module")
+def native() -> Iterator[None]:
+    """The step channel, built (a failing build fails the test; only a missing tool chain
+    skips it)."""
+    try:
+        steps.build(log_to_stderr=False)
+    except ToolchainMissing as exc:
+        pytest.skip(str(exc))
+    assert steps.library() is not None
+    yield
+
+
+@pytest.fixture
+def ssd(tmp_path: Path) -> Path:
+    path = tmp_path / "faults.ssd"
+    path.write_text(SSD)
+    return path
+
+
+def component(source: str = "grpc://127.0.0.1:1") -> ssp.Component:
+    return ssp.Component(name="Gain", type=ssp.GRPC_TYPE, source=source, connectors=(), line=1)
+
+
+@pytest.mark.usefixtures("native")
+def test_remote_participants_step_natively_unless_told_not_to(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    assert type(participants.create(component(), RunOptions())) is steps.NativeRemote
+    plain = participants.create(component(), RunOptions(native_steps=False))
+    assert type(plain) is RemoteParticipant
+    monkeypatch.setenv(steps.ENVIRONMENT, "0")
+    assert type(participants.create(component(), RunOptions())) is RemoteParticipant
+
+
+@pytest.mark.usefixtures("native")
+@pytest.mark.parametrize("algorithm", ["jacobi", "gauss-seidel"])
+def test_the_same_bytes_as_grpc_aio(
+    coupler: Coupler,
+    ssd: Path,
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+    algorithm: str,
+) -> None:
+    """FMU -> remote Gain -> FMU: the remote member's request leaves before the FMUs compute
+    (Jacobi) or in order (Gauss-Seidel); results.csv byte for byte as over grpc.aio."""
+    recorded = {}
+    with gain(monkeypatch):
+        for path, flag in (("native", ()), ("aio", ("--no-native-steps",))):
+            out = tmp_path / path
+            outcome = coupler(
+                "run", ssd, "--out", out, "--step", "0.1", "--algorithm", algorithm, *flag
+            )
+            assert outcome.code == 0, outcome.err
+            recorded[path] = (out / "results.csv").read_bytes()
+            gain_summary = coupler.summary(out)["participants"]["Gain"]
+            assert gain_summary["steps"] == 200
+            assert 0 < gain_summary["do_step_latency_ms"]["p50"] < 1000
+    assert recorded["native"] == recorded["aio"]
+    assert recorded["native"].count(b"\n") == 202  # header and t = 0 .. 20 s
+
+
+class Ending(GainParticipant):
+    """Asks to end the run at t >= 1 s."""
+
+    async def do_step(self, time_s: float, step: float, inputs: Mapping[str, object]) -> Values:
+        outputs = await super().do_step(time_s, step, inputs)  # type: ignore[arg-type]
+        if time_s + step >= 1 - 1e-9:
+            raise EndRun("the train has arrived", outputs)
+        return outputs
+
+
+class Strange(GainParticipant):
+    """Answers with an output it never described from t >= 0.5 s."""
+
+    async def do_step(self, time_s: float, step: float, inputs: Mapping[str, object]) -> Values:
+        outputs = await super().do_step(time_s, step, inputs)  # type: ignore[arg-type]
+        if time_s >= 0.5 - 1e-9:
+            outputs["z"] = 1.0
+        return outputs
+
+
+@pytest.mark.usefixtures("native")
+def test_a_participant_ending_the_run_is_heard(
+    coupler: Coupler, ssd: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    with serving(Ending("Gain")) as server:
+        monkeypatch.setenv("GAIN_PORT", str(server.port))
+        outcome = coupler("run", ssd, "--out", tmp_path, "--step", "0.1")
+    assert outcome.code == 0, outcome.err
+    summary = coupler.summary(tmp_path)
+    assert summary["status"] == "terminated"
+    assert "Gain asked to end the run at t=1 s: the train has arrived" in summary["reason"]
+    assert coupler.column(tmp_path, "time")[-1] == pytest.approx(1.0)
+
+
+@pytest.mark.usefixtures("native")
+def test_an_answer_outside_the_description_fails_the_run(
+    coupler: Coupler, ssd: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    with serving(Strange("Gain")) as server:
+        monkeypatch.setenv("GAIN_PORT", str(server.port))
+        outcome = coupler("run", ssd, "--out", tmp_path, "--step", "0.1")
+    assert outcome.code == 1
+    reason = coupler.summary(tmp_path)["reason"]
+    assert "Gain.DoStep" in reason and "'z'" in reason, reason
+    assert len(coupler.results(tmp_path)) == 6  # t = 0 .. 0.5 s, nothing lost
+
+
+def test_without_the_library_remote_steps_take_grpc_aio(monkeypatch: pytest.MonkeyPatch) -> None:
+    """No tool chain, no build: the run takes the Python path, nothing else changes."""
+    monkeypatch.setattr(steps, "library", lambda: None)
+    assert not steps.enabled()
+    assert type(participants.create(component(), RunOptions())) is RemoteParticipant
+
+
+@pytest.mark.usefixtures("native")
+async def test_a_step_in_two_halves() -> None:
+    """NativeRemote after Initialize: split() is itself; send, then receive, gives what
+    do_step over grpc.aio gives; after Terminate the stream is gone."""
+    from coupler.channels import RunSetup
+
+    with serving(GainParticipant("Gain")) as one, serving(GainParticipant("Gain")) as other:
+        native = steps.NativeRemote(f"grpc://127.0.0.1:{one.port}")
+        aio = RemoteParticipant(f"grpc://127.0.0.1:{other.port}")
+        for p in (native, aio):
+            await p.open()
+            await p.initialize(RunSetup(run_id=f"halves-{id(p)}", start_time=0.0, step_size=0.1))
+        halves = native.split()
+        assert halves is native
+        for k in range(3):
+            halves.send(k * 0.1, 0.1, {"u": float(k)})
+            assert halves.receive() == await aio.do_step(k * 0.1, 0.1, {"u": float(k)})
+        for p in (native, aio):
+            await p.terminate("done")
+            await p.close()
+        assert native.split() is None
