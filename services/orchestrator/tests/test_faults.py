@@ -522,6 +522,28 @@ def test_an_interrupt_reaches_an_orchestrator_blocked_in_an_fmu(
     assert len(assert_rows_kept(out)) == 11
 
 
+def test_an_interrupt_reaches_a_run_of_fast_in_process_fmus(
+    fmus: dict[str, Path], tmp_path: Path
+) -> None:
+    """No step ever awaits in a run of in-process FMUs: the step loop still gives the event
+    loop a turn every few milliseconds, so SIGINT ends it at once (before, it ran on to its
+    end); rows kept."""
+    out = tmp_path / "o"
+    run = orchestrator(fmus["Source2"], out, "--stop-time", "1e6", "--step", "0.01")
+    try:
+        wait_for_rows(out, 1000)
+        sent = time.monotonic()
+        run.send_signal(signal.SIGINT)
+        _, err = run.communicate(timeout=60)
+    finally:
+        run.kill()
+    assert time.monotonic() - sent < 10, err
+    assert run.returncode == 130, err
+    result = summary(out)
+    assert (result["status"], result["reason"]) == ("aborted", "interrupted by the user")
+    assert 1000 <= len(assert_rows_kept(out)) < 100_000_001
+
+
 def test_an_fmu_crashing_in_process_leaves_the_summary_and_the_flushed_rows(
     faulty_ssd: Path, tmp_path: Path
 ) -> None:
