@@ -9,11 +9,12 @@ Cases (steps/s, median of the repetitions; Coupler and its reference interleaved
   recorded, `coupler`'s runner; against a hand-written FMPy FMU2Slave loop over the same FMUs
   (every output read each step) and libcosim (libcosimpy, C++) with the same connections;
 - remote xN: N example gain participants, each its own process, chained y -> u in a ring,
-  Jacobi; against raw grpc.aio round trips to N trivial servers (processes answering the same
+  Jacobi, over the native step channel when it is built (COUPLER_NATIVE_STEPS=0 measures the
+  grpc.aio path instead); against raw grpc.aio round trips to N trivial servers (processes answering the same
   messages: unary DoStep and the bidi StepStream) and, for N = 1, mosaik 3 with one remote
   simulator over its TCP API (a local source and sink around it);
 - proxy FMU x1: the gain participant exported by `coupler export-fmu` (FMI 2, its C++ binary
-  calling the participant with unary DoStep) run in-process by Coupler and by a hand-written
+  calling the participant over its StepStream) run in-process by Coupler and by a hand-written
   FMPy loop, against `coupler run` driving the same participant directly (its stream);
 - scale: 100 gain participants in one run: steps/s, RSS per participant process, time from the
   run's start to its first step for 1, 10 and 100 participants;
@@ -820,12 +821,16 @@ def main() -> int:
     def log(text: str) -> None:
         print(f"[{time.perf_counter() - started:6.1f} s] {text}", file=sys.stderr, flush=True)
 
+    from coupler_orchestrator import steps
+
+    channel = "native step channel" if steps.enabled() else "grpc.aio"
     rows, extra = asyncio.run(suite(sizes, log))
+    extra["remote_steps"] = channel
     print()
     print(
         f"Coupler benchmark ({'full' if args.full else 'quick'}; steps/s, median of "
         f"{sizes.repeats}, Coupler and reference interleaved in this run; {os.cpu_count()} cores, "
-        f"Python {platform.python_version()})"
+        f"Python {platform.python_version()}; remote steps over the {channel})"
     )
     print(table(rows))
     print(f"time from run start to first step [s]: {extra['time_to_first_step_s']}")

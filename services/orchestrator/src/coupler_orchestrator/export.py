@@ -64,7 +64,7 @@ ADDRESS_VARIABLE = "coupler_address"
 SOURCES = Path(__file__).parent / "proxy"
 INSTALL_HINT = (
     "install the C++ gRPC tool chain: `bash scripts/install-grpc-dev.sh` (Debian: apt-get "
-    "install g++ pkg-config libgrpc++-dev protobuf-compiler-grpc patchelf)"
+    "install g++ pkg-config libgrpc++-dev libprotobuf-dev protobuf-compiler-grpc patchelf)"
 )
 
 BASE_SYSTEM = re.compile(
