@@ -10,9 +10,9 @@ Cases (steps/s, median of the repetitions; Coupler and its reference interleaved
   (every output read each step) and libcosim (libcosimpy, C++) with the same connections;
 - remote xN: N example gain participants, each its own process, chained y -> u in a ring,
   Jacobi, over the native step channel when it is built (COUPLER_NATIVE_STEPS=0 measures the
-  grpc.aio path instead); against raw grpc.aio round trips to N trivial servers (processes answering the same
-  messages: unary DoStep and the bidi StepStream) and, for N = 1, mosaik 3 with one remote
-  simulator over its TCP API (a local source and sink around it);
+  grpc.aio path instead); against raw grpc.aio round trips to N trivial servers (processes
+  answering the same messages: unary DoStep and the bidi StepStream) and, for N = 1, mosaik 3
+  with one remote simulator over its TCP API (a local source and sink around it);
 - proxy FMU x1: the gain participant exported by `coupler export-fmu` (FMI 2, its C++ binary
   calling the participant over its StepStream) run in-process by Coupler and by a hand-written
   FMPy loop, against `coupler run` driving the same participant directly (its stream);

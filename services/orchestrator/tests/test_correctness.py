@@ -15,6 +15,7 @@ import shutil
 import zipfile
 from collections.abc import Mapping
 from pathlib import Path
+from typing import Any
 
 import fmpy
 import pytest
@@ -24,7 +25,8 @@ from hypothesis import strategies as st
 from coupler.channels import Causality, Channel, Description, RunSetup, Value, ValueType
 from coupler.messages import encode_message
 from coupler.participant import EndRun, Participant, Values
-from coupler_orchestrator.results import csv_field
+from coupler_orchestrator.observer import Column
+from coupler_orchestrator.results import csv_field, formatter, row_formatter
 from coupler_railway.messages import TRAIN_STATE
 
 from .conftest import Coupler, serving
@@ -497,3 +499,34 @@ def test_csv_fields_are_written_exactly_as_the_csv_module_writes_them(texts: lis
     written = io.StringIO()
     csv.writer(written, lineterminator="\n").writerow(["0.5", *texts])
     assert ",".join(["0.5", *(csv_field(t) for t in texts)]) + "\n" == written.getvalue()
+
+
+CELLS = {
+    "Real": st.floats(allow_nan=True) | st.integers(),
+    "Integer": st.integers(),
+    "Enumeration": st.integers(),
+    "UInt64": st.integers(min_value=0, max_value=2**64 - 1),
+    "Boolean": st.booleans() | st.integers(),
+    "String": st.text(),
+    "Binary": st.binary(),
+}
+
+
+@given(
+    st.lists(st.sampled_from(sorted(CELLS)), min_size=1, max_size=8).flatmap(
+        lambda types: st.tuples(
+            st.just(types),
+            st.tuples(*(CELLS[t] for t in types)),
+            st.sets(st.integers(0, len(types) - 1)),
+            st.floats(allow_nan=False),
+        )
+    )
+)
+def test_a_results_row_is_its_cells_as_each_columns_formatter_writes_them(case: Any) -> None:
+    """results.csv's rows come from one %-format made per run; every byte as the columns'
+    formatters write the cells one by one, for any selection of columns."""
+    types, row, chosen, time = case
+    columns = [Column(name=f"C.v{i}", unit="", type=t) for i, t in enumerate(types)]
+    picked = sorted(chosen)
+    cells = [repr(time), *(formatter(columns[i])(row[i]) for i in picked)]
+    assert row_formatter(columns, picked)(time, row) == ",".join(cells) + "\n"

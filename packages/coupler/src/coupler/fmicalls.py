@@ -15,7 +15,7 @@ UTF-8). Anything else (binaries, the narrower FMI 3.0 integer types, arrays, FMI
 from __future__ import annotations
 
 import ctypes
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -69,6 +69,13 @@ class _Group:
     """The FMI type: Boolean values become bool, String values str."""
 
 
+_CONVERT: dict[str, Callable[[Any], list[Value]]] = {
+    "Boolean": lambda buffer: [bool(v) for v in buffer],
+    "String": lambda buffer: [v.decode("utf-8", "replace") if v else "" for v in buffer],
+}
+"""FMI type -> its buffer's values as Values, for the types whose ctypes values are not."""
+
+
 class Calls:
     """The prepared calls of one FMU instance."""
 
@@ -80,9 +87,18 @@ class Calls:
         self._outputs = outputs
         arity = 5 if version == "3.0" else 4  # FMI 3.0 getters also take the number of values
         self._getters = [
-            (g, (self._component, g.refs, g.count, g.buffer, g.count)[:arity]) for g in outputs
+            (
+                g.function,
+                (self._component, g.refs, g.count, g.buffer, g.count)[:arity],
+                g.buffer,
+                _CONVERT.get(g.kind),
+                g.call,
+            )
+            for g in outputs
         ]
-        """Each output group with the arguments of its getter, made once."""
+        """Per output group: its getter, the getter's arguments, the buffer it fills, what
+        turns the buffer's values into Values (None: they are already) and its name."""
+        self._output_names = tuple(name for g in outputs for name in g.names)
         self._setters = setters
         """FMI type -> (setter function, ctypes element type)."""
         self._input_groups: dict[tuple[str, ...], list[_Group]] = {}
@@ -160,18 +176,13 @@ class Calls:
         return self._terminate.value, self._last.value
 
     def get(self) -> dict[str, Value]:
-        outputs: dict[str, Value] = {}
-        for group, arguments in self._getters:
-            status = group.function(*arguments)
+        values: list[Value] = []
+        for function, arguments, buffer, convert, call in self._getters:
+            status = function(*arguments)
             if status > 1:
-                raise CallFailed(group.call, status)
-            values = group.buffer[:]
-            if group.kind == "Boolean":
-                values = [bool(v) for v in values]
-            elif group.kind == "String":
-                values = [v.decode("utf-8", "replace") if v else "" for v in values]
-            outputs.update(zip(group.names, values, strict=False))  # equal lengths, by make
-        return outputs
+                raise CallFailed(call, status)
+            values += buffer if convert is None else convert(buffer)
+        return dict(zip(self._output_names, values, strict=True))
 
 
 def prepare(

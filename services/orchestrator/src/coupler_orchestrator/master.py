@@ -17,6 +17,7 @@ else h), never by a difference of two communication points.
 from __future__ import annotations
 
 import asyncio
+import math
 import os
 import sys
 import time as wallclock
@@ -46,6 +47,9 @@ YIELD_EVERY = 0.02
 """Longest stretch [s] the step loop keeps the event loop to itself when no step awaits (only
 in-process and native members): an interrupt, the live monitor and the progress line get
 their turn in between."""
+DUE_PATTERNS = 1024
+"""At most this many distinct sets of due members are kept (members with large, coprime
+multiples make more; those are worked out step by step)."""
 Key = tuple[str, str]
 
 
@@ -96,6 +100,16 @@ class Master:
             steps=plan.grid.steps,
         )
         self._keys = [(m.name, c.name) for m in plan.members for c in m.outputs]
+        self._store_keys = {
+            m.name: {c.name: (m.name, c.name) for c in m.outputs} for m in plan.order
+        }
+        """Each member's outputs' keys in ``store``, made once."""
+        self._do_step = {m.name: f"{m.name}.DoStep" for m in plan.order}
+        """What the watchdog calls each member's step."""
+        self._period = math.lcm(*(m.multiple for m in plan.order)) if plan.order else 1
+        self._due: dict[int, tuple[list[Member], list[Member], list[Member]]] = {}
+        """Jacobi's members due at step k (by k modulo the multiples' period): in-process,
+        split and awaited ones."""
         self._slot = {m.name: i for i, m in enumerate(plan.members)}
         self._timing: list[float | None] = [None] * len(plan.members)
         self.store: dict[Key, Value] = {}
@@ -302,7 +316,7 @@ class Master:
         watchdog = self._watchdog
         assert watchdog is not None
         started = wallclock.perf_counter()
-        watchdog.arm(f"{m.name}.DoStep", time, m.deadline)
+        watchdog.arm(self._do_step[m.name], time, m.deadline)
         try:
             outputs = stepper(time, m.step, inputs)
         except EndRun as end:
@@ -323,7 +337,7 @@ class Master:
         """The second half: its answer, waited for on this thread (watched)."""
         watchdog = self._watchdog
         assert watchdog is not None
-        watchdog.arm(f"{m.name}.DoStep", self.plan.grid.time(k), m.deadline + 10, NATIVE_STUCK)
+        watchdog.arm(self._do_step[m.name], self.plan.grid.time(k), m.deadline + 10, NATIVE_STUCK)
         try:
             outputs = self._split[m.name].receive()
         except EndRun as end:
@@ -338,15 +352,7 @@ class Master:
     async def _jacobi_step(self, k: int, pending: dict[int, list[tuple[Member, Values]]]) -> None:
         """Every due member on the outputs of t_k: the remote ones in flight while the local
         ones compute here; everyone's outputs stored for the time they reach."""
-        local: list[Member] = []
-        split: list[Member] = []
-        remote: list[Member] = []
-        for m in self.plan.order:
-            if k % m.multiple == 0:
-                if m.name in self._local:
-                    local.append(m)
-                else:
-                    (split if m.name in self._split else remote).append(m)
+        local, split, remote = self._due_at(k)
         if len(remote) == 1 and not local and not split:
             pending[k + remote[0].multiple].append((remote[0], await self._step(remote[0], k)))
         else:
@@ -368,6 +374,25 @@ class Master:
                 pending[k + m.multiple].append((m, result))
         for m, outputs in pending.pop(k + 1, []):
             self._store(m, outputs, "DoStep", self.plan.grid.time(k + 1))
+
+    def _due_at(self, k: int) -> tuple[list[Member], list[Member], list[Member]]:
+        """The members due at step ``k``: in-process, split and awaited ones (in plan order)."""
+        phase = k % self._period
+        due = self._due.get(phase)
+        if due is None:
+            local: list[Member] = []
+            split: list[Member] = []
+            remote: list[Member] = []
+            for m in self.plan.order:
+                if k % m.multiple == 0:
+                    if m.name in self._local:
+                        local.append(m)
+                    else:
+                        (split if m.name in self._split else remote).append(m)
+            due = (local, split, remote)
+            if len(self._due) < DUE_PATTERNS:
+                self._due[phase] = due
+        return due
 
     async def _gauss_seidel_step(self, k: int, held: dict[str, Values]) -> None:
         """Members in order; outputs of t_{k+m} are stored in the slot of the base step that
@@ -401,8 +426,9 @@ class Master:
                 participant=m.name,
                 call=call,
             )
+        store, keys = self.store, self._store_keys[m.name]
         for channel, value in outputs.items():
-            self.store[(m.name, channel)] = value
+            store[keys[channel]] = value
 
     def _record(self, time: float) -> None:
         row = [self.store[k] for k in self._keys]

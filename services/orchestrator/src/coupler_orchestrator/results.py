@@ -68,6 +68,31 @@ def formatter(column: Column) -> Callable[[Value], str]:
     return lambda value: csv_field(format_value(value, column))
 
 
+PLAIN = {"Real": "%r", "Integer": "%s", "Enumeration": "%s", "UInt64": "%s"}
+"""Column types whose cell is the value's repr or str (what ``formatter`` chooses for them),
+written by a %-format."""
+
+
+def row_formatter(columns: Sequence[Column], picked: Sequence[int]) -> Callable[..., str]:
+    """``(time, row) -> line``: the CSV line of the ``picked`` columns of a row, exactly the
+    cells ``formatter`` makes, through one %-format made once (the columns of PLAIN types go
+    in as they are, the others through their formatter first)."""
+    template = ",".join(["%r", *(PLAIN.get(columns[i].type, "%s") for i in picked)]) + "\n"
+    special = [
+        (j, formatter(columns[i])) for j, i in enumerate(picked) if columns[i].type not in PLAIN
+    ]
+    indices = list(picked)
+
+    def line(time: float, row: Sequence[Value]) -> str:
+        cells: list[Any] = [time]
+        cells += [row[i] for i in indices]
+        for j, format_cell in special:
+            cells[j + 1] = format_cell(cells[j + 1])
+        return template % tuple(cells)
+
+    return line
+
+
 def csv_field(text: str) -> str:
     """``text`` as a field of a CSV row, quoted when it holds a comma, a quote or a newline:
     exactly what the csv module writes with lineterminator "\\n" (a lone carriage return is
@@ -134,17 +159,16 @@ class CsvRecorder(Observer):
         self.path = path
         self.selection = selection or Selection()
         self._file: IO[str] | None = None
-        self._picked: list[int] = []
-        self._formatters: list[Callable[[Value], str]] = []
+        self._line: Callable[[float, Sequence[Value]], str] = row_formatter([], [])
         self._count = 0
         self._flushed = 0.0
         self._good = 0
         """Bytes of results.csv known to hold only complete rows (flushed without error)."""
 
     def started(self, info: RunInfo) -> None:
-        self._picked = self.selection.columns(info.columns)
-        columns = [info.columns[i] for i in self._picked]
-        self._formatters = [formatter(c) for c in columns]
+        picked = self.selection.columns(info.columns)
+        columns = [info.columns[i] for i in picked]
+        self._line = row_formatter(info.columns, picked)
         try:
             self.path.parent.mkdir(parents=True, exist_ok=True)
             self._file = self.path.open("w", encoding="utf-8", newline="", buffering=1 << 16)
@@ -160,10 +184,8 @@ class CsvRecorder(Observer):
         count, self._count = self._count, self._count + 1
         if count % self.selection.every or self._file is None:
             return
-        cells = [repr(time)]
-        cells += [f(row[i]) for f, i in zip(self._formatters, self._picked, strict=True)]
         try:
-            self._file.write(",".join(cells) + "\n")
+            self._file.write(self._line(time, row))
             now = wallclock.monotonic()
             if now - self._flushed >= FLUSH_EVERY_S:
                 self._file.flush()
@@ -305,12 +327,21 @@ class LatencyStats:
         self._buckets: dict[int, int] = {}
 
     def add(self, seconds: float) -> None:
-        self.count += 1
-        self.total += seconds
-        if seconds > self.maximum:
-            self.maximum = seconds
-        bucket = int(math.log(max(seconds, self._BASE) / self._BASE) / self._WIDTH)
-        self._buckets[bucket] = self._buckets.get(bucket, 0) + 1
+        self.add_all([seconds])
+
+    def add_all(self, samples: Sequence[float]) -> None:
+        """Count a batch of samples (one call per batch: the step loop's samples are folded in
+        every ``SummaryWriter.BATCH`` steps)."""
+        if not samples:
+            return
+        self.count += len(samples)
+        self.total += sum(samples)
+        self.maximum = max(self.maximum, *samples)
+        buckets, log, base = self._buckets, math.log, self._BASE
+        floor, per_bucket = log(base), 1 / self._WIDTH
+        for seconds in samples:
+            bucket = int((log(seconds) - floor) * per_bucket) if seconds > base else 0
+            buckets[bucket] = buckets.get(bucket, 0) + 1
 
     def percentile(self, q: float) -> float:
         """The ``q`` quantile (0..1) [s], within 1 %."""
@@ -336,12 +367,18 @@ class LatencyStats:
 class SummaryWriter(Observer):
     """Writes summary.json: at the start (``running``), every few seconds, and at the end."""
 
+    BATCH = 256
+    """Steps whose latencies are kept before they are counted (counting in batches costs a
+    third of counting step by step); every summary counts all of them."""
+
     def __init__(self, path: Path, *, extra: Mapping[str, Any]) -> None:
         self.path = path
         self.extra = dict(extra)
         self.summary: dict[str, Any] = {}
         self._info: RunInfo | None = None
         self._latency: list[LatencyStats] = []
+        self._timings: list[Sequence[float | None]] = []
+        """Each step's latencies (one per member) not yet folded into ``_latency``."""
         self._time = 0.0
         self._points = 0
         self._wall_start = wallclock.monotonic()
@@ -361,17 +398,24 @@ class SummaryWriter(Observer):
             self._write(None)
 
     def timed(self, seconds: Sequence[float | None]) -> None:
-        for stats, sample in zip(self._latency, seconds, strict=True):
-            if sample is not None:
-                stats.add(sample)
+        self._timings.append(seconds)
+        if len(self._timings) >= self.BATCH:
+            self._fold()
 
     def finished(self, end: RunEnd) -> None:
         self._write(end)
+
+    def _fold(self) -> None:
+        """The kept steps' latencies into each member's statistics, member by member."""
+        timings, self._timings = self._timings, []
+        for i, stats in enumerate(self._latency):
+            stats.add_all([s for row in timings if (s := row[i]) is not None])
 
     def _write(self, end: RunEnd | None) -> None:
         info = self._info
         if info is None:
             return
+        self._fold()
         wall = end.wall_time if end else wallclock.monotonic() - self._wall_start
         simulated = (end.end_time if end else self._time) - info.start_time
         self.summary = {
