@@ -57,6 +57,7 @@ async def _let_others_run() -> None:
     for _ in range(TURNS):
         await asyncio.sleep(0)
 
+
 DUE_PATTERNS = 1024
 """At most this many distinct sets of due members are kept (members with large, coprime
 multiples make more; those are worked out step by step)."""
