@@ -66,6 +66,9 @@ SSD = """<?xml version="1.0" encoding="UTF-8"?>
 </ssd:SystemStructureDescription>
 """
 RUN = ("--step", "0.1")
+PACED = ("--realtime-factor", "5")
+"""200 steps in 4 s: the first rows reach the disk after 1 s (results.csv is flushed once a
+second), and a fault caused then lands well before the run's end on a slow machine too."""
 
 
 @pytest.fixture(params=["native", "grpc.aio"])
@@ -179,7 +182,7 @@ def test_a_killed_participant_fails_the_run_rows_kept(
 ) -> None:
     with gain(monkeypatch) as process:
         once_rows(tmp_path, 3, lambda: process.signal(signal.SIGKILL))
-        outcome = coupler("run", ssd, "--out", tmp_path, *RUN, "--realtime-factor", "10")
+        outcome = coupler("run", ssd, "--out", tmp_path, *RUN, *PACED)
     assert outcome.code == 1
     result = summary(tmp_path)
     assert result["status"] == "failed"
@@ -194,7 +197,7 @@ def test_a_stopped_participant_says_it_is_shutting_down(
 ) -> None:
     with gain(monkeypatch) as process:
         once_rows(tmp_path, 3, lambda: process.signal(signal.SIGTERM))
-        outcome = coupler("run", ssd, "--out", tmp_path, *RUN, "--realtime-factor", "10")
+        outcome = coupler("run", ssd, "--out", tmp_path, *RUN, *PACED)
     assert outcome.code == 1
     result = summary(tmp_path)
     assert result["status"] == "failed"
