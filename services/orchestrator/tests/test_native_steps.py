@@ -20,7 +20,7 @@ from coupler_orchestrator import participants, ssp, steps
 from coupler_orchestrator.export import ToolchainMissing
 from coupler_orchestrator.options import RunOptions
 
-from .conftest import Coupler, serving
+from .conftest import Coupler, Outcome, serving
 from .test_faults import SSD, gain
 
 pytestmark = pytest.mark.usefixtures("fmus")
@@ -107,13 +107,24 @@ class Strange(GainParticipant):
         return outputs
 
 
+def run_against(
+    participant: GainParticipant,
+    coupler: Coupler,
+    ssd: Path,
+    out: Path,
+    monkeypatch: pytest.MonkeyPatch,
+) -> Outcome:
+    """``coupler run`` of the gain scenario, its Gain served by ``participant``."""
+    with serving(participant) as server:
+        monkeypatch.setenv("GAIN_PORT", str(server.port))
+        return coupler("run", ssd, "--out", out, "--step", "0.1")
+
+
 @pytest.mark.usefixtures("native")
 def test_a_participant_ending_the_run_is_heard(
     coupler: Coupler, ssd: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    with serving(Ending("Gain")) as server:
-        monkeypatch.setenv("GAIN_PORT", str(server.port))
-        outcome = coupler("run", ssd, "--out", tmp_path, "--step", "0.1")
+    outcome = run_against(Ending("Gain"), coupler, ssd, tmp_path, monkeypatch)
     assert outcome.code == 0, outcome.err
     summary = coupler.summary(tmp_path)
     assert summary["status"] == "terminated"
@@ -125,9 +136,7 @@ def test_a_participant_ending_the_run_is_heard(
 def test_an_answer_outside_the_description_fails_the_run(
     coupler: Coupler, ssd: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    with serving(Strange("Gain")) as server:
-        monkeypatch.setenv("GAIN_PORT", str(server.port))
-        outcome = coupler("run", ssd, "--out", tmp_path, "--step", "0.1")
+    outcome = run_against(Strange("Gain"), coupler, ssd, tmp_path, monkeypatch)
     assert outcome.code == 1
     reason = coupler.summary(tmp_path)["reason"]
     assert "Gain.DoStep" in reason and "'z'" in reason, reason
