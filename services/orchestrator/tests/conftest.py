@@ -27,7 +27,9 @@ from coupler.logs import configure_logging
 from coupler.participant import Participant, Values
 from coupler.security import ServerSecurity
 from coupler.server import ParticipantServer
+from coupler_orchestrator import steps
 from coupler_orchestrator.cli import main
+from coupler_orchestrator.export import ToolchainMissing
 
 REPO = Path(__file__).resolve().parents[3]
 DATA = Path(__file__).parent / "data"
@@ -93,6 +95,25 @@ class Coupler:
     @staticmethod
     def summary(out_dir: Path) -> dict[str, Any]:
         return json.loads((out_dir / "summary.json").read_text())  # type: ignore[no-any-return]
+
+
+def build_native_steps() -> None:
+    """The native step channel, built (a failing build fails the test; only a missing tool
+    chain skips it)."""
+    try:
+        steps.build(log_to_stderr=False)
+    except ToolchainMissing as exc:
+        pytest.skip(str(exc))
+
+
+@pytest.fixture(params=["native", "grpc.aio"])
+def step_path(request: pytest.FixtureRequest, monkeypatch: pytest.MonkeyPatch) -> str:
+    """Remote steps over the native step channel and over Python's grpc.aio."""
+    if request.param == "native":
+        build_native_steps()
+    else:
+        monkeypatch.setenv(steps.ENVIRONMENT, "0")
+    return str(request.param)
 
 
 @pytest.fixture

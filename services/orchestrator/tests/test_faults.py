@@ -29,8 +29,6 @@ import pytest
 from coupler.client import parse_address
 from coupler.v1 import component_pb2 as pb
 from coupler.v1 import component_pb2_grpc as pb_grpc
-from coupler_orchestrator import steps
-from coupler_orchestrator.export import ToolchainMissing
 
 from .conftest import Coupler
 
@@ -69,20 +67,6 @@ RUN = ("--step", "0.1")
 PACED = ("--realtime-factor", "5")
 """200 steps in 4 s: the first rows reach the disk after 1 s (results.csv is flushed once a
 second), and a fault caused then lands well before the run's end on a slow machine too."""
-
-
-@pytest.fixture(params=["native", "grpc.aio"])
-def step_path(request: pytest.FixtureRequest, monkeypatch: pytest.MonkeyPatch) -> str:
-    """Remote steps over the native step channel (built here; only a missing tool chain
-    skips it) and over Python's grpc.aio."""
-    if request.param == "native":
-        try:
-            steps.build(log_to_stderr=False)
-        except ToolchainMissing as exc:
-            pytest.skip(str(exc))
-    else:
-        monkeypatch.setenv(steps.ENVIRONMENT, "0")
-    return str(request.param)
 
 
 def free_port() -> int:

@@ -13,14 +13,14 @@ from pathlib import Path
 
 import pytest
 
+from coupler.channels import RunSetup
 from coupler.client import RemoteParticipant
 from coupler.examples.gain import GainParticipant
 from coupler.participant import EndRun, Values
 from coupler_orchestrator import participants, ssp, steps
-from coupler_orchestrator.export import ToolchainMissing
 from coupler_orchestrator.options import RunOptions
 
-from .conftest import Coupler, Outcome, serving
+from .conftest import Coupler, Outcome, build_native_steps, serving
 from .test_faults import SSD, gain
 
 pytestmark = pytest.mark.usefixtures("fmus")
@@ -28,12 +28,8 @@ pytestmark = pytest.mark.usefixtures("fmus")
 
 @pytest.fixture(scope="module")
 def native() -> Iterator[None]:
-    """The step channel, built (a failing build fails the test; only a missing tool chain
-    skips it)."""
-    try:
-        steps.build(log_to_stderr=False)
-    except ToolchainMissing as exc:
-        pytest.skip(str(exc))
+    """The step channel, built and loaded."""
+    build_native_steps()
     assert steps.library() is not None
     yield
 
@@ -154,8 +150,6 @@ def test_without_the_library_remote_steps_take_grpc_aio(monkeypatch: pytest.Monk
 async def test_a_step_in_two_halves() -> None:
     """NativeRemote after Initialize: split() is itself; send, then receive, gives what
     do_step over grpc.aio gives; after Terminate the stream is gone."""
-    from coupler.channels import RunSetup
-
     with serving(GainParticipant("Gain")) as one, serving(GainParticipant("Gain")) as other:
         native = steps.NativeRemote(f"grpc://127.0.0.1:{one.port}")
         aio = RemoteParticipant(f"grpc://127.0.0.1:{other.port}")

@@ -45,18 +45,15 @@ def secure_ssd(tmp_path: Path) -> Path:
     return ssd
 
 
-@pytest.mark.parametrize("steps", ["native", "grpc.aio"])
+@pytest.mark.usefixtures("step_path")
 def test_mutual_tls_and_token_give_the_plaintext_results(
     coupler: Coupler,
     tmp_path: Path,
     pki: DevPki,
     secure_gain: ParticipantServer,
     monkeypatch: pytest.MonkeyPatch,
-    steps: str,
 ) -> None:
-    """Over the native step channel (when built here) and over grpc.aio."""
-    if steps == "grpc.aio":
-        monkeypatch.setenv("COUPLER_NATIVE_STEPS", "0")
+    """Over the native step channel and over grpc.aio."""
     secure = coupler(
         "run",
         secure_ssd(tmp_path),

@@ -1,7 +1,8 @@
 """``RemoteParticipant``: a participant behind ``grpc://HOST:PORT`` (or ``grpcs://`` with TLS),
 seen as a local one.
 
-gRPC errors are translated to Coupler's exception tree here, in ``_translate``, and nowhere else.
+gRPC errors are translated to Coupler's exception tree here, in ``translate``, and nowhere else (the
+orchestrator's native step channel calls it too).
 """
 
 from __future__ import annotations
@@ -175,7 +176,7 @@ class RemoteParticipant(Participant):
                 health_pb2_grpc.HealthStub(self._channel), deadline_s=self.connect_timeout
             )
         except grpc.aio.AioRpcError as exc:
-            raise _translate(
+            raise translate(
                 exc.code(),
                 exc.details(),
                 participant=self.name,
@@ -248,7 +249,7 @@ class RemoteParticipant(Participant):
         if response is grpc.aio.EOF:  # the server closed the stream: its status says why
             code = await stream.code()
             details = await stream.details()
-            raise _translate(
+            raise translate(
                 code, details, participant=self.name, call="DoStep", address=self.address
             )
         return response
@@ -312,7 +313,7 @@ class RemoteParticipant(Participant):
         try:
             return await pending
         except grpc.aio.AioRpcError as exc:
-            raise _translate(
+            raise translate(
                 exc.code(), exc.details(), participant=self.name, call=call, address=self.address
             ) from exc
         except TimeoutError as exc:
@@ -324,7 +325,7 @@ class RemoteParticipant(Participant):
             ) from exc
 
 
-def _translate(
+def translate(
     code: grpc.StatusCode, details: str | None, *, participant: str, call: str, address: str
 ) -> ParticipantError:
     """The one place gRPC errors become Coupler errors."""

@@ -84,7 +84,6 @@ class Calls:
     ) -> None:
         self._component = slave.component
         self._version = version
-        self._outputs = outputs
         arity = 5 if version == "3.0" else 4  # FMI 3.0 getters also take the number of values
         self._getters = [
             (

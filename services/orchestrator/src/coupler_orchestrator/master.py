@@ -51,17 +51,15 @@ TURNS = 4
 """Turns of the event loop the step loop gives after each such stretch: one turn runs only
 what is ready at that moment, and what it makes ready (data read from a socket wakes a
 future, the future a task) needs the next; an idle turn costs about 10 us."""
+DUE_PATTERNS = 1024
+"""At most this many distinct sets of due members are kept (members with large, coprime
+multiples make more; those are worked out step by step)."""
+Key = tuple[str, str]
 
 
 async def _let_others_run() -> None:
     for _ in range(TURNS):
         await asyncio.sleep(0)
-
-
-DUE_PATTERNS = 1024
-"""At most this many distinct sets of due members are kept (members with large, coprime
-multiples make more; those are worked out step by step)."""
-Key = tuple[str, str]
 
 
 @dataclass

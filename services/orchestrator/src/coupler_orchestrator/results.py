@@ -326,9 +326,6 @@ class LatencyStats:
         self.maximum = 0.0
         self._buckets: dict[int, int] = {}
 
-    def add(self, seconds: float) -> None:
-        self.add_all([seconds])
-
     def add_all(self, samples: Sequence[float]) -> None:
         """Count a batch of samples (one call per batch: the step loop's samples are folded in
         every ``SummaryWriter.BATCH`` steps)."""

@@ -32,7 +32,7 @@ import structlog
 
 from coupler import wire
 from coupler.channels import RunSetup, Value
-from coupler.client import RemoteParticipant, _translate, uses_tls
+from coupler.client import RemoteParticipant, translate, uses_tls
 from coupler.errors import ParticipantError, ParticipantTimeout
 from coupler.fmubuild import compile_library
 from coupler.participant import EndRun, Split, Values
@@ -49,7 +49,7 @@ _OK, _FAILED, _TIMEOUT = 0, 1, 2
 _CODES = {code.value[0]: code for code in grpc.StatusCode}
 
 
-def build(*, cache: Path | None = None, log_to_stderr: bool = True) -> Path:
+def build(*, log_to_stderr: bool = True) -> Path:
     """The shared library, built on first use and cached under a key of its source, the
     compiler and gRPC's version; ToolchainMissing without the C++ gRPC tool chain."""
     if problem := toolchain_problem(("g++", "pkg-config"), ("grpc++",)):
@@ -58,7 +58,7 @@ def build(*, cache: Path | None = None, log_to_stderr: bool = True) -> Path:
     key.update(inspect.getsource(build).encode())
     for command in (["g++", "--version"], ["pkg-config", "--modversion", "grpc++"]):
         key.update(subprocess.run(command, capture_output=True, check=False).stdout)
-    library = (cache or cache_root()) / f"libcoupler-steps-{key.hexdigest()[:16]}.so"
+    library = cache_root() / f"libcoupler-steps-{key.hexdigest()[:16]}.so"
     if library.is_file():
         return library
     if log_to_stderr:
@@ -219,7 +219,7 @@ class NativeRemote(RemoteParticipant):
             )
         if result != _OK:
             details = self._lib.cs_error(self._native).decode(errors="replace")
-            raise _translate(
+            raise translate(
                 _CODES.get(self._code.value, grpc.StatusCode.UNKNOWN),
                 details,
                 participant=self.name,
