@@ -27,7 +27,7 @@ from coupler.logs import configure_logging
 from coupler.participant import Participant, Values
 from coupler.security import ServerSecurity
 from coupler.server import ParticipantServer
-from coupler_orchestrator import steps
+from coupler_orchestrator import kernel, steps
 from coupler_orchestrator.cli import main
 from coupler_orchestrator.export import ToolchainMissing
 
@@ -111,6 +111,17 @@ def step_path(request: pytest.FixtureRequest, monkeypatch: pytest.MonkeyPatch) -
     """Remote steps over the native step channel and over Python's grpc.aio."""
     if request.param == "native":
         build_native_steps()
+    else:
+        monkeypatch.setenv(steps.ENVIRONMENT, "0")
+    return str(request.param)
+
+
+@pytest.fixture(params=["C", "Python"])
+def fmu_path(request: pytest.FixtureRequest, monkeypatch: pytest.MonkeyPatch) -> str:
+    """In-process FMUs stepped by the native FMU step (C; a failing build fails the test) and
+    through Python (``COUPLER_NATIVE_STEPS=0``)."""
+    if request.param == "C":
+        kernel.build()
     else:
         monkeypatch.setenv(steps.ENVIRONMENT, "0")
     return str(request.param)

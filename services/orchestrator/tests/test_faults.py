@@ -465,6 +465,7 @@ def test_an_isolated_fmu_that_hangs_fails_within_the_deadline(
     assert took < 15  # start-up, the 1 s deadline, Terminate's 3 s, killing the host
 
 
+@pytest.mark.usefixtures("fmu_path")
 def test_an_fmu_hanging_in_process_ends_the_run_at_its_deadline(
     faulty_ssd: Path, tmp_path: Path
 ) -> None:
@@ -484,6 +485,7 @@ def test_an_fmu_hanging_in_process_ends_the_run_at_its_deadline(
     assert "error: run failed: Faulty.DoStep [DEADLINE_EXCEEDED]" in err
 
 
+@pytest.mark.usefixtures("fmu_path")
 def test_an_interrupt_reaches_an_orchestrator_blocked_in_an_fmu(
     faulty_ssd: Path, tmp_path: Path
 ) -> None:
@@ -509,6 +511,7 @@ def test_an_interrupt_reaches_an_orchestrator_blocked_in_an_fmu(
     assert len(assert_rows_kept(out)) == 11
 
 
+@pytest.mark.usefixtures("fmu_path")
 def test_an_interrupt_reaches_a_run_of_fast_in_process_fmus(
     fmus: dict[str, Path], tmp_path: Path
 ) -> None:

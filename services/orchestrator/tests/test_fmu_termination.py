@@ -81,6 +81,7 @@ def _run_alone(coupler: Coupler, fmu: Path, out: Path, *, step: float) -> Outcom
     )
 
 
+@pytest.mark.usefixtures("fmu_path")
 @pytest.mark.parametrize("fmu", ["Stair2", "Stair3"])
 def test_termination_request_ends_the_run_like_fmpy(
     fmu: str, fmus: Mapping[str, Path], coupler: Coupler, tmp_path: Path
@@ -108,6 +109,7 @@ def test_termination_request_ends_the_run_like_fmpy(
     assert (rows[-1]["time"], rows[-1]["Stair.counter"]) == ("9.0", "10")
 
 
+@pytest.mark.usefixtures("fmu_path")
 @pytest.mark.parametrize("fmu", ["Stair2", "Stair3"])
 def test_stop_inside_a_step_is_named_in_the_reason(
     fmu: str, fmus: Mapping[str, Path], coupler: Coupler, tmp_path: Path

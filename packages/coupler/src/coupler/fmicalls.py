@@ -56,7 +56,7 @@ def status_name(status: int) -> str:
 
 
 @dataclass(frozen=True)
-class _Group:
+class Group:
     """Variables of one FMI type: their references, a buffer and the function to call."""
 
     names: tuple[str, ...]
@@ -69,7 +69,16 @@ class _Group:
     """The FMI type: Boolean values become bool, String values str."""
 
 
-_CONVERT: dict[str, Callable[[Any], list[Value]]] = {
+@dataclass(frozen=True)
+class NativeParts:
+    """An instance's handle, FMI version and DoStep function, for a caller in C."""
+
+    instance: Any
+    version: str
+    do_step: Any
+
+
+CONVERT: dict[str, Callable[[Any], list[Value]]] = {
     "Boolean": lambda buffer: [bool(v) for v in buffer],
     "String": lambda buffer: [v.decode("utf-8", "replace") if v else "" for v in buffer],
 }
@@ -80,17 +89,19 @@ class Calls:
     """The prepared calls of one FMU instance."""
 
     def __init__(
-        self, slave: Any, version: str, outputs: list[_Group], setters: dict[str, tuple[Any, Any]]
+        self, slave: Any, version: str, outputs: list[Group], setters: dict[str, tuple[Any, Any]]
     ) -> None:
         self._component = slave.component
         self._version = version
+        self.outputs = tuple(outputs)
+        """The output groups, in the order ``get`` reads them."""
         arity = 5 if version == "3.0" else 4  # FMI 3.0 getters also take the number of values
         self._getters = [
             (
                 g.function,
                 (self._component, g.refs, g.count, g.buffer, g.count)[:arity],
                 g.buffer,
-                _CONVERT.get(g.kind),
+                CONVERT.get(g.kind),
                 g.call,
             )
             for g in outputs
@@ -100,10 +111,12 @@ class Calls:
         self._output_names = tuple(name for g in outputs for name in g.names)
         self._setters = setters
         """FMI type -> (setter function, ctypes element type)."""
-        self._input_groups: dict[tuple[str, ...], list[_Group]] = {}
+        self._input_groups: dict[tuple[str, ...], list[Group]] = {}
         functions = slave._functions
         prefix = "fmi2" if version == "2.0" else "fmi3"
         self._do_step = functions[f"{prefix}DoStep"]
+        self.native = NativeParts(slave.component, version, self._do_step)
+        """What a step loop in C needs besides the groups (``coupler_orchestrator.kernel``)."""
         self._prefix = prefix
         if version == "3.0":
             self._event = ctypes.c_bool()
@@ -119,7 +132,7 @@ class Calls:
 
     def setters_for(
         self, names: tuple[str, ...], types: Mapping[str, tuple[str, int]]
-    ) -> list[_Group]:
+    ) -> list[Group]:
         """Setter groups for a set of input names (the step loop asks for the same set)."""
         groups = self._input_groups.get(names)
         if groups is None:
@@ -131,7 +144,7 @@ class Calls:
                 function, element = self._setters[fmi_type]
                 refs = (ctypes.c_uint * len(members))(*(types[n][1] for n in members))
                 groups.append(
-                    _Group(
+                    Group(
                         tuple(members),
                         function,
                         refs,
@@ -144,7 +157,7 @@ class Calls:
             self._input_groups[names] = groups
         return groups
 
-    def set(self, groups: Sequence[_Group], values: Mapping[str, Value]) -> None:
+    def set(self, groups: Sequence[Group], values: Mapping[str, Value]) -> None:
         component = self._component
         for group in groups:
             buffer = group.buffer
@@ -213,7 +226,7 @@ def prepare(
     for fmi_type, members in by_type.items():
         element, suffix = fast[fmi_type]
         groups.append(
-            _Group(
+            Group(
                 tuple(n for n, _ in members),
                 functions[f"{prefix}Get{suffix}"],
                 (ctypes.c_uint * len(members))(*(r for _, r in members)),

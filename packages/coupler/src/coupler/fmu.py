@@ -33,7 +33,7 @@ from fmpy.model_description import ModelDescription, ScalarVariable
 from coupler.archives import Budget, extract
 from coupler.channels import Capabilities, Description, RunSetup, Value
 from coupler.errors import ParticipantError, ScenarioError
-from coupler.fmicalls import CallFailed, Calls, prepare, status_name
+from coupler.fmicalls import CallFailed, Calls, Group, prepare, status_name
 from coupler.fmuchannels import (
     VALUE_TYPES,
     ArrayInputs,
@@ -247,6 +247,28 @@ class FmuParticipant(Participant):
             return calls.get()
         except CallFailed as exc:
             raise self._failed(exc, time, step) from exc
+
+    # --- for a step loop in C (coupler_orchestrator.kernel), after Initialize -----------------
+
+    def prepared(self) -> Calls | None:
+        """The instance's prepared calls; None when it steps through FMPy's own."""
+        return self._calls
+
+    def input_groups(self, names: tuple[str, ...]) -> list[Group]:
+        """The prepared setter groups of these inputs (ScenarioError for one it lacks)."""
+        assert self._calls is not None
+        if names not in self._checked_inputs:
+            self._check_inputs(names)
+        return self._calls.setters_for(names, self._input_types)
+
+    def stopped(self, call: str, status: int, time: float, step: float) -> Exception:
+        """What a prepared call that stopped a step means: the participant's error, or its
+        request to end the run (fmi2Discard with fmi2Terminated)."""
+        return self._failed(CallFailed(call, status), time, step)
+
+    def terminated(self, time: float, step: float, reached: float) -> EndRun:
+        """fmi3DoStep set terminateSimulation, having reached ``reached``."""
+        return self._fmi3_terminated(time, step, reached)
 
     def _step_through_fmpy(self, time: float, step: float, inputs: Mapping[str, Value]) -> Values:
         """A step through FMPy's calls: FMI 1.0, arrays, strings and the rarer types."""

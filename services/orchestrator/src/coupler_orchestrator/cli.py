@@ -256,8 +256,10 @@ def _run_options(command: argparse.ArgumentParser) -> None:
         "--no-native-steps",
         dest="native_steps",
         action="store_false",
-        help="step remote participants through Python's grpc.aio instead of the native step "
-        "channel (used when the C++ gRPC tool chain is installed; also COUPLER_NATIVE_STEPS=0)",
+        help="step everything through Python: remote participants over grpc.aio instead of the "
+        "native step channel (used when the C++ gRPC tool chain is installed), in-process FMUs "
+        "one ctypes call at a time instead of the native FMU step (C, built with gcc); the "
+        "same results either way (also COUPLER_NATIVE_STEPS=0)",
     )
     _security_options(command)
 

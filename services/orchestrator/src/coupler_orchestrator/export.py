@@ -53,6 +53,7 @@ __all__ = [
     "ToolchainMissing",
     "build_proxy",
     "cache_root",
+    "cached_library",
     "export_fmu",
     "fingerprint",
     "toolchain_problem",
@@ -130,6 +131,37 @@ def cache_root() -> Path:
         return Path(explicit)
     base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
     return Path(base) / "coupler"
+
+
+def cached_library(
+    source: Path,
+    *,
+    compiler: str,
+    flags: Sequence[str],
+    libraries: Sequence[str] = (),
+    versions: Sequence[Sequence[str]],
+    prefix: str,
+    what: str,
+    log_to_stderr: bool = True,
+) -> Path:
+    """A shared library of one source file, built on first use under ``cache_root()`` and
+    kept under a key of the source, the flags and what the ``versions`` commands print (the
+    compiler's and the libraries' versions); FmuBuildError when the compiler fails."""
+    key = hashlib.sha256(source.read_bytes())
+    key.update("\0".join([compiler, *flags, *libraries]).encode())
+    for command in versions:
+        key.update(subprocess.run(command, capture_output=True, check=False).stdout)
+    library = cache_root() / f"{prefix}-{key.hexdigest()[:16]}.so"
+    if library.is_file():
+        return library
+    if log_to_stderr:
+        print(f"building {what} (once per machine)", file=sys.stderr)
+    library.parent.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory(dir=library.parent, prefix=".build-") as scratch:
+        built = Path(scratch) / library.name
+        compile_library(compiler, [*flags, str(source), *libraries, "-o", str(built)], what=what)
+        built.replace(library)  # whole or not at all
+    return library
 
 
 def _protocol_descriptor() -> bytes:

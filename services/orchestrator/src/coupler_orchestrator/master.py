@@ -30,6 +30,7 @@ import structlog
 from coupler.channels import RunSetup, Value
 from coupler.errors import CouplerError, ParticipantError, ParticipantTimeout
 from coupler.participant import EndRun, Split, StepNow, Values
+from coupler_orchestrator import kernel
 from coupler_orchestrator.checks import Member
 from coupler_orchestrator.observer import Column, Observer, RunEnd, RunInfo
 from coupler_orchestrator.options import Algorithm
@@ -133,6 +134,8 @@ class Master:
         """Members stepping in two halves on this thread (after Initialize), by name."""
         self._sent: dict[str, float] = {}
         """When each split member's request under way was sent [perf_counter]."""
+        self._kernel: kernel.Kernel | None = None
+        """Steps every member in C, when the plan allows it (after Initialize)."""
         self._watchdog: Watchdog | None = None
         self._wall_start = 0.0
         self._abandoned = False
@@ -162,7 +165,9 @@ class Master:
             held: dict[str, Values] = {}
             yielded = wallclock.perf_counter()
             for k in range(grid.steps):
-                if plan.algorithm is Algorithm.JACOBI:
+                if self._kernel is not None:
+                    self._native_step(k)
+                elif plan.algorithm is Algorithm.JACOBI:
                     await self._jacobi_step(k, pending)
                 else:
                     await self._gauss_seidel_step(k, held)
@@ -272,6 +277,12 @@ class Master:
         if self._local or self._split:
             self._watchdog = Watchdog(self._abandon)
             self._watchdog.start()
+        self._kernel = kernel.prepare(self.plan, self.plan.native)
+        if self._kernel is not None:
+            assert self._watchdog is not None
+            self._watchdog.follow(self._kernel.under_way)
+            for (name, channel), value in self.store.items():
+                self._kernel.place(name, {channel: value})
 
     def _abandon(self, status: str, reason: str) -> None:
         """End the run from the watchdog's thread: this thread is stuck in a participant."""
@@ -358,6 +369,27 @@ class Master:
             raise asyncio.CancelledError
         return outputs
 
+    def _native_step(self, k: int) -> None:
+        """Every member stepped in C (``kernel``); a member that stops its step is told
+        about as it is in Python: its error ends the run, its request to end it is kept and
+        the members after it step on."""
+        native = self._kernel
+        assert native is not None
+        time = self.plan.grid.time(k)
+        start = 0
+        while (stopped := native.step(time, start)) is not None:
+            index, meaning = stopped
+            if self._abandoned:
+                raise asyncio.CancelledError
+            if not isinstance(meaning, EndRun):
+                raise meaning
+            m = self.plan.order[index]
+            native.place(m.name, self._ask_to_end(m, k, meaning))
+            start = index + 1
+        if self._abandoned:  # it came back after the watchdog had ended the run
+            raise asyncio.CancelledError
+        self._timing = native.timing[:]
+
     async def _jacobi_step(self, k: int, pending: dict[int, list[tuple[Member, Values]]]) -> None:
         """Every due member on the outputs of t_k: the remote ones in flight while the local
         ones compute here; everyone's outputs stored for the time they reach."""
@@ -440,7 +472,10 @@ class Master:
             store[keys[channel]] = value
 
     def _record(self, time: float) -> None:
-        row = [self.store[k] for k in self._keys]
+        if self._kernel is not None:
+            row = self._kernel.row()
+        else:
+            row = [self.store[k] for k in self._keys]
         timing = self._timing
         for observer in self.observers:
             observer.stepped(time, row)

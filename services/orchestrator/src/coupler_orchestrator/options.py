@@ -49,9 +49,10 @@ class RunOptions:
     """Deadline of each call to a participant [s]; per component: the SSD annotation
     ``org.coupler.component callTimeout``."""
     native_steps: bool = True
-    """Step remote participants over the native step channel (C++ gRPC on the master's
-    thread; built once per machine when the tool chain is installed, ``steps``); False, or
-    without the tool chain, or with ``COUPLER_NATIVE_STEPS=0``: Python's grpc.aio."""
+    """Step natively: remote participants over the native step channel (C++ gRPC on the
+    master's thread, built once per machine when the tool chain is installed, ``steps``), a
+    run of in-process FMUs in C (``kernel``). False, or with ``COUPLER_NATIVE_STEPS=0``:
+    Python's grpc.aio and one ctypes call per FMI call, with the same results."""
     exit_when_stuck: bool = False
     """When an in-process FMU hangs on the master's thread past its deadline (or through an
     interrupt), end the process after the run's results are written (the command line does;

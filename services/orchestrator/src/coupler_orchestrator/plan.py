@@ -8,6 +8,7 @@ from dataclasses import dataclass
 from coupler_orchestrator.checks import Checked, Member, TimeGrid
 from coupler_orchestrator.options import Algorithm, RunOptions
 from coupler_orchestrator.ordering import execution_order
+from coupler_orchestrator.steps import wanted
 from coupler_orchestrator.wiring import Link
 
 
@@ -34,6 +35,8 @@ class Plan:
     """Pace simulated time at this multiple of wall time; None runs as fast as possible."""
     exit_when_stuck: bool = False
     """End the process when an in-process call hangs (``RunOptions.exit_when_stuck``)."""
+    native: bool = False
+    """Step in-process FMUs in C when the plan allows it (``coupler_orchestrator.kernel``)."""
 
 
 def build_plan(checked: Checked, links: tuple[Link, ...], options: RunOptions) -> Plan:
@@ -50,6 +53,7 @@ def build_plan(checked: Checked, links: tuple[Link, ...], options: RunOptions) -
         lease=lease_of(options, checked),
         realtime_factor=options.realtime_factor or None,
         exit_when_stuck=options.exit_when_stuck,
+        native=wanted(options.native_steps),
     )
 
 

@@ -17,12 +17,9 @@ the same meaning, the same errors and the same results.
 from __future__ import annotations
 
 import ctypes
-import hashlib
-import inspect
 import os
 import subprocess
 import sys
-import tempfile
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -34,11 +31,15 @@ from coupler import wire
 from coupler.channels import RunSetup, Value
 from coupler.client import RemoteParticipant, translate, uses_tls
 from coupler.errors import ParticipantError, ParticipantTimeout
-from coupler.fmubuild import compile_library
 from coupler.participant import EndRun, Split, Values
 from coupler.security import read_secret
 from coupler.v1 import component_pb2 as pb
-from coupler_orchestrator.export import ExportError, ToolchainMissing, cache_root, toolchain_problem
+from coupler_orchestrator.export import (
+    ExportError,
+    ToolchainMissing,
+    cached_library,
+    toolchain_problem,
+)
 
 log = structlog.get_logger("coupler.steps")
 
@@ -54,27 +55,24 @@ def build(*, log_to_stderr: bool = True) -> Path:
     compiler and gRPC's version; ToolchainMissing without the C++ gRPC tool chain."""
     if problem := toolchain_problem(("g++", "pkg-config"), ("grpc++",)):
         raise ToolchainMissing(f"cannot build the native step channel: {problem}")
-    key = hashlib.sha256(SOURCE.read_bytes())
-    key.update(inspect.getsource(build).encode())
-    for command in (["g++", "--version"], ["pkg-config", "--modversion", "grpc++"]):
-        key.update(subprocess.run(command, capture_output=True, check=False).stdout)
-    library = cache_root() / f"libcoupler-steps-{key.hexdigest()[:16]}.so"
-    if library.is_file():
-        return library
-    if log_to_stderr:
-        print("building the native step channel (once per machine)", file=sys.stderr)
-    library.parent.mkdir(parents=True, exist_ok=True)
-    flags = subprocess.run(
+    libraries = subprocess.run(
         ["pkg-config", "--cflags", "--libs", "grpc++"], capture_output=True, text=True, check=True
     ).stdout.split()
-    with tempfile.TemporaryDirectory(dir=library.parent, prefix=".build-") as scratch:
-        built = Path(scratch) / library.name
-        common = ["-shared", "-fPIC", "-O2", "-std=c++17", "-Wall", "-Wextra"]
-        compile_library(
-            "g++", [*common, str(SOURCE), *flags, "-o", str(built)], what="the step channel"
-        )
-        built.replace(library)  # whole or not at all
-    return library
+    return cached_library(
+        SOURCE,
+        compiler="g++",
+        flags=["-shared", "-fPIC", "-O2", "-std=c++17", "-Wall", "-Wextra"],
+        libraries=libraries,
+        versions=[["g++", "--version"], ["pkg-config", "--modversion", "grpc++"]],
+        prefix="libcoupler-steps",
+        what="the native step channel",
+        log_to_stderr=log_to_stderr,
+    )
+
+
+def wanted(asked: bool = True) -> bool:
+    """Whether native stepping is asked for and not turned off by ``COUPLER_NATIVE_STEPS``."""
+    return asked and os.environ.get(ENVIRONMENT, "1").strip().lower() not in ("0", "no", "false")
 
 
 _loaded: ctypes.CDLL | None = None
@@ -126,12 +124,10 @@ def library() -> ctypes.CDLL | None:
     return lib
 
 
-def enabled(wanted: bool = True) -> bool:
+def enabled(asked: bool = True) -> bool:
     """Whether runs step remote members natively: asked for, not turned off by the
     environment, and the library at hand."""
-    if not wanted or os.environ.get(ENVIRONMENT, "1").strip().lower() in ("0", "no", "false"):
-        return False
-    return library() is not None
+    return wanted(asked) and library() is not None
 
 
 class NativeRemote(RemoteParticipant):

@@ -14,6 +14,9 @@ import threading
 import time
 from collections.abc import Callable
 
+Armed = tuple[str, float, float, float, str]
+"""(what, simulated time, deadline [s], since [monotonic], cause) of the call under way."""
+
 _active: Watchdog | None = None
 IN_PROCESS = (
     "the FMU hangs in-process (the run had reached t={time:g} s; isolate it with "
@@ -33,9 +36,10 @@ class Watchdog:
     def __init__(self, on_stuck: Callable[[str, str], None], *, poll: float = 0.2) -> None:
         self.on_stuck = on_stuck
         self.poll = poll
-        self._armed: tuple[str, float, float, float, str] | None = None
-        """(what, simulated time, deadline [s], since [monotonic], cause) of the call under
-        way."""
+        self._armed: Armed | None = None
+        """The call under way, as ``arm`` was told."""
+        self._follow: Callable[[], Armed | None] | None = None
+        """Says which call made in C is under way (``follow``)."""
         self._stop = threading.Event()
         self._fired = False
         self._thread = threading.Thread(target=self._watch, name="coupler-watchdog", daemon=True)
@@ -59,9 +63,20 @@ class Watchdog:
     def disarm(self) -> None:
         self._armed = None
 
+    def follow(self, under_way: Callable[[], Armed | None]) -> None:
+        """Also watch calls made from C code, which cannot ``arm``: ``under_way()`` tells the
+        one under way (read from this thread; None between calls)."""
+        self._follow = under_way
+
+    def _under_way(self) -> Armed | None:
+        armed = self._armed
+        if armed is None and self._follow is not None:
+            armed = self._follow()
+        return armed
+
     def blocked_for(self) -> float:
         """How long the call under way has run [s]; 0 when none is."""
-        armed = self._armed
+        armed = self._under_way()
         return time.monotonic() - armed[3] if armed else 0.0
 
     def end(self, status: str, reason: str) -> None:
@@ -73,7 +88,7 @@ class Watchdog:
 
     def _watch(self) -> None:
         while not self._stop.wait(self.poll):
-            armed = self._armed
+            armed = self._under_way()
             if armed is None:
                 continue
             what, time_s, deadline, since, cause = armed

@@ -1,0 +1,372 @@
+"""The native FMU step: every in-process FMU of a run stepped by one call into C per base step.
+
+Stepping an FMU from Python costs a ctypes call per FMI call (setters, DoStep, a getter per
+type), each far dearer than the FMU's own work for a small model. ``native/fmu_steps.c`` runs
+the loop over them in C instead: each member's inputs copied from the outputs they are
+connected to, set, stepped, every output read into one array per type. Python then reads a
+step's results row with one slice per array.
+
+It is used when it means exactly what the step in Python means: every member an in-process FMU
+with prepared calls (``coupler.fmicalls``: FMI 2.0/3.0 scalars), stepping every base step
+(no multiples), every connection a plain copy of a numeric value (no unit or type conversion,
+no strings: a string lives in its FMU's memory only until that FMU's next call). Otherwise, and
+with ``--no-native-steps`` / ``COUPLER_NATIVE_STEPS=0``, the members step through Python with
+the same results (``tests/test_native_kernel.py`` compares them byte for byte).
+
+The library is built with gcc on first use (well under a second, once per machine) and cached
+beside the native step channel's.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import sys
+from collections.abc import Callable, Mapping, Sequence
+from operator import itemgetter
+from pathlib import Path
+from typing import Any
+
+import structlog
+
+from coupler.channels import Value
+from coupler.errors import CouplerError
+from coupler.fmicalls import CONVERT, Group
+from coupler.fmu import FmuParticipant
+from coupler_orchestrator.checks import Member
+from coupler_orchestrator.export import cached_library
+from coupler_orchestrator.options import Algorithm
+from coupler_orchestrator.plan import Plan
+from coupler_orchestrator.watchdog import IN_PROCESS
+
+log = structlog.get_logger("coupler.kernel")
+
+SOURCE = Path(__file__).parent / "native" / "fmu_steps.c"
+DONE = -1
+SET, STEP, GET, TERMINATE = 0, 1, 2, 3
+
+
+class _Call(ctypes.Structure):
+    _fields_ = [
+        ("function", ctypes.c_void_p),
+        ("refs", ctypes.c_void_p),
+        ("count", ctypes.c_size_t),
+        ("buffer", ctypes.c_void_p),
+    ]
+
+
+class _Copy(ctypes.Structure):
+    _fields_ = [("target", ctypes.c_void_p), ("source", ctypes.c_void_p), ("size", ctypes.c_size_t)]
+
+
+class _Member(ctypes.Structure):
+    _fields_ = [
+        ("instance", ctypes.c_void_p),
+        ("do_step", ctypes.c_void_p),
+        ("step", ctypes.c_double),
+        ("version", ctypes.c_int),
+        ("slot", ctypes.c_int),
+        ("copies", ctypes.c_int),
+        ("copy", ctypes.POINTER(_Copy)),
+        ("sets", ctypes.c_int),
+        ("set", ctypes.POINTER(_Call)),
+        ("gets", ctypes.c_int),
+        ("get", ctypes.POINTER(_Call)),
+        ("event", ctypes.c_bool),
+        ("terminate", ctypes.c_bool),
+        ("early", ctypes.c_bool),
+        ("last", ctypes.c_double),
+    ]
+
+
+def build() -> Path:
+    """The shared library, built with gcc on first use (quietly: well under a second) and
+    cached."""
+    return cached_library(
+        SOURCE,
+        compiler="gcc",
+        flags=["-shared", "-fPIC", "-O2", "-std=c11", "-Wall", "-Wextra"],
+        versions=[["gcc", "--version"]],
+        prefix="libcoupler-fmu-steps",
+        what="the native FMU step",
+        log_to_stderr=False,
+    )
+
+
+_loaded: ctypes.CDLL | None = None
+_problem: str | None = None
+
+
+def library() -> ctypes.CDLL | None:
+    """The loaded library; None (the reason said once) when it cannot be had."""
+    global _loaded, _problem
+    if _loaded is not None or _problem is not None:
+        return _loaded
+    try:
+        lib = ctypes.CDLL(str(build()))
+    except (CouplerError, OSError) as exc:
+        _problem = str(exc)
+        print(f"warning: native FMU step unavailable: {exc}", file=sys.stderr)
+        return None
+    lib.ck_step.restype = ctypes.c_int
+    lib.ck_step.argtypes = [
+        ctypes.POINTER(_Member),
+        ctypes.c_int,
+        ctypes.c_int,
+        ctypes.c_int,
+        ctypes.c_double,
+        ctypes.POINTER(ctypes.c_double),
+        ctypes.POINTER(ctypes.c_double),
+        ctypes.POINTER(ctypes.c_int),
+    ]
+    _loaded = lib
+    return lib
+
+
+def _address(function: Any) -> int:
+    return ctypes.cast(function, ctypes.c_void_p).value or 0
+
+
+def _element(group: Group) -> Any:
+    return group.buffer._type_
+
+
+class _Plane:
+    """One array of every output of one C type (and one conversion to Values)."""
+
+    def __init__(self, element: Any, kind: str) -> None:
+        self.element = element
+        self.convert = CONVERT.get(kind)
+        self.size = 0
+        self.array: Any = None
+
+    def allocate(self) -> None:
+        self.array = (self.element * max(1, self.size))()
+
+    def address(self, index: int) -> int:
+        return ctypes.addressof(self.array) + index * ctypes.sizeof(self.element)
+
+    def values(self) -> list[Value]:
+        found = self.array[: self.size]
+        return found if self.convert is None else self.convert(found)
+
+
+def unsuitable(plan: Plan) -> str | None:
+    """Why the native FMU step cannot step this plan (after Initialize); None when it can."""
+    if not plan.order:
+        return "no members"
+    for m in plan.order:
+        p = m.participant
+        if not isinstance(p, FmuParticipant) or p.prepared() is None:
+            return f"{m.name} is not an in-process FMU with prepared calls"
+        if m.multiple != 1:
+            return f"{m.name} steps every {m.multiple} base steps"
+    for link in plan.links:
+        if link.convert is not None:
+            return f"{link.target}.{link.input} converts what it receives"
+    return None
+
+
+class Kernel:
+    """The in-process FMUs of one plan, stepped in C (``unsuitable(plan)`` must be None)."""
+
+    def __init__(self, plan: Plan, lib: ctypes.CDLL) -> None:
+        self._lib = lib
+        self._order = plan.order
+        slots = {m.name: i for i, m in enumerate(plan.members)}
+        planes: dict[tuple[Any, str], _Plane] = {}
+        placed: list[tuple[str, Group, _Plane, int]] = []  # member, group, plane, first index
+        for m in plan.order:
+            calls = self._participant(m).prepared()
+            assert calls is not None
+            for group in calls.outputs:
+                element = _element(group)
+                plane = planes.setdefault((element, group.kind), _Plane(element, group.kind))
+                placed.append((m.name, group, plane, plane.size))
+                plane.size += group.count
+        for plane in planes.values():
+            plane.allocate()
+        self._planes = list(planes.values())
+        self._slot: dict[tuple[str, str], tuple[_Plane, int, Group]] = {}
+        """Every output's place: its plane, its index there and its group."""
+        gets: dict[str, list[tuple[Group, _Plane, int]]] = {}
+        for name, group, plane, first in placed:
+            gets.setdefault(name, []).append((group, plane, first))
+            for j, channel in enumerate(group.names):
+                self._slot[(name, channel)] = (plane, first + j, group)
+        offsets, start = {}, 0
+        for plane in self._planes:
+            offsets[id(plane)] = start
+            start += plane.size
+        position = {key: offsets[id(plane)] + i for key, (plane, i, _) in self._slot.items()}
+        columns = [(m.name, c.name) for m in plan.members for c in m.outputs]
+        self._row = _row_getter([position[key] for key in columns])
+
+        feeds: dict[str, list[tuple[str, tuple[str, str]]]] = {}
+        for link in plan.links:
+            feeds.setdefault(link.target, []).append((link.input, (link.source, link.output)))
+        self._keep: list[Any] = []  # every ctypes object the C side points into
+        self._sets: list[list[Group]] = []
+        """Each member's setter groups (in stepping order), to name a failed one."""
+        self._members = (_Member * len(plan.order))()
+        for i, m in enumerate(plan.order):
+            self._fill(self._members[i], m, slots[m.name], gets[m.name], feeds.get(m.name, []))
+        self.timing = (ctypes.c_double * len(plan.members))()
+        self._watch = (ctypes.c_double * 2)(-1.0, 0.0)
+        self._stop = (ctypes.c_int * 3)()
+        self._jacobi = int(plan.algorithm is Algorithm.JACOBI)
+        self._time = 0.0
+        self._what = [f"{m.name}.DoStep" for m in plan.members]
+        self._deadline = [m.deadline for m in plan.members]
+
+    @staticmethod
+    def _participant(m: Member) -> FmuParticipant:
+        assert isinstance(m.participant, FmuParticipant)
+        return m.participant
+
+    def _fill(
+        self,
+        native: _Member,
+        m: Member,
+        slot: int,
+        gets: Sequence[tuple[Group, _Plane, int]],
+        feed: Sequence[tuple[str, tuple[str, str]]],
+    ) -> None:
+        participant = self._participant(m)
+        calls = participant.prepared()
+        assert calls is not None
+        parts = calls.native
+        native.instance = parts.instance
+        native.do_step = _address(parts.do_step)
+        native.step = m.step
+        native.version = 3 if parts.version == "3.0" else 2
+        native.slot = slot
+        get = (_Call * max(1, len(gets)))()
+        for g, (group, plane, first) in enumerate(gets):
+            get[g] = _Call(
+                _address(group.function),
+                ctypes.addressof(group.refs),
+                group.count,
+                plane.address(first),
+            )
+        native.gets, native.get = len(gets), get
+        source = dict(feed)
+        sets = participant.input_groups(tuple(source)) if source else []
+        set_ = (_Call * max(1, len(sets)))()
+        copies = []
+        for s, group in enumerate(sets):
+            set_[s] = _Call(
+                _address(group.function),
+                ctypes.addressof(group.refs),
+                group.count,
+                ctypes.addressof(group.buffer),
+            )
+            size = ctypes.sizeof(_element(group))
+            for j, name in enumerate(group.names):
+                plane, index, origin = self._slot[source[name]]
+                if group.kind == "String" or _element(origin) is not _element(group):
+                    raise _Unsuitable(
+                        f"{m.name}.{name} ({group.kind}) is fed a {origin.kind} by "
+                        f"{source[name][0]}.{source[name][1]}"
+                    )
+                copies.append(
+                    _Copy(ctypes.addressof(group.buffer) + j * size, plane.address(index), size)
+                )
+        native.sets, native.set = len(sets), set_
+        copy = (_Copy * max(1, len(copies)))(*copies)
+        native.copies, native.copy = len(copies), copy
+        self._keep += [get, set_, copy]
+        self._sets.append(sets)
+
+    def place(self, member: str, outputs: Mapping[str, Value]) -> None:
+        """Put a member's outputs (its Initialize answer, or those it ended the run with)
+        where its successors and the results row read them."""
+        for channel, value in outputs.items():
+            plane, index, group = self._slot[(member, channel)]
+            if group.kind == "String":
+                plane.array[index] = str(value).encode("utf-8")
+            else:
+                plane.array[index] = value
+
+    def row(self) -> list[Value]:
+        """Every member's outputs, in the results' column order."""
+        values: list[Value] = []
+        for plane in self._planes:
+            values += plane.values()
+        return self._row(values)
+
+    def step(self, time: float, start: int = 0) -> tuple[int, Exception] | None:
+        """Step the members from ``start`` (in stepping order) at ``time``; None when all
+        stepped, else the index of the member that stopped the step and what it means (an
+        error, or ``EndRun``: step on from the next member)."""
+        self._time = time
+        stop = self._stop
+        index = self._lib.ck_step(
+            self._members,
+            len(self._order),
+            self._jacobi,
+            start,
+            time,
+            self.timing,
+            self._watch,
+            stop,
+        )
+        if index == DONE:
+            return None
+        return index, self._meaning(index, time)
+
+    def _meaning(self, index: int, time: float) -> Exception:
+        m = self._order[index]
+        participant = self._participant(m)
+        call, group, status = self._stop
+        if call == TERMINATE:
+            return participant.terminated(time, m.step, self._members[index].last)
+        calls = participant.prepared()
+        assert calls is not None
+        if call == GET:
+            name = calls.outputs[group].call
+        elif call == SET:
+            name = self._sets[index][group].call
+        else:
+            name = "fmi3DoStep" if calls.native.version == "3.0" else "fmi2DoStep"
+        return participant.stopped(name, status, time, m.step)
+
+    def under_way(self) -> tuple[str, float, float, float, str] | None:
+        """The member step under way for the watchdog: (what, simulated time, deadline,
+        since [monotonic], cause); None between steps."""
+        slot, since = self._watch[0], self._watch[1]
+        if slot < 0:
+            return None
+        at = int(slot)
+        return self._what[at], self._time, self._deadline[at], since, IN_PROCESS
+
+
+class _Unsuitable(Exception):
+    """A connection the native FMU step cannot copy (found while preparing it)."""
+
+
+def _row_getter(positions: Sequence[int]) -> Callable[[list[Value]], list[Value]]:
+    if len(positions) > 1:
+        pick = itemgetter(*positions)
+        return lambda values: list(pick(values))
+    return lambda values: [values[i] for i in positions]
+
+
+def prepare(plan: Plan, wanted: bool) -> Kernel | None:
+    """The kernel for this plan (after Initialize), when asked for and it means exactly what
+    the step in Python means; None otherwise (why is logged)."""
+    if not wanted:
+        return None
+    reason = unsuitable(plan)
+    if reason is None:
+        lib = library()
+        if lib is None:
+            return None
+        try:
+            kernel = Kernel(plan, lib)
+        except _Unsuitable as exc:
+            reason = str(exc)
+        else:
+            log.debug("native_fmu_step", members=len(plan.order))
+            return kernel
+    log.debug("native_fmu_step_unused", reason=reason)
+    return None

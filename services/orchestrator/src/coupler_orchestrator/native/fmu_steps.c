@@ -1,0 +1,136 @@
+/* The in-process FMUs' step loop in C: one call from Python steps every member of a base step.
+ *
+ * Python (coupler_orchestrator.kernel) prepares everything once per run: each member's FMI
+ * functions, instance, value references and buffers (the outputs' buffers are slices of one
+ * array per type, so Python reads a whole row with one slice per type), and the routing of
+ * every connection as a copy from an output's slot to an input's slot. A step is then plain C:
+ * copy the connected values, set them, fmi2DoStep / fmi3DoStep, get every output. No allocation,
+ * no Python, no ctypes conversion per call.
+ *
+ * Jacobi copies every member's inputs before the first member steps (all on the outputs of
+ * t_k); Gauss-Seidel copies each member's just before it steps (it sees its predecessors'
+ * outputs of t_k+1). A call whose status is worse than Warning (or an FMI 3.0 request to
+ * terminate, or an FMI 2.0 discard) stops the step at that member and returns its index;
+ * Python says what it means and may go on from the next member.
+ *
+ * While a member is under way, watch[0] holds its slot and watch[1] the CLOCK_MONOTONIC time
+ * it began (what Python's time.monotonic reads), for the watchdog thread; watch[0] is -1
+ * between steps. timing[slot] receives each member's wall time [s].
+ */
+#define _POSIX_C_SOURCE 199309L /* clock_gettime */
+#include <stdbool.h>
+#include <stddef.h>
+#include <string.h>
+#include <time.h>
+
+enum { FMI2 = 2, FMI3 = 3 };
+enum { DONE = -1 };
+enum { CALL_SET = 0, CALL_STEP = 1, CALL_GET = 2, CALL_TERMINATE = 3 };
+
+typedef int (*fmi2_access)(void *, const unsigned int *, size_t, void *);
+typedef int (*fmi3_access)(void *, const unsigned int *, size_t, void *, size_t);
+typedef int (*fmi2_step)(void *, double, double, int);
+typedef int (*fmi3_step)(void *, double, double, bool, bool *, bool *, bool *, double *);
+
+typedef struct {
+    void *function;
+    const unsigned int *refs;
+    size_t count;
+    void *buffer;
+} ck_call;
+
+typedef struct {
+    void *target;
+    const void *source;
+    size_t size;
+} ck_copy;
+
+typedef struct {
+    void *instance;
+    void *do_step;
+    double step;
+    int version;
+    int slot;
+    int copies;
+    const ck_copy *copy;
+    int sets;
+    const ck_call *set;
+    int gets;
+    const ck_call *get;
+    /* fmi3DoStep's answers */
+    bool event, terminate, early;
+    double last;
+} ck_member;
+
+static double monotonic(void) {
+    struct timespec now;
+    clock_gettime(CLOCK_MONOTONIC, &now);
+    return (double)now.tv_sec + (double)now.tv_nsec * 1e-9;
+}
+
+static int access_call(int version, const ck_call *call, void *instance) {
+    if (version == FMI2)
+        return ((fmi2_access)call->function)(instance, call->refs, call->count, call->buffer);
+    return ((fmi3_access)call->function)(instance, call->refs, call->count, call->buffer,
+                                         call->count);
+}
+
+static void copy_inputs(const ck_member *m) {
+    for (int i = 0; i < m->copies; i++)
+        memcpy(m->copy[i].target, m->copy[i].source, m->copy[i].size);
+}
+
+/* Steps members[from..n) at `time`; DONE, or the index of the member that stopped the step
+ * with stop[0] = CALL_*, stop[1] = which set/get and stop[2] = the FMI status. */
+int ck_step(ck_member *members, int n, int jacobi, int from, double time, double *timing,
+            volatile double *watch, int *stop) {
+    if (jacobi && from == 0)
+        for (int i = 0; i < n; i++) copy_inputs(&members[i]);
+    for (int i = from; i < n; i++) {
+        ck_member *m = &members[i];
+        double began = monotonic();
+        watch[1] = began;
+        watch[0] = (double)m->slot;
+        if (!jacobi) copy_inputs(m);
+        int stopped = DONE;
+        for (int s = 0; s < m->sets; s++) {
+            int result = access_call(m->version, &m->set[s], m->instance);
+            if (result > 1) {
+                stop[0] = CALL_SET, stop[1] = s, stop[2] = result;
+                stopped = i;
+                break;
+            }
+        }
+        if (stopped == DONE) {
+            int result;
+            if (m->version == FMI2) {
+                result = ((fmi2_step)m->do_step)(m->instance, time, m->step, 1);
+            } else {
+                m->event = m->terminate = m->early = false;
+                result = ((fmi3_step)m->do_step)(m->instance, time, m->step, true, &m->event,
+                                                 &m->terminate, &m->early, &m->last);
+            }
+            if (result > 1) {
+                stop[0] = CALL_STEP, stop[1] = 0, stop[2] = result;
+                stopped = i;
+            } else if (m->version == FMI3 && m->terminate) {
+                stop[0] = CALL_TERMINATE, stop[1] = 0, stop[2] = result;
+                stopped = i;
+            }
+        }
+        if (stopped == DONE) {
+            for (int g = 0; g < m->gets; g++) {
+                int result = access_call(m->version, &m->get[g], m->instance);
+                if (result > 1) {
+                    stop[0] = CALL_GET, stop[1] = g, stop[2] = result;
+                    stopped = i;
+                    break;
+                }
+            }
+        }
+        timing[m->slot] = monotonic() - began;
+        watch[0] = -1.0;
+        if (stopped != DONE) return stopped;
+    }
+    return DONE;
+}

@@ -1,0 +1,171 @@
+"""The native FMU step (coupler_orchestrator.kernel): chosen for runs of in-process FMUs, the
+same bytes in results.csv as the step in Python, and left alone where it would not mean the
+same (a string connection).
+
+    Source (FMI 2 or 3) --ramp, counter--> Feed1 --real, int, bool--> Feed2 --real--> Feed3
+                                           (Feedthrough2, FMI 2)
+
+The step in C is also run by test_fmu_termination.py (an FMU asking to end the run, FMI 2
+and 3) and test_faults.py (an FMU hanging in-process, an interrupt while it hangs, an
+interrupt of a fast run), each over both paths (the ``fmu_path`` fixture).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from pathlib import Path
+
+import pytest
+
+from coupler_orchestrator import kernel
+from coupler_orchestrator.plan import Plan
+
+from .conftest import Coupler
+
+ROUTES = [
+    ("Source", "ramp", "Feed1", "real_in"),
+    ("Source", "counter", "Feed1", "int_in"),
+    ("Feed1", "real_out", "Feed2", "real_in"),
+    ("Feed1", "int_out", "Feed2", "int_in"),
+    ("Feed1", "bool_out", "Feed2", "bool_in"),
+    ("Feed2", "real_out", "Feed3", "real_in"),
+    ("Feed3", "bool_out", "Feed1", "bool_in"),  # a loop: Jacobi and Gauss-Seidel differ
+]
+DECOUPLED = (
+    '<ssd:Annotations><ssc:Annotation type="org.coupler.connection">'
+    '<coupler:Connection decoupled="true"/></ssc:Annotation></ssd:Annotations>'
+)
+"""The loop's last connection: Gauss-Seidel reads it from the previous step."""
+STRING = ("Feed1", "string_out", "Feed2", "string_in")
+
+
+TYPES = {"ramp": "Real", "sine": "Real", "counter": "Integer", "real": "Real", "int": "Integer",
+         "bool": "Boolean", "string": "String"}  # fmt: skip
+
+
+def connectors(outputs: list[str], inputs: list[str]) -> str:
+    """Connectors of every output and of the connected inputs."""
+    return "".join(
+        f'<ssd:Connector name="{name}" kind="{kind}"><ssc:{TYPES[name.split("_")[0]]}/>'
+        "</ssd:Connector>"
+        for names, kind in ((outputs, "output"), (inputs, "input"))
+        for name in names
+    )
+
+
+def chain(
+    folder: Path, fmus: Mapping[str, Path], source: str, routes: list[tuple[str, ...]]
+) -> Path:
+    def inputs(element: str) -> list[str]:
+        return [d for _, _, c, d in routes if c == element]
+
+    elements = [
+        f'<ssd:Component name="Source" source="{fmus[source]}"><ssd:Connectors>'
+        f"{connectors(['ramp', 'sine', 'counter'], [])}</ssd:Connectors></ssd:Component>"
+    ] + [
+        f'<ssd:Component name="Feed{k}" source="{fmus["Feedthrough2"]}"><ssd:Connectors>'
+        f"{connectors(['real_out', 'int_out', 'bool_out', 'string_out'], inputs(f'Feed{k}'))}"
+        "</ssd:Connectors></ssd:Component>"
+        for k in (1, 2, 3)
+    ]
+    connections = [
+        f'<ssd:Connection startElement="{a}" startConnector="{b}" endElement="{c}" '
+        f'endConnector="{d}">{DECOUPLED if (a, c) == ("Feed3", "Feed1") else ""}</ssd:Connection>'
+        for a, b, c, d in routes
+    ]
+    path = folder / "chain.ssd"
+    path.write_text(
+        f"""<?xml version="1.0" encoding="UTF-8"?>
+<ssd:SystemStructureDescription version="1.0" name="Chain"
+    xmlns:ssd="http://ssp-standard.org/SSP1/SystemStructureDescription"
+    xmlns:ssc="http://ssp-standard.org/SSP1/SystemStructureCommon"
+    xmlns:coupler="org.coupler.connection">
+  <ssd:System name="Chain">
+    <ssd:Elements>{"".join(elements)}</ssd:Elements>
+    <ssd:Connections>{"".join(connections)}</ssd:Connections>
+  </ssd:System>
+  <ssd:DefaultExperiment startTime="0" stopTime="2"/>
+</ssd:SystemStructureDescription>
+""",
+        encoding="utf-8",
+    )
+    return path
+
+
+@pytest.fixture
+def prepared(monkeypatch: pytest.MonkeyPatch) -> list[kernel.Kernel | None]:
+    """What ``kernel.prepare`` gave each run of the test (None: the run stepped in Python)."""
+    kernel.build()
+    made: list[kernel.Kernel | None] = []
+    real = kernel.prepare
+
+    def spy(plan: Plan, wanted: bool) -> kernel.Kernel | None:
+        made.append(real(plan, wanted))
+        return made[-1]
+
+    monkeypatch.setattr(kernel, "prepare", spy)
+    return made
+
+
+PARAMS = ("--param", "Feed2.gain=-1.5", "--param", "Feed1.int_offset=3", "--step", "0.01")
+
+
+@pytest.mark.parametrize("algorithm", ["jacobi", "gauss-seidel"])
+@pytest.mark.parametrize("source", ["Source2", "Source3"])
+def test_fmus_step_in_c_with_the_same_bytes_as_in_python(
+    coupler: Coupler,
+    fmus: Mapping[str, Path],
+    tmp_path: Path,
+    prepared: list[kernel.Kernel | None],
+    algorithm: str,
+    source: str,
+) -> None:
+    ssd = chain(tmp_path, fmus, source, ROUTES)
+    recorded = {}
+    for path, flag in (("C", ()), ("Python", ("--no-native-steps",))):
+        out = tmp_path / path
+        outcome = coupler("run", ssd, "--out", out, "--algorithm", algorithm, *PARAMS, *flag)
+        assert outcome.code == 0, outcome.err
+        recorded[path] = (out / "results.csv").read_bytes()
+        summary = coupler.summary(out)
+        for name in ("Source", "Feed1", "Feed2", "Feed3"):
+            assert summary["participants"][name]["steps"] == 200
+            assert 0 < summary["participants"][name]["do_step_latency_ms"]["p50"] < 1000
+    assert [made is not None for made in prepared] == [True, False]
+    assert recorded["C"] == recorded["Python"]
+    lines = recorded["C"].decode().splitlines()
+    assert len(lines) == 202  # header and t = 0 .. 2 s
+    header = lines[0].split(",")
+    last = dict(zip(header, lines[-1].split(","), strict=True))
+    # the ramp went through gains 1, -1.5, 1 (one step late per member under Jacobi)
+    assert float(last["Feed3.real_out"]) != 0.0
+    assert int(last["Feed1.int_out"]) >= 3
+
+
+def test_a_string_connection_steps_in_python(
+    coupler: Coupler, fmus: Mapping[str, Path], tmp_path: Path, prepared: list[kernel.Kernel | None]
+) -> None:
+    """A string lives in its FMU's memory only until that FMU's next call: the step in C
+    would copy a pointer that the source's own step invalidates, so the run steps in
+    Python (and the string arrives)."""
+    ssd = chain(tmp_path, fmus, "Source2", [*ROUTES, STRING])
+    out = tmp_path / "out"
+    outcome = coupler("run", ssd, "--out", out, *PARAMS)
+    assert outcome.code == 0, outcome.err
+    assert prepared == [None]
+    rows = coupler.results(out)
+    assert rows[-1]["Feed2.string_out"] == rows[-1]["Feed1.string_out"]
+
+
+def test_why_a_plan_steps_in_python() -> None:
+    """``unsuitable`` names what keeps a plan out of C: no members at all here."""
+    plan = Plan(
+        members=(),
+        order=(),
+        links=(),
+        grid=None,  # type: ignore[arg-type]
+        algorithm=None,  # type: ignore[arg-type]
+        run_id="x",
+        lease=1.0,
+    )
+    assert kernel.unsuitable(plan) == "no members"
