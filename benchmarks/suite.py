@@ -6,8 +6,10 @@
 Cases (steps/s, median of the repetitions; Coupler and its reference interleaved):
 
 - in-process FMU chain xN: Source2 feeding N Feedthrough2 (real_out -> real_in), every output
-  recorded, `coupler`'s runner; against a hand-written FMPy FMU2Slave loop over the same FMUs
-  (every output read each step) and libcosim (libcosimpy, C++) with the same connections;
+  recorded, `coupler`'s runner, the FMUs stepped by the native FMU step (C; with
+  COUPLER_NATIVE_STEPS=0 through Python, one ctypes call per FMI call); against a
+  hand-written FMPy FMU2Slave loop over the same FMUs (every output read each step) and
+  libcosim (libcosimpy, C++) with the same connections;
 - remote xN: N example gain participants, each its own process, chained y -> u in a ring,
   Jacobi, over the native step channel when it is built (COUPLER_NATIVE_STEPS=0 measures the
   grpc.aio path instead); against raw grpc.aio round trips to N trivial servers (processes
@@ -821,16 +823,19 @@ def main() -> int:
     def log(text: str) -> None:
         print(f"[{time.perf_counter() - started:6.1f} s] {text}", file=sys.stderr, flush=True)
 
-    from coupler_orchestrator import steps
+    from coupler_orchestrator import kernel, steps
 
     channel = "native step channel" if steps.enabled() else "grpc.aio"
+    fmu_steps = "in C" if steps.wanted() and kernel.library() is not None else "through Python"
     rows, extra = asyncio.run(suite(sizes, log))
     extra["remote_steps"] = channel
+    extra["fmu_steps"] = fmu_steps
     print()
     print(
         f"Coupler benchmark ({'full' if args.full else 'quick'}; steps/s, median of "
         f"{sizes.repeats}, Coupler and reference interleaved in this run; {os.cpu_count()} cores, "
-        f"Python {platform.python_version()}; remote steps over the {channel})"
+        f"Python {platform.python_version()}; remote steps over the {channel}, in-process FMUs "
+        f"stepped {fmu_steps})"
     )
     print(table(rows))
     print(f"time from run start to first step [s]: {extra['time_to_first_step_s']}")

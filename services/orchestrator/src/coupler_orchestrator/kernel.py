@@ -20,6 +20,7 @@ beside the native step channel's.
 from __future__ import annotations
 
 import ctypes
+import shutil
 import sys
 from collections.abc import Callable, Mapping, Sequence
 from operator import itemgetter
@@ -101,9 +102,13 @@ def library() -> ctypes.CDLL | None:
     global _loaded, _problem
     if _loaded is not None or _problem is not None:
         return _loaded
+    if shutil.which("gcc") is None:  # a machine that only runs (a slim container): quietly
+        _problem = "gcc not found on PATH"
+        log.info("native_fmu_step_unavailable", reason=_problem)
+        return None
     try:
         lib = ctypes.CDLL(str(build()))
-    except (CouplerError, OSError) as exc:
+    except (CouplerError, OSError) as exc:  # a build that fails is a bug: say so, carry on
         _problem = str(exc)
         print(f"warning: native FMU step unavailable: {exc}", file=sys.stderr)
         return None
