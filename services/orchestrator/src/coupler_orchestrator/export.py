@@ -21,6 +21,7 @@ naming what changed. docs/export-fmu.md is the user's guide.
 
 from __future__ import annotations
 
+import ctypes
 import hashlib
 import inspect
 import math
@@ -30,11 +31,12 @@ import shutil
 import subprocess
 import sys
 import tempfile
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from xml.etree import ElementTree
 
+import structlog
 from google.protobuf import descriptor_pb2
 
 from coupler import wire
@@ -50,6 +52,7 @@ __all__ = [
     "MODEL_IDENTIFIER",
     "ExportError",
     "Exported",
+    "NativeLibrary",
     "ToolchainMissing",
     "build_proxy",
     "cache_root",
@@ -59,6 +62,8 @@ __all__ = [
     "toolchain_problem",
     "write_fmu",
 ]
+
+log = structlog.get_logger("coupler.export")
 
 MODEL_IDENTIFIER = "CouplerProxy"
 ADDRESS_VARIABLE = "coupler_address"
@@ -162,6 +167,39 @@ def cached_library(
         compile_library(compiler, [*flags, str(source), *libraries, "-o", str(built)], what=what)
         built.replace(library)  # whole or not at all
     return library
+
+
+class NativeLibrary:
+    """A shared library built by ``build`` and loaded on the first call; the call then gives
+    it, or None when it cannot be had — said once: quietly (logged) without its tool chain
+    (``ToolchainMissing``), as a warning on stderr when the build fails (a bug)."""
+
+    def __init__(
+        self, build: Callable[[], Path], declare: Callable[[ctypes.CDLL], None], what: str
+    ) -> None:
+        self._build = build
+        self._declare = declare
+        """Sets the functions' argument and result types."""
+        self.what = what
+        self._loaded: ctypes.CDLL | None = None
+        self.problem: str | None = None
+
+    def __call__(self) -> ctypes.CDLL | None:
+        if self._loaded is not None or self.problem is not None:
+            return self._loaded
+        try:
+            lib = ctypes.CDLL(str(self._build()))
+        except ToolchainMissing as exc:
+            self.problem = str(exc)
+            log.info("native_library_unavailable", library=self.what, reason=self.problem)
+            return None
+        except (CouplerError, OSError) as exc:
+            self.problem = str(exc)
+            print(f"warning: {self.what} unavailable: {exc}", file=sys.stderr)
+            return None
+        self._declare(lib)
+        self._loaded = lib
+        return lib
 
 
 def _protocol_descriptor() -> bytes:

@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import ctypes
 import shutil
-import sys
 from collections.abc import Callable, Mapping, Sequence
 from operator import itemgetter
 from pathlib import Path
@@ -30,11 +29,10 @@ from typing import Any
 import structlog
 
 from coupler.channels import Value
-from coupler.errors import CouplerError
 from coupler.fmicalls import CONVERT, Group
 from coupler.fmu import FmuParticipant
 from coupler_orchestrator.checks import Member
-from coupler_orchestrator.export import cached_library
+from coupler_orchestrator.export import NativeLibrary, ToolchainMissing, cached_library
 from coupler_orchestrator.options import Algorithm
 from coupler_orchestrator.plan import Plan
 from coupler_orchestrator.watchdog import IN_PROCESS
@@ -81,7 +79,9 @@ class _Member(ctypes.Structure):
 
 def build() -> Path:
     """The shared library, built with gcc on first use (quietly: well under a second) and
-    cached."""
+    cached; ToolchainMissing without gcc."""
+    if shutil.which("gcc") is None:
+        raise ToolchainMissing("cannot build the native FMU step: gcc not found on PATH")
     return cached_library(
         SOURCE,
         compiler="gcc",
@@ -93,25 +93,7 @@ def build() -> Path:
     )
 
 
-_loaded: ctypes.CDLL | None = None
-_problem: str | None = None
-
-
-def library() -> ctypes.CDLL | None:
-    """The loaded library; None (the reason said once) when it cannot be had."""
-    global _loaded, _problem
-    if _loaded is not None or _problem is not None:
-        return _loaded
-    if shutil.which("gcc") is None:  # a machine that only runs (a slim container): quietly
-        _problem = "gcc not found on PATH"
-        log.info("native_fmu_step_unavailable", reason=_problem)
-        return None
-    try:
-        lib = ctypes.CDLL(str(build()))
-    except (CouplerError, OSError) as exc:  # a build that fails is a bug: say so, carry on
-        _problem = str(exc)
-        print(f"warning: native FMU step unavailable: {exc}", file=sys.stderr)
-        return None
+def _declare(lib: ctypes.CDLL) -> None:
     lib.ck_step.restype = ctypes.c_int
     lib.ck_step.argtypes = [
         ctypes.POINTER(_Member),
@@ -123,8 +105,11 @@ def library() -> ctypes.CDLL | None:
         ctypes.POINTER(ctypes.c_double),
         ctypes.POINTER(ctypes.c_int),
     ]
-    _loaded = lib
-    return lib
+
+
+library = NativeLibrary(build, _declare, "the native FMU step")
+"""``library()``: the loaded native FMU step, or None (why is said once; quietly without gcc,
+as on a machine that only runs, such as a slim container)."""
 
 
 def _address(function: Any) -> int:

@@ -19,13 +19,11 @@ from __future__ import annotations
 import ctypes
 import os
 import subprocess
-import sys
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
 import grpc
-import structlog
 
 from coupler import wire
 from coupler.channels import RunSetup, Value
@@ -35,13 +33,11 @@ from coupler.participant import EndRun, Split, Values
 from coupler.security import read_secret
 from coupler.v1 import component_pb2 as pb
 from coupler_orchestrator.export import (
-    ExportError,
+    NativeLibrary,
     ToolchainMissing,
     cached_library,
     toolchain_problem,
 )
-
-log = structlog.get_logger("coupler.steps")
 
 SOURCE = Path(__file__).parent / "native" / "step_streams.cc"
 ENVIRONMENT = "COUPLER_NATIVE_STEPS"
@@ -75,25 +71,7 @@ def wanted(asked: bool = True) -> bool:
     return asked and os.environ.get(ENVIRONMENT, "1").strip().lower() not in ("0", "no", "false")
 
 
-_loaded: ctypes.CDLL | None = None
-_problem: str | None = None
-
-
-def library() -> ctypes.CDLL | None:
-    """The loaded step channel; None (the reason logged once) when it cannot be had."""
-    global _loaded, _problem
-    if _loaded is not None or _problem is not None:
-        return _loaded
-    try:
-        lib = ctypes.CDLL(str(build()))
-    except ToolchainMissing as exc:
-        _problem = str(exc)
-        log.info("native_steps_unavailable", reason=_problem)
-        return None
-    except (ExportError, OSError) as exc:  # a build that fails is a bug: say so, carry on
-        _problem = str(exc)
-        print(f"warning: native step channel unavailable: {exc}", file=sys.stderr)
-        return None
+def _declare(lib: ctypes.CDLL) -> None:
     stream = ctypes.c_void_p
     lib.cs_open.restype = stream
     lib.cs_open.argtypes = [
@@ -120,8 +98,10 @@ def library() -> ctypes.CDLL | None:
     ]
     lib.cs_close.restype = None
     lib.cs_close.argtypes = [stream, ctypes.c_double]
-    _loaded = lib
-    return lib
+
+
+library = NativeLibrary(build, _declare, "the native step channel")
+"""``library()``: the loaded step channel, or None (why is said once)."""
 
 
 def enabled(asked: bool = True) -> bool:
