@@ -169,3 +169,24 @@ def test_why_a_plan_steps_in_python() -> None:
         lease=1.0,
     )
     assert kernel.unsuitable(plan) == "no members"
+
+
+def test_what_is_recorded_is_picked_from_the_same_row(
+    coupler: Coupler, fmus: Mapping[str, Path], tmp_path: Path, prepared: list[kernel.Kernel | None]
+) -> None:
+    """--output-variables and --output-interval pick from the row the native step reads."""
+    ssd = chain(tmp_path, fmus, "Source2", ROUTES)
+    picked = ("--output-variables", "Feed2.*", "Source.counter", "--output-interval", "0.05")
+    recorded = {}
+    for path, flag in (("C", ()), ("Python", ("--no-native-steps",))):
+        out = tmp_path / path
+        outcome = coupler("run", ssd, "--out", out, *PARAMS, *picked, *flag)
+        assert outcome.code == 0, outcome.err
+        recorded[path] = (out / "results.csv").read_bytes()
+    assert [made is not None for made in prepared] == [True, False]
+    assert recorded["C"] == recorded["Python"]
+    lines = recorded["C"].decode().splitlines()
+    assert lines[0] == (
+        "time,Source.counter,Feed2.real_out,Feed2.int_out,Feed2.bool_out,Feed2.string_out"
+    )
+    assert len(lines) == 42  # header and t = 0, 0.05 .. 2 s
