@@ -199,7 +199,9 @@ class Kernel:
         """Each member's setter groups (in stepping order), to name a failed one."""
         self._members = (_Member * len(plan.order))()
         for i, m in enumerate(plan.order):
-            self._fill(self._members[i], m, slots[m.name], gets[m.name], feeds.get(m.name, []))
+            self._fill(
+                self._members[i], m, slots[m.name], gets.get(m.name, []), feeds.get(m.name, [])
+            )
         self.timing = (ctypes.c_double * len(plan.members))()
         self._watch = (ctypes.c_double * 2)(-1.0, 0.0)
         self._stop = (ctypes.c_int * 3)()

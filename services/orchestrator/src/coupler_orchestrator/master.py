@@ -9,7 +9,8 @@ Members that compute in this process (in-process FMUs, ``Participant.synchronous
 this thread without awaiting — while the remote members' steps are in flight — under the eye
 of a ``Watchdog`` that ends the run when such a step outlives its deadline. Remote members on
 the native step channel (``Participant.split``) are sent their requests first and answered
-last, on this thread too; the others are awaited.
+last, on this thread too; the others are awaited. A run of in-process FMUs only is stepped
+by one call into C per base step (``kernel``), with the same meaning.
 t_k = t_0 + k*h; each member steps from t_k by exactly its configured step (its deltaTime,
 else h), never by a difference of two communication points.
 """
@@ -123,6 +124,7 @@ class Master:
         self._slot = {m.name: i for i, m in enumerate(plan.members)}
         self._timing: list[float | None] = [None] * len(plan.members)
         self.store: dict[Key, Value] = {}
+        """Every member's latest outputs (the native FMU step keeps its own, in C arrays)."""
         self.completed_steps = 0
         self._ended: str | None = None
         """Why a participant asked to end the run, once one did."""
@@ -265,7 +267,8 @@ class Master:
             self._store(m, result, "Initialize", grid.start)
 
     def _watch_local_members(self) -> None:
-        """Find the members that step on this thread; watch them while they do."""
+        """Find the members that step on this thread and watch them while they do; prepare
+        the native FMU step when the plan allows it (``kernel``)."""
         for m in self.plan.order:
             stepper = m.participant.synchronous()
             if stepper is not None:
