@@ -99,8 +99,8 @@ def prepared(monkeypatch: pytest.MonkeyPatch) -> list[kernel.Kernel | None]:
     made: list[kernel.Kernel | None] = []
     real = kernel.prepare
 
-    def spy(plan: Plan, wanted: bool) -> kernel.Kernel | None:
-        made.append(real(plan, wanted))
+    def spy(plan: Plan) -> kernel.Kernel | None:
+        made.append(real(plan))
         return made[-1]
 
     monkeypatch.setattr(kernel, "prepare", spy)
@@ -155,20 +155,6 @@ def test_a_string_connection_steps_in_python(
     assert prepared == [None]
     rows = coupler.results(out)
     assert rows[-1]["Feed2.string_out"] == rows[-1]["Feed1.string_out"]
-
-
-def test_why_a_plan_steps_in_python() -> None:
-    """``unsuitable`` names what keeps a plan out of C: no members at all here."""
-    plan = Plan(
-        members=(),
-        order=(),
-        links=(),
-        grid=None,  # type: ignore[arg-type]
-        algorithm=None,  # type: ignore[arg-type]
-        run_id="x",
-        lease=1.0,
-    )
-    assert kernel.unsuitable(plan) == "no members"
 
 
 def test_what_is_recorded_is_picked_from_the_same_row(

@@ -71,11 +71,12 @@ class Group:
 
 @dataclass(frozen=True)
 class NativeParts:
-    """An instance's handle, FMI version and DoStep function, for a caller in C."""
+    """An instance's handle, FMI version, DoStep function and its name, for a caller in C."""
 
     instance: Any
     version: str
     do_step: Any
+    call: str
 
 
 CONVERT: dict[str, Callable[[Any], list[Value]]] = {
@@ -115,7 +116,7 @@ class Calls:
         functions = slave._functions
         prefix = "fmi2" if version == "2.0" else "fmi3"
         self._do_step = functions[f"{prefix}DoStep"]
-        self.native = NativeParts(slave.component, version, self._do_step)
+        self.native = NativeParts(slave.component, version, self._do_step, f"{prefix}DoStep")
         """What a step loop in C needs besides the groups (``coupler_orchestrator.kernel``)."""
         self._prefix = prefix
         if version == "3.0":

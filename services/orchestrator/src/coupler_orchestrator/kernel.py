@@ -35,7 +35,7 @@ from coupler_orchestrator.checks import Member
 from coupler_orchestrator.export import NativeLibrary, ToolchainMissing, cached_library
 from coupler_orchestrator.options import Algorithm
 from coupler_orchestrator.plan import Plan
-from coupler_orchestrator.watchdog import IN_PROCESS
+from coupler_orchestrator.watchdog import IN_PROCESS, Armed
 
 log = structlog.get_logger("coupler.kernel")
 
@@ -127,6 +127,8 @@ class _Plane:
         self.element = element
         self.convert = CONVERT.get(kind)
         self.size = 0
+        self.start = 0
+        """Where its values begin in a row's values (``Kernel.row``)."""
         self.array: Any = None
 
     def allocate(self) -> None:
@@ -173,9 +175,11 @@ class Kernel:
                 plane = planes.setdefault((element, group.kind), _Plane(element, group.kind))
                 placed.append((m.name, group, plane, plane.size))
                 plane.size += group.count
-        for plane in planes.values():
-            plane.allocate()
         self._planes = list(planes.values())
+        start = 0
+        for plane in self._planes:
+            plane.allocate()
+            plane.start, start = start, start + plane.size
         self._slot: dict[tuple[str, str], tuple[_Plane, int, Group]] = {}
         """Every output's place: its plane, its index there and its group."""
         gets: dict[str, list[tuple[Group, _Plane, int]]] = {}
@@ -183,13 +187,8 @@ class Kernel:
             gets.setdefault(name, []).append((group, plane, first))
             for j, channel in enumerate(group.names):
                 self._slot[(name, channel)] = (plane, first + j, group)
-        offsets, start = {}, 0
-        for plane in self._planes:
-            offsets[id(plane)] = start
-            start += plane.size
-        position = {key: offsets[id(plane)] + i for key, (plane, i, _) in self._slot.items()}
-        columns = [(m.name, c.name) for m in plan.members for c in m.outputs]
-        self._row = _row_getter([position[key] for key in columns])
+        columns = [self._slot[(m.name, c.name)] for m in plan.members for c in m.outputs]
+        self._row = _row_getter([plane.start + index for plane, index, _ in columns])
 
         feeds: dict[str, list[tuple[str, tuple[str, str]]]] = {}
         for link in plan.links:
@@ -319,10 +318,10 @@ class Kernel:
         elif call == SET:
             name = self._sets[index][group].call
         else:
-            name = "fmi3DoStep" if calls.native.version == "3.0" else "fmi2DoStep"
+            name = calls.native.call
         return participant.stopped(name, status, time, m.step)
 
-    def under_way(self) -> tuple[str, float, float, float, str] | None:
+    def under_way(self) -> Armed | None:
         """The member step under way for the watchdog: (what, simulated time, deadline,
         since [monotonic], cause); None between steps."""
         slot, since = self._watch[0], self._watch[1]
@@ -343,10 +342,10 @@ def _row_getter(positions: Sequence[int]) -> Callable[[list[Value]], list[Value]
     return lambda values: [values[i] for i in positions]
 
 
-def prepare(plan: Plan, wanted: bool) -> Kernel | None:
-    """The kernel for this plan (after Initialize), when asked for and it means exactly what
-    the step in Python means; None otherwise (why is logged)."""
-    if not wanted:
+def prepare(plan: Plan) -> Kernel | None:
+    """The kernel for this plan (after Initialize), when the plan asks for it (``native``)
+    and it means exactly what the step in Python means; None otherwise (why is logged)."""
+    if not plan.native:
         return None
     reason = unsuitable(plan)
     if reason is None:

@@ -280,12 +280,12 @@ class Master:
         if self._local or self._split:
             self._watchdog = Watchdog(self._abandon)
             self._watchdog.start()
-        self._kernel = kernel.prepare(self.plan, self.plan.native)
+        self._kernel = kernel.prepare(self.plan)
         if self._kernel is not None:
             assert self._watchdog is not None
             self._watchdog.follow(self._kernel.under_way)
-            for (name, channel), value in self.store.items():
-                self._kernel.place(name, {channel: value})
+            for m, keys in self._store_keys.items():  # the Initialize answers
+                self._kernel.place(m, {c: self.store[key] for c, key in keys.items()})
 
     def _abandon(self, status: str, reason: str) -> None:
         """End the run from the watchdog's thread: this thread is stuck in a participant."""
@@ -382,8 +382,6 @@ class Master:
         start = 0
         while (stopped := native.step(time, start)) is not None:
             index, meaning = stopped
-            if self._abandoned:
-                raise asyncio.CancelledError
             if not isinstance(meaning, EndRun):
                 raise meaning
             m = self.plan.order[index]

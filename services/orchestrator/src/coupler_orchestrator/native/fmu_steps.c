@@ -80,6 +80,33 @@ static void copy_inputs(const ck_member *m) {
         memcpy(m->copy[i].target, m->copy[i].source, m->copy[i].size);
 }
 
+static bool stopped(int *stop, int call, int which, int status) {
+    stop[0] = call, stop[1] = which, stop[2] = status;
+    return true;
+}
+
+/* The member's setters or getters in order; true (stop[] set) at the first that fails. */
+static bool access_all(const ck_member *m, const ck_call *calls, int count, int call, int *stop) {
+    for (int c = 0; c < count; c++) {
+        int result = access_call(m->version, &calls[c], m->instance);
+        if (result > 1) return stopped(stop, call, c, result);
+    }
+    return false;
+}
+
+/* fmi2DoStep / fmi3DoStep; true (stop[] set) when it failed or asked to terminate. */
+static bool do_step(ck_member *m, double time, int *stop) {
+    if (m->version == FMI2) {
+        int result = ((fmi2_step)m->do_step)(m->instance, time, m->step, 1);
+        return result > 1 && stopped(stop, CALL_STEP, 0, result);
+    }
+    m->event = m->terminate = m->early = false;
+    int result = ((fmi3_step)m->do_step)(m->instance, time, m->step, true, &m->event,
+                                         &m->terminate, &m->early, &m->last);
+    if (result > 1) return stopped(stop, CALL_STEP, 0, result);
+    return m->terminate && stopped(stop, CALL_TERMINATE, 0, result);
+}
+
 /* Steps members[from..n) at `time`; DONE, or the index of the member that stopped the step
  * with stop[0] = CALL_*, stop[1] = which set/get and stop[2] = the FMI status. */
 int ck_step(ck_member *members, int n, int jacobi, int from, double time, double *timing,
@@ -92,45 +119,11 @@ int ck_step(ck_member *members, int n, int jacobi, int from, double time, double
         watch[1] = began;
         watch[0] = (double)m->slot;
         if (!jacobi) copy_inputs(m);
-        int stopped = DONE;
-        for (int s = 0; s < m->sets; s++) {
-            int result = access_call(m->version, &m->set[s], m->instance);
-            if (result > 1) {
-                stop[0] = CALL_SET, stop[1] = s, stop[2] = result;
-                stopped = i;
-                break;
-            }
-        }
-        if (stopped == DONE) {
-            int result;
-            if (m->version == FMI2) {
-                result = ((fmi2_step)m->do_step)(m->instance, time, m->step, 1);
-            } else {
-                m->event = m->terminate = m->early = false;
-                result = ((fmi3_step)m->do_step)(m->instance, time, m->step, true, &m->event,
-                                                 &m->terminate, &m->early, &m->last);
-            }
-            if (result > 1) {
-                stop[0] = CALL_STEP, stop[1] = 0, stop[2] = result;
-                stopped = i;
-            } else if (m->version == FMI3 && m->terminate) {
-                stop[0] = CALL_TERMINATE, stop[1] = 0, stop[2] = result;
-                stopped = i;
-            }
-        }
-        if (stopped == DONE) {
-            for (int g = 0; g < m->gets; g++) {
-                int result = access_call(m->version, &m->get[g], m->instance);
-                if (result > 1) {
-                    stop[0] = CALL_GET, stop[1] = g, stop[2] = result;
-                    stopped = i;
-                    break;
-                }
-            }
-        }
+        bool halted = access_all(m, m->set, m->sets, CALL_SET, stop) || do_step(m, time, stop) ||
+                      access_all(m, m->get, m->gets, CALL_GET, stop);
         timing[m->slot] = monotonic() - began;
         watch[0] = -1.0;
-        if (stopped != DONE) return stopped;
+        if (halted) return i;
     }
     return DONE;
 }
