@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 
 from coupler.errors import ScenarioError
-from coupler_railway import load_infrastructure
+from coupler_railway import load_infrastructure, load_network
 from coupler_railway.openrails.export import export_route
 from coupler_railway.openrails.world import WorldFrame
 from openrails_mock.config import MockConfig
@@ -94,3 +94,32 @@ def test_missing_railml_names_the_file(tmp_path: Path) -> None:
     missing = tmp_path / "nowhere.railml"
     with pytest.raises(ScenarioError, match=r"nowhere\.railml"):
         create_app(MockConfig(railml=missing))
+
+
+JUNCTION = ROOT / "packages/railway/tests/data/junction.railml"
+
+
+@pytest.mark.parametrize(("switch", "node"), [(0, 2), (1, 3)])
+async def test_exported_junction_left_and_right(
+    serve: Serve, tmp_path: Path, switch: int, node: int
+) -> None:
+    """The exporter's junction (node 4: route 0 the left one, on along the main line; route 1
+    the right one, the branch) thrown by SwitchCommands on the path West-East."""
+    export_route(JUNCTION, tmp_path / "junction")
+    config = MockConfig(route=tmp_path / "junction", path=Path("PATHS/W-E.pat"), loading_delay_s=0)
+    async with serve(config) as session:
+        for _ in range(400):
+            payload = body(THROTTLE=1.0) | {"SwitchCommands": {"4": switch}}
+            async with session.post("/API/CABCONTROLS", json=payload) as resp:
+                train = (await resp.json())["trains"]["PLAYER"]
+            if train["locomotiveState"]["distance"] > 330.0:
+                break
+    assert train["trackLocation"]["trackNodeIndex"] == node
+    front = 41.7 + train["locomotiveState"]["distance"]
+    assert train["trackLocation"]["trackNodeOffset"] == pytest.approx(front - 300.0, abs=1e-3)
+    lines = load_network(JUNCTION).lines
+    model = lines[0].model if node == 2 else lines[1].model
+    expected = model.position(front if node == 2 else front - 300.0)
+    assert train["rotation"] == pytest.approx(
+        math.remainder(math.radians(expected.heading_deg), math.tau), abs=1e-3
+    )
