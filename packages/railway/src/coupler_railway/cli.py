@@ -26,6 +26,9 @@ def _export_openrails(args: argparse.Namespace) -> int:
     except OSError as exc:
         print(f"error: {exc.filename or args.railml}: {exc.strerror or exc}", file=sys.stderr)
         return 1
+    except ValueError as exc:  # e.g. a degenerate track the model cannot be built from
+        print(f"error: {args.railml}: {exc}", file=sys.stderr)
+        return 1
     origin = report.origin
     print(f"OpenRails route {report.name!r} written to {report.folder}")
     print(

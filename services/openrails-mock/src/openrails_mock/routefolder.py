@@ -304,6 +304,8 @@ def _track_node(block: Block, shapes: dict[int, SectionShape]) -> TrackNode:
                 shape_index = int(row[0])
                 numbers = [float(v) for v in row[8:16]]
                 world = (int(row[2]), int(row[3]), int(row[4]))
+                if not all(math.isfinite(v) for v in numbers):
+                    raise ValueError("not finite")
             except ValueError:
                 raise sections_block.error(
                     f"vector section {k} of node {index} has a value that is not a number",
