@@ -175,6 +175,11 @@ class _Builder:
         self.base_elevation: list[float] = []
         self.base_elevation = self._base_elevations()
         self.slope_offset = 0.0
+        self.section_uid: dict[int, tuple[int, int, int]] = {}
+        """id(section) -> (world tile x, z, UID) of the Dyntrack drawing it."""
+        self.item_uid: dict[int, tuple[int, int, int]] = {}
+        self.section_index: dict[int, int] = {}
+        """id(section) -> its number in tsection.dat (and its dynamic track's)."""
 
     # -- geometry helpers ----------------------------------------------------------------
 
@@ -448,8 +453,6 @@ class _Builder:
     def _world_objects(self) -> dict[tuple[int, int], list[tuple[str, object]]]:
         """Every world object by tile, in UID order; assigns the UIDs the TDB refers to."""
         world: dict[tuple[int, int], list[tuple[str, object]]] = {}
-        self.section_uid: dict[int, tuple[int, int, int]] = {}
-        self.item_uid: dict[int, tuple[int, int, int]] = {}
 
         def add(tile: tuple[int, int], kind: str, thing: object) -> tuple[int, int, int]:
             objects = world.setdefault(tile, [])
@@ -524,9 +527,9 @@ class _Builder:
         stf.end()
         stf.save(folder / "tsection.dat")
 
-    def _track_section(self, section: Section, index: int | None = None) -> list[object]:
+    def _track_section(self, section: Section) -> list[object]:
         """``SectionCurve ( c ) index a b`` of a route track section (or dynamic track)."""
-        number = self.section_index[id(section)] if index is None else index
+        number = self.section_index[id(section)]
         if section.curvature == 0.0:
             return [_Raw("SectionCurve ( 0 )"), number, float32(section.length), 0]
         radius = float32(1.0 / abs(section.curvature))
