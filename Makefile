@@ -4,15 +4,17 @@ UV ?= $(shell command -v uv 2>/dev/null || echo .venv-uv/bin/uv)
 PROTO_OUT := packages/coupler/src
 FMU_DIR := build/fmus
 RAILML := scenarios/railway/data/annaberg-schwarzenberg.railml
+ROUTE := build/routes/annaberg-schwarzenberg
 
 .PHONY: setup sync proto proto-check lint test demo demo-example fmus faulty-fmus track-fmu \
-        assets browser grpc-dev bench compose-check swarm-check k8s-check export-fmu-check clean
+        route assets browser grpc-dev bench compose-check swarm-check k8s-check export-fmu-check clean
 
 $(UV):
 	python3 -m venv .venv-uv && .venv-uv/bin/pip install --quiet uv
 
-# Everything a fresh machine needs: the workspace, the FMUs, the map's browser assets.
-setup: sync fmus faulty-fmus track-fmu assets
+# Everything a fresh machine needs: the workspace, the FMUs, the railway's OpenRails route,
+# the map's browser assets.
+setup: sync fmus faulty-fmus track-fmu route assets
 
 sync: $(UV)
 	$(UV) sync --frozen --quiet
@@ -45,6 +47,15 @@ track-fmu: sync $(FMU_DIR)/TrackBalises.fmu
 
 $(FMU_DIR)/TrackBalises.fmu: $(TRACK_FMU_INPUTS)
 	$(UV) run --frozen python -m balise_fmu.build --railml $(RAILML) --out $@
+
+# The railway scenario's OpenRails route folder, exported from the same railML file (the mock
+# runs on it; a real OpenRails can load it); rebuilt when the railML file or the exporter change.
+ROUTE_INPUTS := $(RAILML) $(wildcard packages/railway/src/coupler_railway/*.py) \
+                $(wildcard packages/railway/src/coupler_railway/openrails/*.py)
+route: sync $(ROUTE)/annaberg-schwarzenberg.trk
+
+$(ROUTE)/annaberg-schwarzenberg.trk: $(ROUTE_INPUTS)
+	$(UV) run --frozen coupler-railway export-openrails $(RAILML) --out $(ROUTE)
 
 # Leaflet (the map) and uPlot (`coupler plot -o FILE.html`) from npm into static files (no CDN
 # at run time).

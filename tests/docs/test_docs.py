@@ -10,8 +10,8 @@ unless the line before it says why it cannot::
 How a block runs:
 
 - in a sandbox: a temporary folder with the repository's top-level entries linked in (the
-  workspace ``.venv`` included) and a ``build/`` of its own holding a copy of ``build/fmus``,
-  so what a block writes (results, logs, certificates, FMUs) stays out of the checkout;
+  workspace ``.venv`` included) and a ``build/`` of its own holding a copy of ``build/fmus``
+  and ``build/routes`` (the railway's OpenRails route), so what a block writes (results, logs, certificates, FMUs) stays out of the checkout;
 - with PATH as a new user has it after ``make setup``: no virtual environment, no uv on it, so
   every command must name ``.venv/bin/...`` or a make target;
 - with the well-known ports (2150, 8080, 50051, 50061, 50062, 50071, 50443) replaced by free
@@ -159,6 +159,10 @@ def sandbox(tmp_path_factory: pytest.TempPathFactory) -> Path:
     if not (fmus / "TrackBalises.fmu").exists():
         pytest.fail(f"{fmus} lacks the FMUs: run `make setup` (make test does)")
     shutil.copytree(fmus, home / "build" / "fmus")
+    routes = ROOT / "build" / "routes"
+    if not (routes / "annaberg-schwarzenberg").is_dir():
+        pytest.fail(f"{routes} lacks the railway's route: run `make setup` (make test does)")
+    shutil.copytree(routes, home / "build" / "routes")
     return home
 
 

@@ -34,6 +34,8 @@ ROOT = Path(__file__).resolve().parents[2]
 SCENARIO = ROOT / "scenarios" / "railway"
 RAILML = SCENARIO / "data" / "annaberg-schwarzenberg.railml"
 FMUS = ROOT / "build" / "fmus"
+ROUTE = ROOT / "build" / "routes" / "annaberg-schwarzenberg"  # make setup exports it
+PATH = "PATHS/ocp_ABU-ocp_SZB.pat"
 ANTENNA_OFFSET = 39.7  # parameters.ssv: TrackBalises.antenna_offset
 STOP_DISTANCE = 25908.3  # parameters.ssv: Driver.stop_distance
 STEP = 1.0
@@ -99,8 +101,10 @@ async def railway_fleet(
                     p["mock"],
                     "--mode",
                     "lockstep",
-                    "--railml",
-                    str(RAILML),
+                    "--route",
+                    str(ROUTE),
+                    "--path",
+                    PATH,
                     *mock_options,
                 ),
                 health=f"http://127.0.0.1:{p['mock']}/API/READY",

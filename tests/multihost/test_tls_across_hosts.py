@@ -51,6 +51,7 @@ RAILWAY = ROOT / "scenarios" / "railway" / "SystemStructure.ssd"
 RAMP_GAIN = ROOT / "examples" / "ramp-gain" / "SystemStructure.ssd"
 RAILML = ROOT / "scenarios" / "railway" / "data" / "annaberg-schwarzenberg.railml"
 FMUS = ROOT / "build" / "fmus"
+ROUTE = ROOT / "build" / "routes" / "annaberg-schwarzenberg"  # make setup exports it
 # (scenario, --stop-time, its gRPC participants): 300 railway steps pass the first balises
 SCENARIOS = {
     "railway": (RAILWAY, 300.0, ("OpenRails", "TrackBalises", "Map")),
@@ -199,7 +200,7 @@ def fleet_file(path: Path, *, bind: str, tls: DevPki | None) -> Path:
     services = {
         "netns-openrails-mock": (
             ["python", "-m", "openrails_mock", "--host", "127.0.0.1", "--port", str(MOCK_PORT),
-             "--mode", "lockstep", "--railml", str(RAILML)],
+             "--mode", "lockstep", "--route", str(ROUTE), "--path", "PATHS/ocp_ABU-ocp_SZB.pat"],
             f"http://127.0.0.1:{MOCK_PORT}/API/READY",
         ),
         "netns-openrails-bridge": (

@@ -208,12 +208,15 @@ def test_balise_without_group(tmp_path: Path) -> None:
 
 
 def test_unsupported_elements_are_warnings(tmp_path: Path) -> None:
-    extra = '<signals><signal id="s1" pos="50"/><signal id="s2" pos="60"/></signals>'
+    extra = (
+        '<speedChanges><speedChange id="v1" pos="50" vMax="60"/>'
+        '<speedChange id="v2" pos="60" vMax="80"/></speedChanges>'
+    )
     text = _railml('<balise id="b1" code="7" pos="10"/>' + GROUP, extra=extra)
     infra = load_infrastructure(_write(tmp_path, text))
     assert len(infra.warnings) == 1
-    assert "unsupported element <signals> ignored" in infra.warnings[0]
-    assert f":{_line_of(text, '<signals>')}:" in infra.warnings[0]
+    assert "unsupported element <speedChanges> ignored" in infra.warnings[0]
+    assert f":{_line_of(text, '<speedChanges>')}:" in infra.warnings[0]
 
 
 def test_entities_are_not_expanded(tmp_path: Path) -> None:

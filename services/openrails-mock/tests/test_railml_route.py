@@ -1,6 +1,9 @@
-"""The mock on real railML routes, read by coupler_railway.
+"""The mock on the project's railML files: exported to route folders first, one way in.
 
-railML --coupler_railway--> TrackModel --> openrails-mock (lockstep) <--HTTP-- test
+    railML --coupler_railway export--> route folder --> openrails-mock (lockstep) <--HTTP-- test
+
+The train's track is the exported track database; it must lie on the railML B-spline (within
+the exporter's 1 cm) and report the B-spline's geographic coordinates.
 """
 
 from __future__ import annotations
@@ -11,7 +14,9 @@ from pathlib import Path
 import pytest
 
 from coupler.errors import ScenarioError
-from coupler_railway import load_infrastructure
+from coupler_railway import load_infrastructure, load_network
+from coupler_railway.openrails.export import export_route
+from coupler_railway.openrails.world import WorldFrame
 from openrails_mock.config import MockConfig
 
 from .conftest import Serve, body
@@ -21,7 +26,7 @@ TEST_LINE = ROOT / "packages/railway/tests/data/test-line.railml"
 SCENARIO = ROOT / "scenarios/railway/data/annaberg-schwarzenberg.railml"
 
 
-async def test_test_line_track_nodes_follow_the_railml_tracks(serve: Serve) -> None:
+async def test_railml_mode_runs_on_the_exported_track(serve: Serve) -> None:
     model = load_infrastructure(TEST_LINE).model
     config = MockConfig(railml=TEST_LINE, loading_delay_s=0.0, start_distance_m=995.0)
     async with serve(config) as session:
@@ -33,34 +38,54 @@ async def test_test_line_track_nodes_follow_the_railml_tracks(serve: Serve) -> N
         async with session.get("/API/MAP") as resp:
             position = await resp.json()
     front = 995.0 + train["locomotiveState"]["distance"]
-    section, offset = model.locate(front)
-    assert train["trackLocation"]["trackNodeIndex"] == section + 1 == 2  # crossed into t2
-    assert math.isclose(train["trackLocation"]["trackNodeOffset"], offset, abs_tol=1e-6)
-    assert math.isclose(train["trackLocation"]["trackNodeLength"], model.sections[1].length)
-    assert train["rearTrackLocation"]["trackNodeIndex"] == 1
+    location = train["trackLocation"]
+    # one vector node from buffer stop to buffer stop, laid the way the line runs
+    assert (location["trackNodeIndex"], location["movementDirection"]) == (1, "Forward")
+    assert location["trackNodeLength"] == pytest.approx(model.length, abs=1e-3)
+    assert location["trackNodeOffset"] == pytest.approx(front, abs=1e-6)
+    assert location["trackVectorSectionIndex"] > 0
+    assert train["rearTrackLocation"]["trackNodeOffset"] == pytest.approx(front - 41.7, abs=1e-6)
     point = model.position(front)
-    assert math.isclose(position["LatLon"]["Lat"], point.latitude_deg, abs_tol=1e-9)
-    assert math.isclose(position["LatLon"]["Lon"], point.longitude_deg, abs_tol=1e-9)
-    assert math.isclose(position["DirectionDeg"], point.heading_deg, abs_tol=1e-9)
-    assert math.isclose(train["rotation"], math.radians(point.heading_deg), abs_tol=1e-9)
-    # location: the lead car's centre (two cars of 20.85 m), east in its 2048 m tile
+    assert math.isclose(position["LatLon"]["Lat"], point.latitude_deg, abs_tol=2e-7)
+    assert math.isclose(position["LatLon"]["Lon"], point.longitude_deg, abs_tol=2e-7)
+    assert math.isclose(position["DirectionDeg"], point.heading_deg, abs_tol=0.05)
+    assert math.isclose(train["rotation"], math.radians(point.heading_deg), abs_tol=1e-3)
+    # location: the lead car's centre (two cars of 20.85 m) on the railML track, within 1 cm
+    # (the route's origin: the line's first point on OpenRails' tile grid)
     lead = model.position(front - 41.7 / 4)
-    assert math.isclose(train["location"]["x"], lead.x_m, abs_tol=1e-6)
-    assert math.isclose(train["location"]["z"], lead.y_m, abs_tol=1e-6)
+    origin = WorldFrame.around(model.frame).origin.absolute
+    x = train["location"]["tileX"] * 2048.0 + train["location"]["x"] - origin[0]
+    z = train["location"]["tileZ"] * 2048.0 + train["location"]["z"] - origin[1]
+    assert math.hypot(x - lead.x_m, z - lead.y_m) < 0.01
+    assert train["location"]["y"] > 0.0  # the line climbs 10 per mille from 500 m
 
 
-async def test_scenario_route_drives_from_annaberg(serve: Serve) -> None:
-    config = MockConfig(railml=SCENARIO, loading_delay_s=0.0)
+@pytest.fixture(scope="module")
+def scenario_route(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    out = tmp_path_factory.mktemp("routes") / "annaberg-schwarzenberg"
+    export_route(SCENARIO, out)
+    return out
+
+
+async def test_scenario_route_drives_from_annaberg(serve: Serve, scenario_route: Path) -> None:
+    path = Path("PATHS/ocp_ABU-ocp_SZB.pat")
+    config = MockConfig(route=scenario_route, path=path, loading_delay_s=0.0)
     async with serve(config) as session:
         async with session.post("/API/CABCONTROLS", json=body(THROTTLE=1.0)) as resp:
             train = (await resp.json())["trains"]["PLAYER"]
         for _ in range(300):  # one minute
             async with session.post("/API/CABCONTROLS", json=body()) as resp:
                 train = (await resp.json())["trains"]["PLAYER"]
+        async with session.get("/API/MAP") as resp:
+            position = await resp.json()
     state = train["locomotiveState"]
     assert state["v"] > 10.0 and state["distance"] > 300.0
-    assert train["trackLocation"]["trackNodeIndex"] >= 1
-    assert train["location"]["y"] != 0.0  # the line climbs or falls: elevation from gradients
+    assert train["trackLocation"]["trackNodeIndex"] == 1
+    assert train["location"]["y"] != 0.0  # the line climbs or falls
+    front = 41.7 + state["distance"]
+    point = load_infrastructure(SCENARIO).model.position(front)
+    assert math.isclose(position["LatLon"]["Lat"], point.latitude_deg, abs_tol=2e-7)
+    assert math.isclose(position["LatLon"]["Lon"], point.longitude_deg, abs_tol=2e-7)
 
 
 def test_missing_railml_names_the_file(tmp_path: Path) -> None:
@@ -69,3 +94,32 @@ def test_missing_railml_names_the_file(tmp_path: Path) -> None:
     missing = tmp_path / "nowhere.railml"
     with pytest.raises(ScenarioError, match=r"nowhere\.railml"):
         create_app(MockConfig(railml=missing))
+
+
+JUNCTION = ROOT / "packages/railway/tests/data/junction.railml"
+
+
+@pytest.mark.parametrize(("switch", "node"), [(0, 2), (1, 3)])
+async def test_exported_junction_left_and_right(
+    serve: Serve, tmp_path: Path, switch: int, node: int
+) -> None:
+    """The exporter's junction (node 4: route 0 the left one, on along the main line; route 1
+    the right one, the branch) thrown by SwitchCommands on the path West-East."""
+    export_route(JUNCTION, tmp_path / "junction")
+    config = MockConfig(route=tmp_path / "junction", path=Path("PATHS/W-E.pat"), loading_delay_s=0)
+    async with serve(config) as session:
+        for _ in range(400):
+            payload = body(THROTTLE=1.0) | {"SwitchCommands": {"4": switch}}
+            async with session.post("/API/CABCONTROLS", json=payload) as resp:
+                train = (await resp.json())["trains"]["PLAYER"]
+            if train["locomotiveState"]["distance"] > 330.0:
+                break
+    assert train["trackLocation"]["trackNodeIndex"] == node
+    front = 41.7 + train["locomotiveState"]["distance"]
+    assert train["trackLocation"]["trackNodeOffset"] == pytest.approx(front - 300.0, abs=1e-3)
+    lines = load_network(JUNCTION).lines
+    model = lines[0].model if node == 2 else lines[1].model
+    expected = model.position(front if node == 2 else front - 300.0)
+    assert train["rotation"] == pytest.approx(
+        math.remainder(math.radians(expected.heading_deg), math.tau), abs=1e-3
+    )

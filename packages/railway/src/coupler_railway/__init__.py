@@ -14,8 +14,17 @@ if TYPE_CHECKING:
     from coupler_railway.errors import RailMLError
     from coupler_railway.frame import LocalFrame
     from coupler_railway.geojson import to_geojson
-    from coupler_railway.infrastructure import Balise, BaliseGroup, Infrastructure, Station, Track
-    from coupler_railway.railml import load_infrastructure
+    from coupler_railway.infrastructure import (
+        Balise,
+        BaliseGroup,
+        Infrastructure,
+        Network,
+        Signal,
+        Station,
+        Switch,
+        Track,
+    )
+    from coupler_railway.railml import load_infrastructure, load_network
     from coupler_railway.resources import BALISES_FILE, TRACK_FILE, write_fmu_resources
     from coupler_railway.track import (
         GradientChange,
@@ -32,9 +41,13 @@ _MODULE_OF = {
     "Balise": "infrastructure",
     "BaliseGroup": "infrastructure",
     "Infrastructure": "infrastructure",
+    "Network": "infrastructure",
+    "Signal": "infrastructure",
     "Station": "infrastructure",
+    "Switch": "infrastructure",
     "Track": "infrastructure",
     "load_infrastructure": "railml",
+    "load_network": "railml",
     "BALISES_FILE": "resources",
     "TRACK_FILE": "resources",
     "write_fmu_resources": "resources",
@@ -61,14 +74,18 @@ __all__ = [
     "GradientChange",
     "Infrastructure",
     "LocalFrame",
+    "Network",
     "RailMLError",
     "SectionGeometry",
+    "Signal",
     "Station",
+    "Switch",
     "Track",
     "TrackModel",
     "TrackPoint",
     "TrackSection",
     "load_infrastructure",
+    "load_network",
     "to_geojson",
     "write_fmu_resources",
 ]

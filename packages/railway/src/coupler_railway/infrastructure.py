@@ -1,4 +1,5 @@
-"""The infrastructure object model read from railML: tracks, balises, groups, stations."""
+"""The infrastructure object model read from railML: lines of tracks, balises, groups, stations,
+signals, and the switches that join lines into a network."""
 
 from __future__ import annotations
 
@@ -76,6 +77,41 @@ class Station:
     line: int
 
 
+@dataclass(frozen=True)
+class Signal:
+    """A railML ``<signal>`` placed on the line."""
+
+    id: str
+    name: str
+    distance_m: float
+    """Distance along the line from its start [m]."""
+    direction: str
+    """railML ``dir``: ``up`` (for trains towards increasing distance), ``down``, ``both``, ..."""
+    type: str
+    """railML ``type`` (main, distant, repeater, ...), empty when not given."""
+    function: str
+    """railML ``function`` (entry, exit, block, ...), empty when not given."""
+    line: int
+
+
+@dataclass(frozen=True)
+class Switch:
+    """A railML ``<switch>`` on a line, where another line (its branch) begins or ends."""
+
+    id: str
+    name: str
+    distance_m: float
+    """Distance along the line it sits on [m]."""
+    branch: int
+    """Index in :attr:`Network.lines` of the line that branches off here."""
+    branch_begins: bool
+    """True: the branch line begins at the switch (railML ``orientation="outgoing"``); False: it
+    ends there (``incoming``)."""
+    course: str
+    """railML ``course`` of the branch: left, right, straight, or empty when not given."""
+    line: int
+
+
 @dataclass(frozen=True, eq=False)
 class Infrastructure:
     """Everything :func:`~coupler_railway.railml.load_infrastructure` reads from one file."""
@@ -92,3 +128,21 @@ class Infrastructure:
     """Sorted by distance along the line."""
     warnings: tuple[str, ...]
     """Content that was read but not interpreted, one message per kind."""
+    signals: tuple[Signal, ...] = ()
+    """Sorted by distance along the line."""
+    switches: tuple[Switch, ...] = ()
+    """Switches on this line, sorted by distance (only in a :class:`Network`)."""
+
+
+@dataclass(frozen=True, eq=False)
+class Network:
+    """A railML file of several lines joined by switches (:func:`~coupler_railway.load_network`).
+
+    Every line is an :class:`Infrastructure` of its own (tracks chained end to begin, one
+    B-spline track model); all models share the first line's local frame.
+    """
+
+    source: Path
+    lines: tuple[Infrastructure, ...]
+    """The first line holds the file's first track that begins without a connection."""
+    warnings: tuple[str, ...]

@@ -17,8 +17,18 @@ from pathlib import Path
 from lxml import etree
 
 from coupler_railway.errors import RailMLError
-from coupler_railway.infrastructure import Balise, BaliseGroup, Infrastructure, Station, Track
-from coupler_railway.track import GradientChange, SectionGeometry, TrackModel
+from coupler_railway.frame import LocalFrame
+from coupler_railway.infrastructure import (
+    Balise,
+    BaliseGroup,
+    Infrastructure,
+    Network,
+    Signal,
+    Station,
+    Switch,
+    Track,
+)
+from coupler_railway.track import GradientChange, SectionGeometry, TrackModel, TrackSection
 
 _INTERPRETED = frozenset(
     {
@@ -26,7 +36,7 @@ _INTERPRETED = frozenset(
         "trackEnd", "connection", "bufferStop", "openEnd", "geoCoord", "trackElements",
         "geoMappings", "geoMapping", "gradientChanges", "gradientChange", "ocsElements",
         "balises", "balise", "baliseGroup", "baliseRef", "operationControlPoints", "ocp",
-        "metadata",
+        "metadata", "connections", "switch", "signals", "signal",
     }
 )  # fmt: skip
 _DIRECTIONS = frozenset({"up", "down", "both", "none", "unknown"})
@@ -36,12 +46,22 @@ _WGS84 = frozenset({"4326", "EPSG:4326", "urn:ogc:def:crs:EPSG::4326"})
 def load_infrastructure(
     path: str | os.PathLike[str], *, tolerance_m: float = 5.0
 ) -> Infrastructure:
-    """Read a railML 2.x file into an :class:`Infrastructure`.
+    """Read a railML 2.x file of one line into an :class:`Infrastructure`.
 
     ``tolerance_m`` bounds every disagreement between declared positions (pos, absPos) and
-    coordinates, and how far a balise's coordinates may lie from the track.
+    coordinates, and how far a balise's coordinates may lie from the track. A file whose tracks
+    form several lines joined by switches is refused: read it with :func:`load_network`.
     """
     return _Reader(Path(path), tolerance_m).read()
+
+
+def load_network(path: str | os.PathLike[str], *, tolerance_m: float = 5.0) -> Network:
+    """Read a railML 2.x file of lines joined by switches into a :class:`Network`.
+
+    A file of one line gives a network of one line; the checks are those of
+    :func:`load_infrastructure`, plus every switch's connection to the line it branches to.
+    """
+    return _Reader(Path(path), tolerance_m).read_network()
 
 
 @dataclass(frozen=True)
@@ -60,6 +80,15 @@ class _RawTrack:
     points: tuple[_Point, ...]
     begin_connection: etree._Element | None
     end_connection: etree._Element | None
+    switches: tuple[etree._Element, ...]
+
+
+@dataclass(frozen=True)
+class _Line:
+    tracks: list[_RawTrack]
+    begin_switch: etree._Element | None
+    """The switch connection the line's first trackBegin connects to, if any."""
+    end_switch: etree._Element | None
 
 
 def _local(element: etree._Element) -> str:
@@ -142,6 +171,21 @@ class _Reader:
     # -- reading ----------------------------------------------------------------------------
 
     def read(self) -> Infrastructure:
+        network = self.read_network()
+        if len(network.lines) != 1:
+            starts = ", ".join(repr(line.tracks[0].id) for line in network.lines)
+            raise RailMLError(
+                self.file,
+                None,
+                None,
+                f"has {len(network.lines)} lines (beginning with tracks {starts}) joined by "
+                "switches; this reader takes one line",
+                "read it with load_network (coupler-railway export-openrails does), or chain the "
+                "tracks end to begin into one line",
+            )
+        return network.lines[0]
+
+    def read_network(self) -> Network:
         parser = etree.XMLParser(
             resolve_entities=False, no_network=True, load_dtd=False, huge_tree=False
         )
@@ -168,27 +212,42 @@ class _Reader:
             raise self.error(root, "has no <infrastructure>", "add <infrastructure><tracks>")
         infra = infrastructures[0]
 
-        raw = self.chain([self.read_track(t) for t in _children(infra, "tracks", "track")], infra)
-        model = self.build_model(raw)
-        balise_elements = [
-            (i, b)
-            for i, r in enumerate(raw)
-            for b in _children(r.element, "ocsElements", "balises", "balise")
-        ]
-        placed = {
-            b.get("id", ""): self.place_balise(b, raw[i], i, model) for i, b in balise_elements
-        }
-        balises, groups = self.group_balises(raw, placed, model)
-        stations = self.read_stations(infra, model)
-        return Infrastructure(
-            source=self.path,
-            tracks=tuple(r.track for r in raw),
-            model=model,
-            balises=balises,
-            groups=groups,
-            stations=stations,
-            warnings=tuple(self.warnings),
+        raw_lines = self.chain(
+            [self.read_track(t) for t in _children(infra, "tracks", "track")], infra
         )
+        frame: LocalFrame | None = None
+        models: list[TrackModel] = []
+        for raw in (line.tracks for line in raw_lines):
+            models.append(self.build_model(raw, frame))
+            frame = models[0].frame
+        switches = self.place_switches(raw_lines, models)
+        placed: dict[str, tuple[float, etree._Element]] = {}
+        line_of: dict[str, int] = {}
+        for index, (line, model) in enumerate(zip(raw_lines, models, strict=True)):
+            for r, section in zip(line.tracks, model.sections, strict=True):
+                for b in _children(r.element, "ocsElements", "balises", "balise"):
+                    placed[b.get("id", "")] = self.place(b, r, section, model)
+                    line_of[b.get("id", "")] = index
+        balises, groups = self.group_balises(
+            [r for line in raw_lines for r in line.tracks], placed, models, line_of
+        )
+        stations = self.read_stations(infra, models)
+        lines = []
+        for index, (line, model) in enumerate(zip(raw_lines, models, strict=True)):
+            lines.append(
+                Infrastructure(
+                    source=self.path,
+                    tracks=tuple(r.track for r in line.tracks),
+                    model=model,
+                    balises=tuple(b for b in balises if line_of[b.id] == index),
+                    groups=tuple(g for g in groups if line_of[g.balise_ids[0]] == index),
+                    stations=tuple(s for s, i in stations if i == index),
+                    warnings=tuple(self.warnings),
+                    signals=self.read_signals(line.tracks, model),
+                    switches=tuple(sorted(switches[index], key=lambda w: w.distance_m)),
+                )
+            )
+        return Network(source=self.path, lines=tuple(lines), warnings=tuple(self.warnings))
 
     def check_ids(self, root: etree._Element) -> None:
         seen: dict[str, etree._Element] = {}
@@ -281,6 +340,7 @@ class _Reader:
             tuple(points),
             connections[0][0] if connections[0] else None,
             connections[1][0] if connections[1] else None,
+            tuple(_children(element, "trackTopology", "connections", "switch")),
         )
 
     def offset(
@@ -312,54 +372,93 @@ class _Reader:
             raise self.error(element, "has no pos", "add pos (metres from trackBegin)")
         return value
 
-    def chain(self, tracks: list[_RawTrack], infra: etree._Element) -> list[_RawTrack]:
-        """Tracks in line order: trackEnd connection -> next trackBegin connection."""
+    def chain(self, tracks: list[_RawTrack], infra: etree._Element) -> list[_Line]:
+        """Tracks into lines: trackEnd connection -> next trackBegin connection. A line ends at
+        a buffer stop or open end (no connection) or at a switch of another track."""
         if not tracks:
             raise self.error(infra, "has no tracks", "add <tracks><track> elements")
         begins = {r.begin_connection.get("id"): r for r in tracks if r.begin_connection is not None}
-        starts = [r for r in tracks if r.begin_connection is None]
-        if len(starts) != 1:
-            raise self.error(
-                starts[1].element if len(starts) > 1 else tracks[0].element,
-                f"the line must have exactly one track whose trackBegin has no connection, "
-                f"found {len(starts)}",
-                "connect the tracks end to begin into one line (trackEnd/connection ref = the "
-                "next trackBegin/connection id and back)",
-            )
-        ordered = [starts[0]]
-        while (connection := ordered[-1].end_connection) is not None:
-            following = begins.get(connection.get("ref"))
-            if (
-                following is None
-                or following.begin_connection is None
-                or (following.begin_connection.get("ref") != connection.get("id"))
-            ):
+        switch_connections = {
+            c.get("id"): (c, switch)
+            for r in tracks
+            for switch in r.switches
+            for c in _children(switch, "connection")
+        }
+
+        def at_switch(connection: etree._Element) -> etree._Element | None:
+            found = switch_connections.get(connection.get("ref"))
+            if found is None:
+                return None
+            if found[0].get("ref") != connection.get("id"):
                 raise self.error(
                     connection,
-                    f"ref {connection.get('ref')!r} is not a trackBegin connection that refers "
+                    f"ref {connection.get('ref')!r} names a switch connection that does not refer "
                     "back to it",
-                    "set ref to the next track's trackBegin/connection id and that one's ref to "
-                    "this id",
+                    f"set that switch connection's ref to {connection.get('id')!r}",
                 )
-            if following in ordered:
-                raise self.error(connection, "closes a loop", "the line must have two ends")
-            ordered.append(following)
+            return found[0]
+
+        starts = [
+            r
+            for r in tracks
+            if r.begin_connection is None or at_switch(r.begin_connection) is not None
+        ]
+        if not starts:
+            raise self.error(
+                tracks[0].element,
+                "no track begins a line (every trackBegin connects to another track's end)",
+                "the line must have two ends: give its first track a trackBegin without a "
+                "connection (a bufferStop or openEnd)",
+            )
+        starts.sort(key=lambda r: r.begin_connection is not None)
+        lines: list[_Line] = []
+        seen: set[int] = set()
+        for first in starts:
+            ordered = [first]
+            seen.add(id(first))
+            end_switch = None
+            while (connection := ordered[-1].end_connection) is not None:
+                end_switch = at_switch(connection)
+                if end_switch is not None:
+                    break
+                following = begins.get(connection.get("ref"))
+                if (
+                    following is None
+                    or following.begin_connection is None
+                    or (following.begin_connection.get("ref") != connection.get("id"))
+                ):
+                    raise self.error(
+                        connection,
+                        f"ref {connection.get('ref')!r} is neither a trackBegin connection nor a "
+                        "switch connection that refers back to it",
+                        "set ref to the next track's trackBegin/connection id (or a switch "
+                        "connection's id) and that one's ref to this id",
+                    )
+                if id(following) in seen:
+                    raise self.error(connection, "closes a loop", "the line must have two ends")
+                ordered.append(following)
+                seen.add(id(following))
+            begin_switch = (
+                at_switch(first.begin_connection) if first.begin_connection is not None else None
+            )
+            lines.append(_Line(ordered, begin_switch, end_switch))
         for r in tracks:
-            if r not in ordered:
+            if id(r) not in seen:
                 raise self.error(
                     r.element, "is not connected to the line", "chain it by connections"
                 )
-        for a, b in itertools.pairwise(ordered):
-            gap = _distance(a.points[-1], b.points[0])
-            if gap > self.tolerance:
-                raise self.error(
-                    b.points[0].element,
-                    f"is {gap:.1f} m away from the end of track {a.track.id!r}",
-                    "make the coordinates at the junction coincide",
-                )
-        return ordered
+        for line in lines:
+            for a, b in itertools.pairwise(line.tracks):
+                gap = _distance(a.points[-1], b.points[0])
+                if gap > self.tolerance:
+                    raise self.error(
+                        b.points[0].element,
+                        f"is {gap:.1f} m away from the end of track {a.track.id!r}",
+                        "make the coordinates at the junction coincide",
+                    )
+        return lines
 
-    def build_model(self, raw: list[_RawTrack]) -> TrackModel:
+    def build_model(self, raw: list[_RawTrack], frame: LocalFrame | None) -> TrackModel:
         gradients: list[GradientChange] = []
         for index, r in enumerate(raw):
             path = ("trackElements", "gradientChanges", "gradientChange")
@@ -380,6 +479,7 @@ class _Reader:
                 for r in raw
             ],
             gradients,
+            frame=frame,
         )
         for r, section in zip(raw, model.sections, strict=True):
             declared = r.track.end_pos - r.track.begin_pos
@@ -404,11 +504,11 @@ class _Reader:
                 )
         return model
 
-    def place_balise(
-        self, element: etree._Element, raw: _RawTrack, index: int, model: TrackModel
+    def place(
+        self, element: etree._Element, raw: _RawTrack, section: TrackSection, model: TrackModel
     ) -> tuple[float, etree._Element]:
+        """Distance along the line of a balise or signal on ``raw`` (its ``section``)."""
         track = raw.track
-        section = model.sections[index]
         off_track = f"place it on track {track.id!r} (pos 0..{track.end_pos - track.begin_pos})"
         offset = self.offset(element, track)
         geo = self.geo(element)
@@ -455,7 +555,8 @@ class _Reader:
         self,
         raw: list[_RawTrack],
         placed: dict[str, tuple[float, etree._Element]],
-        model: TrackModel,
+        models: list[TrackModel],
+        line_of: dict[str, int],
     ) -> tuple[tuple[Balise, ...], tuple[BaliseGroup, ...]]:
         membership: dict[str, tuple[int, int, etree._Element]] = {}
         groups: list[BaliseGroup] = []
@@ -486,6 +587,12 @@ class _Reader:
                             "put each balise in exactly one baliseGroup",
                         )
                     membership[ref] = (code, rank, group)
+                if len({line_of[ref] for ref in refs}) > 1:
+                    raise self.error(
+                        group,
+                        "has balises on lines joined by a switch",
+                        "keep the balises of a group on one line",
+                    )
                 groups.append(
                     BaliseGroup(
                         id=group.get("id", ""),
@@ -519,7 +626,7 @@ class _Reader:
                 raise self.error(
                     element, f"dir {direction!r} is unknown", f"use one of {sorted(_DIRECTIONS)}"
                 )
-            point = model.position(distance)
+            point = models[line_of[ident]].position(distance)
             group_code, rank, _ = membership[ident]
             balises.append(
                 Balise(
@@ -539,8 +646,11 @@ class _Reader:
         groups.sort(key=lambda g: (g.distance_m, g.code))
         return tuple(balises), tuple(groups)
 
-    def read_stations(self, infra: etree._Element, model: TrackModel) -> tuple[Station, ...]:
-        stations: list[Station] = []
+    def read_stations(
+        self, infra: etree._Element, models: list[TrackModel]
+    ) -> list[tuple[Station, int]]:
+        """Every ocp with coordinates, projected onto the nearest line: (station, line index)."""
+        stations: list[tuple[Station, int]] = []
         for ocp in _children(infra, "operationControlPoints", "ocp"):
             geo = self.geo(ocp)
             if geo is None:
@@ -549,19 +659,119 @@ class _Reader:
                     "geoCoord and is not placed"
                 )
                 continue
-            along, lateral = model.nearest(*geo)
+            nearest = [model.nearest(*geo) for model in models]
+            index = min(range(len(models)), key=lambda i: nearest[i][1])
+            along, lateral = nearest[index]
             stations.append(
-                Station(
-                    id=ocp.get("id", ""),
-                    name=ocp.get("name") or ocp.get("id", ""),
-                    latitude_deg=geo[0],
-                    longitude_deg=geo[1],
-                    distance_m=along,
-                    offset_m=lateral,
-                    line=ocp.sourceline or 0,
+                (
+                    Station(
+                        id=ocp.get("id", ""),
+                        name=ocp.get("name") or ocp.get("id", ""),
+                        latitude_deg=geo[0],
+                        longitude_deg=geo[1],
+                        distance_m=along,
+                        offset_m=lateral,
+                        line=ocp.sourceline or 0,
+                    ),
+                    index,
                 )
             )
-        return tuple(sorted(stations, key=lambda s: s.distance_m))
+        return sorted(stations, key=lambda s: (s[1], s[0].distance_m))
+
+    def read_signals(self, raw: list[_RawTrack], model: TrackModel) -> tuple[Signal, ...]:
+        signals: list[Signal] = []
+        for r, section in zip(raw, model.sections, strict=True):
+            for element in _children(r.element, "ocsElements", "signals", "signal"):
+                distance, _ = self.place(element, r, section, model)
+                direction = element.get("dir", "unknown")
+                if direction not in _DIRECTIONS:
+                    raise self.error(
+                        element,
+                        f"dir {direction!r} is unknown",
+                        f"use one of {sorted(_DIRECTIONS)}",
+                    )
+                signals.append(
+                    Signal(
+                        id=element.get("id", ""),
+                        name=element.get("name") or element.get("id", ""),
+                        distance_m=distance,
+                        direction=direction,
+                        type=element.get("type", ""),
+                        function=element.get("function", ""),
+                        line=element.sourceline or 0,
+                    )
+                )
+        return tuple(sorted(signals, key=lambda s: s.distance_m))
+
+    def place_switches(self, lines: list[_Line], models: list[TrackModel]) -> list[list[Switch]]:
+        """Every switch on its line, with the line that branches off it; checked to meet."""
+        owner = {
+            id(c): index
+            for index, line in enumerate(lines)
+            for c in (line.begin_switch, line.end_switch)
+            if c is not None
+        }
+        found: list[list[Switch]] = [[] for _ in lines]
+        for index, (line, model) in enumerate(zip(lines, models, strict=True)):
+            for r, section in zip(line.tracks, model.sections, strict=True):
+                for switch in r.switches:
+                    connections = _children(switch, "connection")
+                    if len(connections) != 1:
+                        raise self.error(
+                            switch,
+                            f"has {len(connections)} connections",
+                            "give a switch exactly one <connection> (to its branch track)",
+                        )
+                    connection = connections[0]
+                    branch = owner.get(id(connection))
+                    if branch is None:
+                        raise self.error(
+                            connection,
+                            f"ref {connection.get('ref')!r} is not the trackBegin or trackEnd "
+                            "connection of the first or last track of a line",
+                            "set ref to the connection id of the branch track's trackBegin (or "
+                            "trackEnd) and that one's ref to this id",
+                        )
+                    if branch == index:
+                        raise self.error(
+                            connection, "connects the line to itself", "branch to another line"
+                        )
+                    offset = self.offset(switch, r.track, required=True)
+                    assert offset is not None
+                    if not 0.0 <= offset <= section.length + self.tolerance:
+                        raise self.error(
+                            switch,
+                            f"lies off its track: offset {offset} m from trackBegin",
+                            f"place it on track {r.track.id!r}",
+                        )
+                    distance = min(section.start_distance + offset, model.length)
+                    begins = lines[branch].begin_switch is connection
+                    branch_model = models[branch]
+                    there = branch_model.local_xy([0.0 if begins else branch_model.length])[0]
+                    here = model.local_xy([distance])[0]
+                    gap = math.hypot(*(there - here))
+                    meets = lines[branch].tracks[0 if begins else -1].track.id
+                    if gap > self.tolerance:
+                        raise self.error(
+                            switch,
+                            f"is {gap:.1f} m away from the "
+                            f"{'beginning' if begins else 'end'} of track "
+                            f"{meets!r}"
+                            f" that branches off it (tolerance {self.tolerance} m)",
+                            "correct the switch's pos or the branch track's coordinates",
+                        )
+                    found[index].append(
+                        Switch(
+                            id=switch.get("id", ""),
+                            name=switch.get("name") or switch.get("id", ""),
+                            distance_m=distance,
+                            branch=branch,
+                            branch_begins=begins,
+                            course=connection.get("course", ""),
+                            line=switch.sourceline or 0,
+                        )
+                    )
+        return found
 
 
 def _distance(a: _Point, b: _Point) -> float:

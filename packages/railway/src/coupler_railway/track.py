@@ -100,15 +100,19 @@ class TrackModel:
         cls,
         sections: Sequence[SectionGeometry],
         gradient_changes: Sequence[GradientChange] = (),
+        *,
+        frame: LocalFrame | None = None,
     ) -> TrackModel:
         """Chain ``sections`` end to begin into one line; a shared junction point counts once.
 
-        Raises ValueError for fewer than two distinct points in total.
+        ``frame``: the local frame to work in (lines of one network share one); by default one
+        around the first point. Raises ValueError for fewer than two distinct points in total.
         """
         if not sections:
             raise ValueError("a track model needs at least one section")
         first = sections[0]
-        frame = LocalFrame(first.latitudes_deg[0], first.longitudes_deg[0])
+        if frame is None:
+            frame = LocalFrame(first.latitudes_deg[0], first.longitudes_deg[0])
         xs: list[float] = []
         ys: list[float] = []
         first_index: list[int] = []
@@ -191,6 +195,13 @@ class TrackModel:
         """Local-frame points ``(n, 2)`` [m] at ``distances``."""
         return np.asarray(self._spline(self._inverse(self._checked(distances))))
 
+    def headings(self, distances: npt.ArrayLike) -> FloatArray:
+        """Direction of increasing distance at ``distances``: radians clockwise from north
+        (the local frame's +y), unwrapped along the array."""
+        d = np.atleast_1d(self._checked(distances))
+        dx, dy = np.asarray(self._derivative(self._inverse(d))).T
+        return np.asarray(np.unwrap(np.arctan2(dx, dy)))
+
     def coordinates(self, distances: npt.ArrayLike) -> FloatArray:
         """Geographic points ``(n, 2)`` as (latitude, longitude) degrees at ``distances``."""
         xy = self.local_xy(np.atleast_1d(np.asarray(distances, dtype=np.float64)))
@@ -234,6 +245,12 @@ class TrackModel:
         starts = [s.start_distance for s in self.sections]
         index = max(bisect.bisect_right(starts, d) - 1, 0)
         return index, d - starts[index]
+
+    @property
+    def gradient_steps(self) -> tuple[tuple[float, float], ...]:
+        """``(distance, slope)`` of every gradient change in distance order: the gradient is
+        ``slope`` per mille from ``distance`` on (0 before the first)."""
+        return tuple(zip(self._gradient_starts, self._gradient_values, strict=True))
 
     def gradient(self, distance: float) -> float:
         """Gradient at ``distance`` in per mille (positive uphill); 0 before any change."""

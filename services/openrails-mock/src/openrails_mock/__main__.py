@@ -7,11 +7,14 @@ import asyncio
 import contextlib
 import logging
 import signal
+import sys
 from pathlib import Path
 from typing import Any
 
 import structlog
 from aiohttp import web
+
+from coupler.errors import ScenarioError
 
 from .api import SERVER, create_app
 from .config import MockConfig
@@ -28,7 +31,10 @@ def _parse(argv: list[str] | None) -> MockConfig:
     parser.add_argument("--mode", choices=["lockstep", "stock"])
     parser.add_argument("--step-ms", type=float, dest="step_ms")
     parser.add_argument("--speedup", type=float)
-    parser.add_argument("--railml", type=Path)
+    parser.add_argument("--route", type=Path, help="OpenRails route folder (holds NAME.trk)")
+    parser.add_argument("--path", type=Path, help="the train's path, e.g. PATHS/X.pat")
+    parser.add_argument("--trains", type=Path, help="other trains (the client's trains config)")
+    parser.add_argument("--railml", type=Path, help="railML file, exported to a route first")
     parser.add_argument("--loading-delay-s", type=float, dest="loading_delay_s")
     parser.add_argument("--start-time-s", type=float, dest="start_time_s")
     parser.add_argument(
@@ -57,6 +63,8 @@ async def _serve(config: MockConfig) -> None:
         port=port,
         mode=config.mode,
         step_ms=config.step_ms,
+        route=str(config.route) if config.route else None,
+        path=str(config.path) if config.path else None,
         railml=str(config.railml) if config.railml else None,
         consist=consist.name,
     )
@@ -75,8 +83,12 @@ async def _serve(config: MockConfig) -> None:
 def main(argv: list[str] | None = None) -> None:
     logging.basicConfig(level=logging.INFO, format="%(message)s")
     config = _parse(argv)
-    with contextlib.suppress(KeyboardInterrupt):
-        asyncio.run(_serve(config))
+    try:
+        with contextlib.suppress(KeyboardInterrupt):
+            asyncio.run(_serve(config))
+    except ScenarioError as exc:  # a route, path or railML file the mock cannot use
+        print(f"openrails-mock: error: {exc}", file=sys.stderr)
+        sys.exit(1)
 
 
 if __name__ == "__main__":

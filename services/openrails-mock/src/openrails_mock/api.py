@@ -21,7 +21,8 @@ from typing import Any
 from aiohttp import web
 
 from .config import MAX_STEP_MS, MockConfig
-from .route import Route, StraightRoute, load_route
+from .objects import CommandError
+from .route import Route, StraightRoute
 from .simulation import (
     CONTROL_SPECS,
     ControlError,
@@ -30,6 +31,15 @@ from .simulation import (
     Snapshot,
     TrackLocation,
     WorldPosition,
+)
+from .world import (
+    SwitchError,
+    TrackWorld,
+    add_other_trains,
+    apply_request,
+    check_request,
+    open_world,
+    reset_world,
 )
 
 Clock = Callable[[], float]
@@ -48,9 +58,17 @@ class BadRequest(Exception):
 class MockServer:
     """The state behind the handlers: the simulation, the mode and the clocks."""
 
-    def __init__(self, config: MockConfig, simulation: Simulation, clock: Clock) -> None:
+    def __init__(
+        self,
+        config: MockConfig,
+        simulation: Simulation,
+        clock: Clock,
+        world: TrackWorld | None = None,
+    ) -> None:
         self.config = config
         self.simulation = simulation
+        self.world = world
+        """The route folder's track, junctions and objects; None on the straight route."""
         self.clock = clock
         self.ready_at = math.inf
         self.last_wall_s = 0.0
@@ -82,15 +100,20 @@ def create_app(
 ) -> web.Application:
     """The mock's aiohttp application.
 
-    ``route`` replaces the one ``config.railml`` names (tests use small routes); ``clock``
-    (monotonic seconds) drives the loading delay and stock mode's wall-clock pacing.
+    The track is the route folder ``config.route`` with the path ``config.path``, or the
+    railML file ``config.railml`` exported to a route folder first, or a straight line.
+    ``route`` replaces all of them (tests use small routes); ``clock`` (monotonic seconds)
+    drives the loading delay and stock mode's wall-clock pacing.
     """
+    world = None
     if route is None:
-        route = (
-            load_route(config.railml)
-            if config.railml is not None
-            else StraightRoute(length_m=DEFAULT_ROUTE_LENGTH_M)
-        )
+        if config.route is not None or config.railml is not None:
+            world = open_world(
+                config.route, railml=config.railml, path=config.path, trains=config.trains
+            )
+            route = world.route(world.player)
+        else:
+            route = StraightRoute(length_m=DEFAULT_ROUTE_LENGTH_M)
     simulation = Simulation(
         consist=config.build_consist(),
         route=route,
@@ -100,7 +123,9 @@ def create_app(
         origin_tile=(config.origin_tile_x, config.origin_tile_z),
         track_nodes_reversed=config.track_nodes_reversed,
     )
-    server = MockServer(config, simulation, clock)
+    if world is not None:
+        add_other_trains(world, simulation)
+    server = MockServer(config, simulation, clock, world)
     app = web.Application(middlewares=[_errors, _pacing])
     app[SERVER] = server
 
@@ -121,6 +146,7 @@ def create_app(
     app.router.add_get("/API/MAP/INIT", get_map_init)
     app.router.add_get("/API/TRAININFO", get_traininfo)
     app.router.add_get("/API/TRAINDRIVINGDISPLAY", get_traindrivingdisplay)
+    app.router.add_get("/API/OBJECTS", get_objects)
     return app
 
 
@@ -133,7 +159,7 @@ async def _errors(request: web.Request, handler: Any) -> web.StreamResponse:
     """Translate the mock's errors into JSON answers, in this one place."""
     try:
         response: web.StreamResponse = await handler(request)
-    except (BadRequest, ControlError) as exc:
+    except (BadRequest, ControlError, SwitchError, CommandError) as exc:
         return _error(400, str(exc))
     return response
 
@@ -168,18 +194,14 @@ async def post_cabcontrols_lockstep(request: web.Request) -> web.Response:
     controls = body.get("Controls")
     if not isinstance(controls, list):
         raise BadRequest('"Controls" must be a list of {LocomotiveName, TypeName, Value}')
-    commands = body.get("Commands", [])
-    if not isinstance(commands, list) or commands:
-        raise BadRequest('"Commands" must be an empty list: the mock has no world commands')
-    switches = body.get("SwitchCommands", {})
-    if not isinstance(switches, dict) or switches:
-        raise BadRequest('"SwitchCommands" must be an empty object: the mock route has no switches')
+    world = check_request(server.world, body.get("SwitchCommands", {}), body.get("Commands", []))
     step_ms = body.get("StepMs", server.config.step_ms)
     if not _is_number(step_ms) or not 0.0 < step_ms <= MAX_STEP_MS:
         raise BadRequest(f'"StepMs" must be a number in (0, {MAX_STEP_MS:g}], got {step_ms!r}')
     posts = [_control_post(item, with_locomotive=True) for item in controls]
     simulation = server.simulation
     simulation.apply(posts)
+    apply_request(server.world, simulation, world)
     simulation.advance(float(step_ms) / 1000.0)
     return web.json_response(_state(simulation))
 
@@ -193,7 +215,7 @@ async def post_reset(request: web.Request) -> web.Response:
     text = await request.text()
     if text.strip() and await _json_body(request) != {}:
         raise BadRequest("POST /API/RESET takes no options: send no body or {}")
-    server.simulation.reset()
+    reset_world(server.world, server.simulation)
     server.last_wall_s = server.clock()
     return web.json_response(_state(server.simulation))
 
@@ -274,6 +296,12 @@ async def get_map_init(request: web.Request) -> web.Response:
             "LonMax": max(ll["Lon"] for ll in latlons),
         }
     )
+
+
+async def get_objects(request: web.Request) -> web.Response:
+    """A mock extension: the route's movable (animated) world objects and where they stand."""
+    world = request.app[SERVER].world
+    return web.json_response(world.objects.listing() if world is not None else [])
 
 
 async def get_traininfo(request: web.Request) -> web.Response:
@@ -383,8 +411,10 @@ def _world(position: WorldPosition) -> dict[str, float | int]:
 
 
 def _state(simulation: Simulation) -> dict[str, Any]:
-    """The lockstep reply: every train (the mock has one) and the camera sensors (none)."""
-    return {"trains": {simulation.train_name: _train(simulation.snapshot())}, "CameraSensors": {}}
+    """The lockstep reply: every train and the camera sensors (none)."""
+    trains = {simulation.train_name: _train(simulation.snapshot())}
+    trains.update({name: _train(other.snapshot()) for name, other in simulation.others.items()})
+    return {"trains": trains, "CameraSensors": {}}
 
 
 def _train(snap: Snapshot) -> dict[str, Any]:

@@ -67,8 +67,16 @@ class MockConfig(BaseSettings):
     """Lockstep step size in milliseconds."""
     speedup: float = Field(default=1.0, gt=0)
     """Stock mode: simulated seconds per wall-clock second."""
+    route: Path | None = None
+    """OpenRails route folder (holding NAME.trk) the train runs on, with ``path``."""
+    path: Path | None = None
+    """The train's path: a .pat file, or PATHS/X.pat inside the route folder."""
+    trains: Path | None = None
+    """Other trains on the route folder: the public simulation client's trains config (JSON
+    list of trainNumber, trainName, trainConfig, trainPath)."""
     railml: Path | None = None
-    """railML infrastructure file of the route; unset: a straight, flat 20 km line."""
+    """railML infrastructure file, exported to a route folder at start-up (ignored when
+    ``route`` is set); unset with ``route``: a straight, flat 20 km line."""
     start_time_s: float = Field(default=8 * 3600.0, ge=0, lt=86400)
     """Time of day at the start, seconds since midnight."""
     start_distance_m: float | None = Field(default=None, ge=0)

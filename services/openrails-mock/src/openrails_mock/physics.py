@@ -165,6 +165,12 @@ class TrainDynamics:
             position_m=position_m, speed_mps=0.0, acceleration_mps2=0.0, odometer_m=0.0
         )
 
+    def set_limits(self, min_position_m: float, max_position_m: float) -> None:
+        """New ends of the segment (the track beyond the train changed); the train keeps its
+        place."""
+        self._min = min(min_position_m, self.state.position_m)
+        self._max = max(max_position_m, self.state.position_m)
+
     def step(self, dt_s: float, controls: Controls) -> TrainState:
         """Advance by dt_s seconds with constant controls; returns (and keeps) the new state."""
         if dt_s <= 0.0:

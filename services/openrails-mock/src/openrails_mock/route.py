@@ -1,9 +1,10 @@
 """The route the mock's train runs on: what the simulation needs of a track model.
 
-``Route`` is the part of ``coupler_railway``'s ``TrackModel`` the mock uses; the railway
-library's model satisfies it as is (``load_route`` reads a railML file with it).
-``StraightRoute`` is a flat or evenly graded straight line for running the mock without an
-infrastructure file, and for tests.
+``Route`` is the part of a track model the simulation uses; ``coupler_railway``'s
+``TrackModel`` satisfies it as is, and so does a train's way through a route folder
+(:class:`~openrails_mock.trackroute.TrackRoute`, which railML files reach through the
+exporter). ``StraightRoute`` is a flat or evenly graded straight line for running the mock
+without a route, and for tests.
 """
 
 from __future__ import annotations
@@ -11,11 +12,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Protocol
-
-from coupler.errors import ScenarioError
-from coupler_railway import RailMLError, load_infrastructure
 
 EARTH_RADIUS_M = 6_371_008.8
 """Mean Earth radius, for the straight route's lat/lon."""
@@ -151,15 +148,3 @@ class StraightRoute:
 
     def gradient(self, distance: float) -> float:
         return self._gradient
-
-
-def load_route(path: Path) -> Route:
-    """The track model of a railML infrastructure file, read by ``coupler_railway``."""
-    try:
-        infrastructure = load_infrastructure(path)
-    except (OSError, RailMLError) as exc:
-        raise ScenarioError(
-            f"cannot use {path} as the route (OPENRAILS_MOCK_RAILML): {exc}"
-        ) from exc
-    route: Route = infrastructure.model
-    return route

@@ -1,4 +1,9 @@
-"""The simulated world: time of day, one train on one route, and the driver's controls.
+"""The simulated world: time of day, the player's train on its route, and the driver's controls.
+
+Other trains (a route folder's trains config) are simulations of their own, advanced with the
+player's and addressed by their ``LocomotiveName``. A route that knows OpenRails' track
+database (:class:`~openrails_mock.trackroute.TrackRoute`) gives the track location and world
+position; any other route gives them from its sections and local frame (see the README).
 
 Errors::
 
@@ -127,19 +132,23 @@ class Simulation:
         origin_tile: tuple[int, int] = (0, 0),
         track_nodes_reversed: bool = False,
     ) -> None:
-        if route.length < consist.length_m:
+        if route.length - getattr(route, "begin", 0.0) < consist.length_m:
             raise ValueError(
-                f"the route ({route.length:.1f} m) is shorter than the train "
+                f"the route ({route.length - getattr(route, 'begin', 0.0):.1f} m) is shorter "
+                "than the train "
                 f"({consist.length_m:.1f} m)"
             )
         self.route = route
         self.consist = consist
         self.train_name = train_name
+        self.start_time_s = start_time_s
         self.origin_tile = origin_tile
         self.facing: TravellerDirection = "Backward" if track_nodes_reversed else "Forward"
         self._start_time_s = start_time_s
         self._start_position_m = consist.length_m if start_distance_m is None else start_distance_m
         self._elevation = _ElevationProfile(route)
+        self.others: dict[str, Simulation] = {}
+        """Other trains by name, advanced with this one (a route folder's trains config)."""
         self.reset()
 
     def reset(self) -> None:
@@ -151,8 +160,16 @@ class Simulation:
             self.consist,
             self.route.gradient,
             position_m=self._start_position_m,
-            min_position_m=self.consist.length_m,
+            min_position_m=getattr(self.route, "begin", 0.0) + self.consist.length_m,
             max_position_m=self.route.length,
+        )
+        for other in self.others.values():
+            other.reset()
+
+    def follow_route(self) -> None:
+        """The route changed beyond the train (a junction was thrown): new buffer stops."""
+        self.dynamics.set_limits(
+            getattr(self.route, "begin", 0.0) + self.consist.length_m, self.route.length
         )
 
     @property
@@ -161,16 +178,27 @@ class Simulation:
         return (self._start_time_s + self.elapsed_s) % SECONDS_PER_DAY
 
     def apply(self, posts: Iterable[ControlPost]) -> None:
-        """Set the posted controls, all or none: any bad one raises ControlError."""
-        controls = self.controls
+        """Set the posted controls, all or none: any bad one raises ControlError. A post
+        naming another train's locomotive goes to that train."""
+        trains = {self.train_name: self, **self.others}
+        controls = {name: train.controls for name, train in trains.items()}
         for post in posts:
-            controls = self._applied(controls, post)
-        self.controls = controls
+            name = self.train_name if post.locomotive_name is None else post.locomotive_name
+            if name not in trains:
+                raise ControlError(
+                    f"unknown locomotive {name!r}: this simulation has the train"
+                    f"{'s' if len(trains) > 1 else ''} {', '.join(map(repr, trains))}"
+                )
+            controls[name] = trains[name]._applied(controls[name], post)
+        for name, train in trains.items():
+            train.controls = controls[name]
 
     def advance(self, dt_s: float) -> None:
         """Move the simulation on by dt_s seconds with the current controls."""
         self.dynamics.step(dt_s, self.controls)
         self.elapsed_s += dt_s
+        for other in self.others.values():
+            other.advance(dt_s)
 
     def range_fraction(self, type_name: str) -> float:
         """Where a control stands in its range, 0..1."""
@@ -209,6 +237,10 @@ class Simulation:
         )
 
     def _track_location(self, distance: float) -> TrackLocation:
+        located = getattr(self.route, "track_location", None)
+        if located is not None:  # a route on OpenRails' track database reports it itself
+            location: TrackLocation = located(distance)
+            return location
         index, offset = self.route.locate(distance)
         # The train faces increasing route distance; on a node laid the other way it faces
         # "Backward", and OpenRails counts the offset from the node's far end, which is again
@@ -224,6 +256,10 @@ class Simulation:
     def _world(self, distance: float) -> WorldPosition:
         """The route point at ``distance`` in tiles; the local frame's origin is the centre of
         ``origin_tile``."""
+        placed = getattr(self.route, "world_position", None)
+        if placed is not None:  # a route on OpenRails' track database knows its world
+            position: WorldPosition = placed(distance)
+            return position
         point = self.route.position(distance)
         east = self.origin_tile[0] * TILE_SIZE_M + point.x_m
         north = self.origin_tile[1] * TILE_SIZE_M + point.y_m
@@ -238,11 +274,6 @@ class Simulation:
         )
 
     def _applied(self, controls: Controls, post: ControlPost) -> Controls:
-        if post.locomotive_name is not None and post.locomotive_name != self.train_name:
-            raise ControlError(
-                f"unknown locomotive {post.locomotive_name!r}: this simulation has one train, "
-                f"{self.train_name!r}"
-            )
         spec = CONTROL_SPECS.get(post.type_name)
         if spec is None:
             raise ControlError(
@@ -271,6 +302,9 @@ class _ElevationProfile:
     """Elevation relative to the route's start, integrated from the gradient."""
 
     def __init__(self, route: Route) -> None:
+        if hasattr(route, "world_position"):  # heights come from the track database
+            self._distances, self._heights = [0.0, 1.0], [0.0, 0.0]
+            return
         count = max(1, math.ceil(route.length / ELEVATION_SPACING_M))
         spacing = route.length / count
         self._distances = [i * spacing for i in range(count + 1)]
