@@ -297,7 +297,7 @@ def export_gain(folder: Path, port: int) -> Path | None:
     """The example gain participant exported as an FMI 2 FMU (coupler export-fmu), pointing at
     ``port``; None without the C++ gRPC tool chain."""
     from coupler.examples.gain import GainParticipant
-    from coupler_orchestrator.export import ExportError, build_proxy, write_fmu
+    from coupler_orchestrator.tools.export_fmu import ExportError, build_proxy, write_fmu
 
     try:
         binaries = build_proxy(log=False)
@@ -364,7 +364,7 @@ def processes(commands: Sequence[Sequence[str]]) -> Iterator[list[subprocess.Pop
 
 
 def free_ports(count: int) -> list[int]:
-    from coupler_orchestrator.fleet import free_port
+    from coupler_orchestrator.tools.fleet import free_port
 
     return [free_port() for _ in range(count)]
 
@@ -823,7 +823,8 @@ def main() -> int:
     def log(text: str) -> None:
         print(f"[{time.perf_counter() - started:6.1f} s] {text}", file=sys.stderr, flush=True)
 
-    from coupler_orchestrator import kernel, steps
+    from coupler_orchestrator.master import native_fmu_step as kernel
+    from coupler_orchestrator.master import native_step_channel as steps
 
     channel = "native step channel" if steps.enabled() else "grpc.aio"
     fmu_steps = "in C" if steps.wanted() and kernel.library() is not None else "through Python"

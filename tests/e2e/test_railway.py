@@ -25,9 +25,9 @@ from typing import Any
 import aiohttp
 import pytest
 
-from coupler_orchestrator.fleet import Fleet, FleetSpec, ServiceSpec
 from coupler_orchestrator.options import RunOptions
 from coupler_orchestrator.runner import RunOutcome, run_scenario
+from coupler_orchestrator.tools.fleet import Fleet, FleetSpec, ServiceSpec
 from coupler_railway import load_infrastructure
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -21,9 +21,9 @@ import numpy as np
 import pytest
 
 from balise_fmu.build import build_track_balises
-from coupler_orchestrator.fleet import Fleet, FleetSpec, ServiceSpec
 from coupler_orchestrator.options import RunOptions
 from coupler_orchestrator.runner import run_scenario
+from coupler_orchestrator.tools.fleet import Fleet, FleetSpec, ServiceSpec
 
 ROOT = Path(__file__).resolve().parents[2]
 TEST_LINE = ROOT / "packages" / "railway" / "tests" / "data" / "test-line.railml"

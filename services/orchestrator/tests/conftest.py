@@ -27,9 +27,10 @@ from coupler.logs import configure_logging
 from coupler.participant import Participant, Values
 from coupler.security import ServerSecurity
 from coupler.server import ParticipantServer
-from coupler_orchestrator import kernel, steps
-from coupler_orchestrator.cli import main
-from coupler_orchestrator.export import ToolchainMissing
+from coupler_orchestrator.cli.main import main
+from coupler_orchestrator.master import native_fmu_step as kernel
+from coupler_orchestrator.master import native_step_channel as steps
+from coupler_orchestrator.tools.export_fmu import ToolchainMissing
 
 REPO = Path(__file__).resolve().parents[3]
 DATA = Path(__file__).parent / "data"

@@ -24,15 +24,15 @@ import pytest
 
 from coupler.errors import CouplerError
 from coupler.health import probe
-from coupler_orchestrator.campaign import (
+from coupler_orchestrator.cli.main import main
+from coupler_orchestrator.tools.campaign import (
     CampaignError,
     CampaignSpec,
     Output,
     reduce,
     run_campaign,
 )
-from coupler_orchestrator.cli import main
-from coupler_orchestrator.fleet import free_port
+from coupler_orchestrator.tools.fleet import free_port
 
 REPO = Path(__file__).resolve().parents[3]
 EXAMPLE = REPO / "examples" / "ramp-gain"

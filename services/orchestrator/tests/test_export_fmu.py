@@ -29,14 +29,14 @@ from coupler.examples.gain import GainParticipant
 from coupler.participant import EndRun, Values
 from coupler.security import ServerSecurity
 from coupler.server import ParticipantServer
-from coupler_orchestrator.export import (
+from coupler_orchestrator.tools.export_fmu import (
     BASE_SYSTEM,
     ToolchainMissing,
     build_proxy,
     fingerprint,
     write_fmu,
 )
-from coupler_orchestrator.fleet import free_port
+from coupler_orchestrator.tools.fleet import free_port
 
 from .conftest import Coupler, serving
 

@@ -25,7 +25,7 @@ from pathlib import Path
 import pytest
 
 from coupler.health import probe
-from coupler_orchestrator.fleet import FleetSpec, holders_of, port_is_free
+from coupler_orchestrator.tools.fleet import FleetSpec, holders_of, port_is_free
 
 DATA = Path(__file__).parent / "data"
 REPO = Path(__file__).resolve().parents[3]

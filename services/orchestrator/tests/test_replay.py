@@ -29,7 +29,7 @@ from coupler.errors import ScenarioError
 from coupler.server import ParticipantServer
 from coupler_orchestrator import recording
 from coupler_orchestrator.observer import Column, RunEnd, RunInfo
-from coupler_orchestrator.replay import ReplayParticipant
+from coupler_orchestrator.pipeline.replay import ReplayParticipant
 
 from .conftest import DATA, Coupler
 

@@ -248,7 +248,7 @@ class FmuParticipant(Participant):
         except CallFailed as exc:
             raise self._failed(exc, time, step) from exc
 
-    # --- for a step loop in C (coupler_orchestrator.kernel), after Initialize -----------------
+    # --- for a step loop in C (the orchestrator's native FMU step), after Initialize -----------
 
     def prepared(self) -> Calls | None:
         """The instance's prepared calls; None when it steps through FMPy's own."""

@@ -23,15 +23,10 @@ from coupler.archives import Budget
 from coupler.channels import Description
 from coupler.errors import ScenarioError
 from coupler_orchestrator import ssp
-from coupler_orchestrator.checks import Checked, check
-from coupler_orchestrator.master import Master
+from coupler_orchestrator.master.loop import Master
 from coupler_orchestrator.observer import Observer, RunEnd
 from coupler_orchestrator.options import RunOptions
-from coupler_orchestrator.participants import opened
-from coupler_orchestrator.plan import Plan, build_plan
-from coupler_orchestrator.recording import SUFFIX as RECORDING_SUFFIX
-from coupler_orchestrator.recording import Recorder
-from coupler_orchestrator.results import (
+from coupler_orchestrator.outputs.results import (
     CsvRecorder,
     ParquetRecorder,
     Selection,
@@ -40,7 +35,12 @@ from coupler_orchestrator.results import (
     coupler_version,
     parquet_available,
 )
-from coupler_orchestrator.wiring import wire
+from coupler_orchestrator.pipeline.checks import Checked, check
+from coupler_orchestrator.pipeline.participants import opened
+from coupler_orchestrator.pipeline.plan import Plan, build_plan
+from coupler_orchestrator.pipeline.wiring import wire
+from coupler_orchestrator.recording import SUFFIX as RECORDING_SUFFIX
+from coupler_orchestrator.recording import Recorder
 
 log = structlog.get_logger("coupler.runner")
 

@@ -32,14 +32,14 @@ from coupler.errors import ParticipantError, ParticipantTimeout
 from coupler.participant import EndRun, Split, Values
 from coupler.security import read_secret
 from coupler.v1 import component_pb2 as pb
-from coupler_orchestrator.export import (
+from coupler_orchestrator.tools.export_fmu import (
     NativeLibrary,
     ToolchainMissing,
     cached_library,
     toolchain_problem,
 )
 
-SOURCE = Path(__file__).parent / "native" / "step_streams.cc"
+SOURCE = Path(__file__).parent.parent / "native" / "step_streams.cc"
 ENVIRONMENT = "COUPLER_NATIVE_STEPS"
 """``0`` turns the native step channel off for every run of the process."""
 _OK, _FAILED, _TIMEOUT = 0, 1, 2

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 from coupler.channels import Value, ValueType
 from coupler_orchestrator import ssp
-from coupler_orchestrator.checks import Checked, Route
+from coupler_orchestrator.pipeline.checks import Checked, Route
 
 Converter = Callable[[Value], Value]
 

@@ -67,7 +67,7 @@ log = structlog.get_logger("coupler.export")
 
 MODEL_IDENTIFIER = "CouplerProxy"
 ADDRESS_VARIABLE = "coupler_address"
-SOURCES = Path(__file__).parent / "proxy"
+SOURCES = Path(__file__).parent.parent / "proxy"
 INSTALL_HINT = (
     "install the C++ gRPC tool chain: `bash scripts/install-grpc-dev.sh` (Debian: apt-get "
     "install g++ pkg-config libgrpc++-dev libprotobuf-dev protobuf-compiler-grpc patchelf)"

@@ -31,23 +31,23 @@ from coupler.participant import Participant
 from coupler.security import ClientSecurity
 from coupler.server import ParticipantServer
 from coupler.settings import SecuritySettings, add_security_arguments
-from coupler_orchestrator.campaign import (
+from coupler_orchestrator.master.watchdog import active as active_watchdog
+from coupler_orchestrator.observer import Observer, RunEnd, RunInfo
+from coupler_orchestrator.options import Algorithm, RunOptions
+from coupler_orchestrator.outputs.monitor import MonitorServer
+from coupler_orchestrator.outputs.progress import ProgressBar, ProgressLines
+from coupler_orchestrator.pipeline.replay import ReplayParticipant
+from coupler_orchestrator.runner import run_scenario, validate_scenario
+from coupler_orchestrator.tools.campaign import (
     CampaignError,
     CampaignProgress,
     CampaignSpec,
     format_table,
     run_campaign,
 )
-from coupler_orchestrator.export import export_fmu
-from coupler_orchestrator.fleet import Fleet, FleetSpec
-from coupler_orchestrator.monitor import MonitorServer
-from coupler_orchestrator.observer import Observer, RunEnd, RunInfo
-from coupler_orchestrator.options import Algorithm, RunOptions
-from coupler_orchestrator.plot import plot
-from coupler_orchestrator.progress import ProgressBar, ProgressLines
-from coupler_orchestrator.replay import ReplayParticipant
-from coupler_orchestrator.runner import run_scenario, validate_scenario
-from coupler_orchestrator.watchdog import active as active_watchdog
+from coupler_orchestrator.tools.export_fmu import export_fmu
+from coupler_orchestrator.tools.fleet import Fleet, FleetSpec
+from coupler_orchestrator.tools.plot import plot
 
 EXIT_OK, EXIT_ERROR, EXIT_INTERRUPTED = 0, 1, 130
 

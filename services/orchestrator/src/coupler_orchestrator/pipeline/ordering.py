@@ -11,7 +11,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 from coupler_orchestrator.options import Algorithm
-from coupler_orchestrator.wiring import Link
+from coupler_orchestrator.pipeline.wiring import Link
 
 
 def execution_order(

@@ -85,9 +85,9 @@ from typing import IO, Any
 import structlog
 
 from coupler.errors import CouplerError, ScenarioError
-from coupler_orchestrator.fleet import Fleet, FleetError, FleetSpec, free_port, port_variables
-from coupler_orchestrator.progress import duration
-from coupler_orchestrator.results import parquet_available, write_json
+from coupler_orchestrator.outputs.progress import duration
+from coupler_orchestrator.outputs.results import parquet_available, write_json
+from coupler_orchestrator.tools.fleet import Fleet, FleetError, FleetSpec, free_port, port_variables
 
 log = structlog.get_logger("coupler.campaign")
 

@@ -23,10 +23,11 @@ from coupler.fmu import FmuParticipant
 from coupler.fmuhost import IsolatedFmu
 from coupler.participant import Participant
 from coupler.security import ClientSecurity
-from coupler_orchestrator import ssp, steps
+from coupler_orchestrator import ssp
+from coupler_orchestrator.master import native_step_channel as steps
+from coupler_orchestrator.master.native_step_channel import NativeRemote
 from coupler_orchestrator.options import RunOptions
-from coupler_orchestrator.replay import ReplayParticipant, parse_source
-from coupler_orchestrator.steps import NativeRemote
+from coupler_orchestrator.pipeline.replay import ReplayParticipant, parse_source
 
 
 @dataclass(frozen=True, kw_only=True)

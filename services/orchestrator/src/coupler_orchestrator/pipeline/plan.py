@@ -5,11 +5,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from coupler_orchestrator.checks import Checked, Member, TimeGrid
+from coupler_orchestrator.master.native_step_channel import wanted
 from coupler_orchestrator.options import Algorithm, RunOptions
-from coupler_orchestrator.ordering import execution_order
-from coupler_orchestrator.steps import wanted
-from coupler_orchestrator.wiring import Link
+from coupler_orchestrator.pipeline.checks import Checked, Member, TimeGrid
+from coupler_orchestrator.pipeline.ordering import execution_order
+from coupler_orchestrator.pipeline.wiring import Link
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -36,7 +36,7 @@ class Plan:
     exit_when_stuck: bool = False
     """End the process when an in-process call hangs (``RunOptions.exit_when_stuck``)."""
     native: bool = False
-    """Step in-process FMUs in C when the plan allows it (``coupler_orchestrator.kernel``)."""
+    """Step in-process FMUs in C when the plan allows it (``master.native_fmu_step``)."""
 
 
 def build_plan(checked: Checked, links: tuple[Link, ...], options: RunOptions) -> Plan:
