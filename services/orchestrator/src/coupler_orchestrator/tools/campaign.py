@@ -85,8 +85,9 @@ from typing import IO, Any
 import structlog
 
 from coupler.errors import CouplerError, ScenarioError
+from coupler_orchestrator.outputs.files import write_json
+from coupler_orchestrator.outputs.parquet import parquet_available
 from coupler_orchestrator.outputs.progress import duration
-from coupler_orchestrator.outputs.results import parquet_available, write_json
 from coupler_orchestrator.tools.fleet import Fleet, FleetError, FleetSpec, free_port, port_variables
 
 log = structlog.get_logger("coupler.campaign")
