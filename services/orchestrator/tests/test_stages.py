@@ -19,7 +19,8 @@ from coupler.channels import Causality, Channel, Description, RunSetup, Value, V
 from coupler.errors import ValidationError
 from coupler.participant import Participant, Values
 from coupler_orchestrator import ssp
-from coupler_orchestrator.options import Algorithm, RunOptions
+from coupler_orchestrator.model import Algorithm
+from coupler_orchestrator.options import RunOptions
 from coupler_orchestrator.pipeline.checks import check
 from coupler_orchestrator.pipeline.ordering import execution_order
 from coupler_orchestrator.pipeline.participants import Roster, Seat

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import sys
 
-from coupler_orchestrator.cli.main import main as cli_main
+from coupler_orchestrator.cli import main as cli_main
 
 
 def main() -> None:

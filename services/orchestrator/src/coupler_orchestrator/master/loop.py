@@ -19,8 +19,6 @@ from __future__ import annotations
 
 import asyncio
 import math
-import os
-import sys
 import time as wallclock
 from collections import defaultdict
 from collections.abc import Mapping, Sequence
@@ -33,8 +31,8 @@ from coupler.errors import CouplerError, ParticipantError, ParticipantTimeout
 from coupler.participant import EndRun, Split, StepNow, Values
 from coupler_orchestrator.master import native_fmu_step as kernel
 from coupler_orchestrator.master.watchdog import Watchdog
+from coupler_orchestrator.model import Algorithm
 from coupler_orchestrator.observer import Column, Observer, RunEnd, RunInfo
-from coupler_orchestrator.options import Algorithm
 from coupler_orchestrator.pipeline.checks import Member
 from coupler_orchestrator.pipeline.plan import Plan
 from coupler_orchestrator.pipeline.wiring import Converter
@@ -305,9 +303,8 @@ class Master:
             reason=reason,
             time=grid.time(self.completed_steps),
         )
-        if self.plan.exit_when_stuck:
-            print(f"error: run {status}: {reason}", file=sys.stderr, flush=True)
-            os._exit(130 if status == "aborted" else 1)
+        if self.plan.on_abandoned is not None:
+            self.plan.on_abandoned(end)
 
     def _inputs(self, m: Member) -> Values:
         feed = self.feeds.get(m.name)

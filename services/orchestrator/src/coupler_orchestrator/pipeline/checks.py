@@ -36,7 +36,8 @@ from coupler.participant import Participant
 from coupler.values import check as check_value
 from coupler.values import parse, widen
 from coupler_orchestrator import ssp
-from coupler_orchestrator.options import Algorithm, RunOptions
+from coupler_orchestrator.model import Algorithm
+from coupler_orchestrator.options import RunOptions
 from coupler_orchestrator.pipeline.participants import Roster, Seat, where
 from coupler_orchestrator.pipeline.replay import ReplayParticipant
 from coupler_orchestrator.ssp.units import Affine, IncompatibleUnits, affine, from_symbol

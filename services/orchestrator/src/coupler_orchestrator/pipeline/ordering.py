@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-from coupler_orchestrator.options import Algorithm
+from coupler_orchestrator.model import Algorithm
 from coupler_orchestrator.pipeline.wiring import Link
 
 

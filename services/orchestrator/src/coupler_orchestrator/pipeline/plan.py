@@ -3,10 +3,13 @@ once, the time grid and the run's settings. Nothing here knows SSP."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 from coupler_orchestrator.master.native_step_channel import wanted
-from coupler_orchestrator.options import Algorithm, RunOptions
+from coupler_orchestrator.model import Algorithm
+from coupler_orchestrator.observer import RunEnd
+from coupler_orchestrator.options import RunOptions
 from coupler_orchestrator.pipeline.checks import Checked, Member, TimeGrid
 from coupler_orchestrator.pipeline.ordering import execution_order
 from coupler_orchestrator.pipeline.wiring import Link
@@ -33,8 +36,8 @@ class Plan:
     call."""
     realtime_factor: float | None = None
     """Pace simulated time at this multiple of wall time; None runs as fast as possible."""
-    exit_when_stuck: bool = False
-    """End the process when an in-process call hangs (``RunOptions.exit_when_stuck``)."""
+    on_abandoned: Callable[[RunEnd], None] | None = None
+    """Told when the run is abandoned, its thread stuck (``RunOptions.on_abandoned``)."""
     native: bool = False
     """Step in-process FMUs in C when the plan allows it (``master.native_fmu_step``)."""
 
@@ -52,7 +55,7 @@ def build_plan(checked: Checked, links: tuple[Link, ...], options: RunOptions) -
         run_id=options.run_id,
         lease=lease_of(options, checked),
         realtime_factor=options.realtime_factor or None,
-        exit_when_stuck=options.exit_when_stuck,
+        on_abandoned=options.on_abandoned,
         native=wanted(options.native_steps),
     )
 
