@@ -18,7 +18,7 @@ from pathlib import Path
 import pytest
 
 from coupler_orchestrator.master import native_fmu_step as kernel
-from coupler_orchestrator.pipeline.plan import Plan
+from coupler_orchestrator.model import Plan
 
 from .conftest import Coupler
 

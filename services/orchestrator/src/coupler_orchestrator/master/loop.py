@@ -31,11 +31,8 @@ from coupler.errors import CouplerError, ParticipantError, ParticipantTimeout
 from coupler.participant import EndRun, Split, StepNow, Values
 from coupler_orchestrator.master import native_fmu_step as kernel
 from coupler_orchestrator.master.watchdog import Watchdog
-from coupler_orchestrator.model import Algorithm
+from coupler_orchestrator.model import Algorithm, Converter, Member, Plan
 from coupler_orchestrator.observer import Column, Observer, RunEnd, RunInfo
-from coupler_orchestrator.pipeline.checks import Member
-from coupler_orchestrator.pipeline.plan import Plan
-from coupler_orchestrator.pipeline.wiring import Converter
 
 log = structlog.get_logger("coupler.master")
 

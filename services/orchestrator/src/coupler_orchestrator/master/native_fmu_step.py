@@ -32,9 +32,7 @@ from coupler.channels import Value
 from coupler.fmicalls import CONVERT, Group
 from coupler.fmu import FmuParticipant
 from coupler_orchestrator.master.watchdog import IN_PROCESS, Armed
-from coupler_orchestrator.model import Algorithm
-from coupler_orchestrator.pipeline.checks import Member
-from coupler_orchestrator.pipeline.plan import Plan
+from coupler_orchestrator.model import Algorithm, Member, Plan
 from coupler_orchestrator.tools.export_fmu import NativeLibrary, ToolchainMissing, cached_library
 
 log = structlog.get_logger("coupler.kernel")

@@ -10,8 +10,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-from coupler_orchestrator.model import Algorithm
-from coupler_orchestrator.pipeline.wiring import Link
+from coupler_orchestrator.model import Algorithm, Link
 
 
 def execution_order(

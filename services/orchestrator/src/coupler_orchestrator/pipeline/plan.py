@@ -3,43 +3,10 @@ once, the time grid and the run's settings. Nothing here knows SSP."""
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from dataclasses import dataclass
-
 from coupler_orchestrator.master.native_step_channel import wanted
-from coupler_orchestrator.model import Algorithm
-from coupler_orchestrator.observer import RunEnd
+from coupler_orchestrator.model import Checked, Link, Plan
 from coupler_orchestrator.options import RunOptions
-from coupler_orchestrator.pipeline.checks import Checked, Member, TimeGrid
 from coupler_orchestrator.pipeline.ordering import execution_order
-from coupler_orchestrator.pipeline.wiring import Link
-
-
-@dataclass(frozen=True, kw_only=True)
-class Plan:
-    """Everything the master needs."""
-
-    members: tuple[Member, ...]
-    """In scenario order (the order of results columns)."""
-    order: tuple[Member, ...]
-    """The same members in the order the algorithm steps them."""
-    links: tuple[Link, ...]
-    """Every connection."""
-    grid: TimeGrid
-    """The communication points."""
-    algorithm: Algorithm
-    """Master algorithm."""
-    run_id: str
-    """Identifies the run in logs, participants and results; unique per run."""
-    lease: float
-    """Lease granted with Initialize [s]: a participant ends the run after this long without a
-    call."""
-    realtime_factor: float | None = None
-    """Pace simulated time at this multiple of wall time; None runs as fast as possible."""
-    on_abandoned: Callable[[RunEnd], None] | None = None
-    """Told when the run is abandoned, its thread stuck (``RunOptions.on_abandoned``)."""
-    native: bool = False
-    """Step in-process FMUs in C when the plan allows it (``master.native_fmu_step``)."""
 
 
 def build_plan(checked: Checked, links: tuple[Link, ...], options: RunOptions) -> Plan:
