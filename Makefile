@@ -62,9 +62,12 @@ browser:
 grpc-dev:
 	@bash scripts/install-grpc-dev.sh
 
+# ruff (style, and complexity: mccabe at most 15 per function), the layer rules of
+# pyproject.toml's [tool.importlinter] (docs/orchestrator.md), mypy.
 lint: sync
 	$(UV) run --frozen ruff check .
 	$(UV) run --frozen ruff format --check .
+	$(UV) run --frozen lint-imports
 	$(UV) run --frozen mypy packages/coupler/src packages/railway/src services/*/src
 
 test: setup browser grpc-dev

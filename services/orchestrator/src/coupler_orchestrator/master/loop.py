@@ -5,11 +5,11 @@ to, step the members that are due, store their outputs, record. Jacobi steps all
 concurrently on the outputs of the previous communication point; Gauss-Seidel steps them one
 after another in the plan's order, each seeing what its predecessors just produced.
 
-Members that compute in this process (in-process FMUs, ``Participant.synchronous``) step on
-this thread without awaiting — while the remote members' steps are in flight — under the eye
-of a ``Watchdog`` that ends the run when such a step outlives its deadline. Remote members on
-the native step channel (``Participant.split``) are sent their requests first and answered
-last, on this thread too; the others are awaited. A run of in-process FMUs only is stepped
+How each member steps is chosen once (``steppers``): members that compute in this process
+(in-process FMUs) step on this thread without awaiting — while the remote members' steps are
+in flight — under the eye of a ``Watchdog`` that ends the run when such a step outlives its
+deadline. Remote members on the native step channel are sent their requests first and
+answered last, on this thread too; the others are awaited. A run of in-process FMUs only is stepped
 by one call into C per base step (``kernel``), with the same meaning.
 t_k = t_0 + k*h; each member steps from t_k by exactly its configured step (its deltaTime,
 else h), never by a difference of two communication points.
@@ -28,8 +28,9 @@ import structlog
 
 from coupler.channels import RunSetup, Value
 from coupler.errors import CouplerError, ParticipantError, ParticipantTimeout
-from coupler.participant import EndRun, Split, StepNow, Values
+from coupler.participant import EndRun, Values
 from coupler_orchestrator.master import native_fmu_step as kernel
+from coupler_orchestrator.master.steppers import Split, StepNow, stepper_of
 from coupler_orchestrator.master.watchdog import Watchdog
 from coupler_orchestrator.model import Algorithm, Converter, Member, Plan
 from coupler_orchestrator.observer import Column, Observer, RunEnd, RunInfo
@@ -265,13 +266,11 @@ class Master:
         """Find the members that step on this thread and watch them while they do; prepare
         the native FMU step when the plan allows it (``kernel``)."""
         for m in self.plan.order:
-            stepper = m.participant.synchronous()
-            if stepper is not None:
-                self._local[m.name] = stepper
-                continue
-            halves = m.participant.split()
-            if halves is not None:
-                self._split[m.name] = halves
+            stepper = stepper_of(m.participant)
+            if stepper.now is not None:
+                self._local[m.name] = stepper.now
+            elif stepper.split is not None:
+                self._split[m.name] = stepper.split
         if self._local or self._split:
             self._watchdog = Watchdog(self._abandon)
             self._watchdog.start()
