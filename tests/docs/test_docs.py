@@ -35,6 +35,7 @@ import time
 import uuid
 from dataclasses import dataclass
 from pathlib import Path
+from coupler.testing import free_port
 
 import pytest
 
@@ -160,12 +161,6 @@ def sandbox(tmp_path_factory: pytest.TempPathFactory) -> Path:
         pytest.fail(f"{fmus} lacks the FMUs: run `make setup` (make test does)")
     shutil.copytree(fmus, home / "build" / "fmus")
     return home
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 def user_environment(marker: str, ports: dict[int, int]) -> dict[str, str]:

@@ -29,6 +29,7 @@ from coupler.examples.gain import GainParticipant
 from coupler.participant import EndRun, Values
 from coupler.security import ServerSecurity
 from coupler.server import ParticipantServer
+from coupler.testing import free_port
 from coupler_orchestrator.tools.export_fmu import (
     BASE_SYSTEM,
     ToolchainMissing,
@@ -36,7 +37,6 @@ from coupler_orchestrator.tools.export_fmu import (
     fingerprint,
     write_fmu,
 )
-from coupler_orchestrator.tools.fleet import free_port
 
 from .conftest import Coupler, serving
 
