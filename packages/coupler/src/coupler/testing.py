@@ -179,8 +179,9 @@ def process_group(
         end_group(process, grace=grace)
 
 
-def end_group(process: subprocess.Popen[Any], *, grace: float = 5.0) -> None:
-    """End ``process``'s process group (SIGTERM, then SIGKILL after ``grace`` s) and reap it."""
+def end_group(process: subprocess.Popen[Any], *, grace: float = 5.0, close: bool = True) -> None:
+    """End ``process``'s process group (SIGTERM, then SIGKILL after ``grace`` s) and reap it;
+    ``close``: its pipes too (not while threads of the caller still read them)."""
     group = process.pid  # a session leader's group id is its pid
     with contextlib.suppress(ProcessLookupError, PermissionError):
         os.killpg(group, signal.SIGTERM)
@@ -191,6 +192,6 @@ def end_group(process: subprocess.Popen[Any], *, grace: float = 5.0) -> None:
     with contextlib.suppress(subprocess.TimeoutExpired):
         process.wait(10)
     for stream in (process.stdin, process.stdout, process.stderr):
-        if stream is not None:
+        if close and stream is not None:
             with contextlib.suppress(OSError):
                 stream.close()
