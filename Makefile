@@ -68,7 +68,7 @@ lint: sync
 	$(UV) run --frozen ruff check .
 	$(UV) run --frozen ruff format --check .
 	$(UV) run --frozen lint-imports
-	$(UV) run --frozen mypy packages/coupler/src packages/railway/src services/*/src
+	$(UV) run --frozen mypy packages/coupler/src packages/coupler-dev/src packages/railway/src services/*/src
 
 test: setup browser grpc-dev
 	$(UV) run --frozen pytest

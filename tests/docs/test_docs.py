@@ -29,15 +29,15 @@ import os
 import re
 import shutil
 import signal
-import socket
 import subprocess
 import time
 import uuid
 from dataclasses import dataclass
 from pathlib import Path
-from coupler.testing import free_port
 
 import pytest
+
+from coupler.testing import free_port
 
 ROOT = Path(__file__).resolve().parents[2]
 DOCS = sorted(

@@ -24,12 +24,12 @@ from typing import Any
 import pytest
 
 from coupler.channels import Capabilities, Description, Value
-from coupler.devcerts import write_pki
 from coupler.examples.gain import GainParticipant
 from coupler.participant import EndRun, Values
 from coupler.security import ServerSecurity
 from coupler.server import ParticipantServer
 from coupler.testing import free_port
+from coupler_dev.devcerts import write_pki
 from coupler_orchestrator.tools.export_fmu import (
     BASE_SYSTEM,
     ToolchainMissing,
