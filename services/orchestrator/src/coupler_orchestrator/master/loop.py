@@ -10,7 +10,7 @@ How each member steps is chosen once (``steppers``): members that compute in thi
 in flight — under the eye of a ``Watchdog`` that ends the run when such a step outlives its
 deadline. Remote members on the native step channel are sent their requests first and
 answered last, on this thread too; the others are awaited. A run of in-process FMUs only is stepped
-by one call into C per base step (``kernel``), with the same meaning.
+by one call into C per base step (``native_fmu_step``), with the same meaning.
 t_k = t_0 + k*h; each member steps from t_k by exactly its configured step (its deltaTime,
 else h), never by a difference of two communication points.
 """
@@ -29,7 +29,7 @@ import structlog
 from coupler.channels import RunSetup, Value
 from coupler.errors import CouplerError, ParticipantError, ParticipantTimeout
 from coupler.participant import EndRun, Values
-from coupler_orchestrator.master import native_fmu_step as kernel
+from coupler_orchestrator.master import native_fmu_step
 from coupler_orchestrator.master.steppers import Split, StepNow, stepper_of
 from coupler_orchestrator.master.watchdog import Watchdog
 from coupler_orchestrator.model import Algorithm, Converter, Member, Plan
@@ -132,7 +132,7 @@ class Master:
         """Members stepping in two halves on this thread (after Initialize), by name."""
         self._sent: dict[str, float] = {}
         """When each split member's request under way was sent [perf_counter]."""
-        self._kernel: kernel.Kernel | None = None
+        self._kernel: native_fmu_step.Kernel | None = None
         """Steps every member in C, when the plan allows it (after Initialize)."""
         self._watchdog: Watchdog | None = None
         self._wall_start = 0.0
@@ -264,7 +264,7 @@ class Master:
 
     def _watch_local_members(self) -> None:
         """Find the members that step on this thread and watch them while they do; prepare
-        the native FMU step when the plan allows it (``kernel``)."""
+        the native FMU step when the plan allows it (``native_fmu_step``)."""
         for m in self.plan.order:
             stepper = stepper_of(m.participant)
             if stepper.now is not None:
@@ -274,7 +274,7 @@ class Master:
         if self._local or self._split:
             self._watchdog = Watchdog(self._abandon)
             self._watchdog.start()
-        self._kernel = kernel.prepare(self.plan)
+        self._kernel = native_fmu_step.prepare(self.plan)
         if self._kernel is not None:
             assert self._watchdog is not None
             self._watchdog.follow(self._kernel.under_way)
@@ -366,7 +366,7 @@ class Master:
         return outputs
 
     def _native_step(self, k: int) -> None:
-        """Every member stepped in C (``kernel``); a member that stops its step is told
+        """Every member stepped in C (``native_fmu_step``); a member that stops its step is told
         about as it is in Python: its error ends the run, its request to end it is kept and
         the members after it step on."""
         native = self._kernel

@@ -23,8 +23,7 @@ from coupler.fmuhost import IsolatedFmu
 from coupler.participant import Participant
 from coupler.security import ClientSecurity
 from coupler_orchestrator import ssp
-from coupler_orchestrator.master import native_step_channel as steps
-from coupler_orchestrator.master.native_step_channel import NativeRemote
+from coupler_orchestrator.master.native_step_channel import NativeRemote, enabled
 from coupler_orchestrator.model import Candidate, Roster
 from coupler_orchestrator.options import RunOptions
 from coupler_orchestrator.pipeline.replay import ReplayParticipant, parse_source
@@ -58,7 +57,7 @@ def create(
             key=settings.tls_key,
             token_file=settings.token_file,
         )
-        remote = NativeRemote if steps.enabled(options.native_steps) else RemoteParticipant
+        remote = NativeRemote if enabled(options.native_steps) else RemoteParticipant
         return remote(
             component.source,
             name=component.name,
