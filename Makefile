@@ -73,10 +73,13 @@ browser:
 grpc-dev:
 	@bash scripts/install-grpc-dev.sh
 
+# ruff (style, and complexity: mccabe at most 15 per function), the layer rules of
+# pyproject.toml's [tool.importlinter] (docs/orchestrator.md), mypy.
 lint: sync
 	$(UV) run --frozen ruff check .
 	$(UV) run --frozen ruff format --check .
-	$(UV) run --frozen mypy packages/coupler/src packages/railway/src services/*/src
+	$(UV) run --frozen lint-imports
+	$(UV) run --frozen mypy packages/coupler/src packages/coupler-dev/src packages/railway/src services/*/src
 
 test: setup browser grpc-dev
 	$(UV) run --frozen pytest

@@ -17,12 +17,13 @@ from __future__ import annotations
 
 import argparse
 import json
-import socket
 import subprocess
 import sys
 import tempfile
 import time
 from pathlib import Path
+
+from coupler.testing import free_port
 
 SSD = """<?xml version="1.0" encoding="UTF-8"?>
 <ssd:SystemStructureDescription version="1.0" name="Soak"
@@ -46,12 +47,6 @@ COMPONENT = """      <ssd:Component name="Gain{i}" type="application/x-coupler-g
         </ssd:Connectors>
       </ssd:Component>"""
 STEP = 0.001
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 def rss_mb(pid: int) -> float | None:

@@ -20,7 +20,8 @@ Cases (steps/s, median of the repetitions; Coupler and its reference interleaved
   FMPy loop, against `coupler run` driving the same participant directly (its stream);
 - scale: 100 gain participants in one run: steps/s, RSS per participant process, time from the
   run's start to its first step for 1, 10 and 100 participants;
-- memory: the orchestrator's RSS after 1e4 and after 1e5 steps of remote x1 (its own process).
+- memory: the orchestrator's RSS after 1e4 and after 1e5 steps of remote x1 (its own process);
+- the command line's start: `coupler --help`, median of five [s].
 
 Prints one table with each ratio, its target and PASS/FAIL, and writes build/bench.json. Not a
 test: nothing here asserts; the figures go into docs/performance.md.
@@ -297,7 +298,7 @@ def export_gain(folder: Path, port: int) -> Path | None:
     """The example gain participant exported as an FMI 2 FMU (coupler export-fmu), pointing at
     ``port``; None without the C++ gRPC tool chain."""
     from coupler.examples.gain import GainParticipant
-    from coupler_orchestrator.export import ExportError, build_proxy, write_fmu
+    from coupler_orchestrator.tools.export_fmu import ExportError, build_proxy, write_fmu
 
     try:
         binaries = build_proxy(log=False)
@@ -364,7 +365,7 @@ def processes(commands: Sequence[Sequence[str]]) -> Iterator[list[subprocess.Pop
 
 
 def free_ports(count: int) -> list[int]:
-    from coupler_orchestrator.fleet import free_port
+    from coupler_orchestrator.tools.fleet import free_port
 
     return [free_port() for _ in range(count)]
 
@@ -605,7 +606,30 @@ async def suite(sizes: Sizes, log: Callable[[str], None]) -> tuple[list[Row], di
     rows: list[Row] = []
     extra: dict[str, Any] = {}
     work = Path(tempfile.mkdtemp(prefix="coupler-bench-"))
+    for section in (cli_start, chains, remotes, proxy_fmu, scale, memory):
+        await section(sizes, log, work, rows, extra)
+    return rows, extra
 
+
+async def cli_start(
+    sizes: Sizes, log: Callable[[str], None], work: Path, rows: list[Row], extra: dict[str, Any]
+) -> None:
+    log("coupler --help: the command line's start (a command imports what it needs when it runs)")
+    command = [str(Path(sys.executable).with_name("coupler")), "--help"]
+    seconds = []
+    for _ in range(5):
+        started = time.perf_counter()
+        await asyncio.to_thread(subprocess.run, command, capture_output=True, check=True)
+        seconds.append(time.perf_counter() - started)
+    extra["cli_help_s"] = round(median_of(seconds), 3)
+    rows.append(
+        Row("coupler --help", median_of(seconds), note="seconds, not steps/s; target: < 0.3 s")
+    )
+
+
+async def chains(
+    sizes: Sizes, log: Callable[[str], None], work: Path, rows: list[Row], extra: dict[str, Any]
+) -> None:
     for n in (2, 10):
         log(f"in-process FMU chain x{n}")
         ssd = chain_ssd(work, n)
@@ -629,6 +653,10 @@ async def suite(sizes: Sizes, log: Callable[[str], None]) -> tuple[list[Row], di
             rows.append(Row(f"in-process FMU chain x{n}", coupler, "libcosim (C++)", cosim, 0.5,
                             note="stretch target"))  # fmt: skip
 
+
+async def remotes(
+    sizes: Sizes, log: Callable[[str], None], work: Path, rows: list[Row], extra: dict[str, Any]
+) -> None:
     for n, target in ((1, 0.8), (3, 0.9), (10, 0.8)):
         log(f"remote x{n}")
         gain_ports, raw_ports = free_ports(n), free_ports(n)
@@ -663,6 +691,10 @@ async def suite(sizes: Sizes, log: Callable[[str], None]) -> tuple[list[Row], di
             if mosaik_figure is not None:
                 rows.append(Row("remote x1", coupler, "mosaik 3 (TCP)", mosaik_figure, 1.25))
 
+
+async def proxy_fmu(
+    sizes: Sizes, log: Callable[[str], None], work: Path, rows: list[Row], extra: dict[str, Any]
+) -> None:
     log("the exported proxy FMU (coupler export-fmu) vs coupler run driving the participant")
     [port] = free_ports(1)
     with processes(gains([port])):
@@ -699,6 +731,10 @@ async def suite(sizes: Sizes, log: Callable[[str], None]) -> tuple[list[Row], di
                             coupler_direct,
                             note=f"{per_step['fmpy_proxy_fmu']:.0f} us/step"))  # fmt: skip
 
+
+async def scale(
+    sizes: Sizes, log: Callable[[str], None], work: Path, rows: list[Row], extra: dict[str, Any]
+) -> None:
     log("scale: 1, 10, 100 participants (time to the first step; 100 in one run)")
     first_step: dict[str, float] = {}
     for n in (1, 10, 100):
@@ -723,6 +759,10 @@ async def suite(sizes: Sizes, log: Callable[[str], None]) -> tuple[list[Row], di
                 )  # fmt: skip
     extra["time_to_first_step_s"] = first_step
 
+
+async def memory(
+    sizes: Sizes, log: Callable[[str], None], work: Path, rows: list[Row], extra: dict[str, Any]
+) -> None:
     log(f"memory: orchestrator RSS at 1e4 and {sizes.rss_steps:.0e} steps (remote x1)")
     [port] = free_ports(1)
     with processes(gains([port])):
@@ -747,7 +787,6 @@ async def suite(sizes: Sizes, log: Callable[[str], None]) -> tuple[list[Row], di
             note="MB, not steps/s; target: within 5 %",
         )
     )
-    return rows, extra
 
 
 async def only(case: str, steps: int) -> float:
@@ -779,8 +818,9 @@ def table(rows: Sequence[Row]) -> str:
         if row.case.startswith("orchestrator RSS"):
             target = "1+-0.05"
         reference = f"{row.reference_rate:,.0f}" if row.reference_rate else ""
+        figure = f"{row.coupler:.3f}" if row.case == "coupler --help" else f"{row.coupler:,.1f}"
         lines.append(
-            f"{row.case:<34} {row.coupler:>10,.1f} {row.reference:<26} {reference:>10} "
+            f"{row.case:<34} {figure:>10} {row.reference:<26} {reference:>10} "
             f"{ratio:>7} {target:>7}  {verdict}{'  (' + row.note + ')' if row.note else ''}"
         )
     return "\n".join(lines)
@@ -823,7 +863,8 @@ def main() -> int:
     def log(text: str) -> None:
         print(f"[{time.perf_counter() - started:6.1f} s] {text}", file=sys.stderr, flush=True)
 
-    from coupler_orchestrator import kernel, steps
+    from coupler_orchestrator.master import native_fmu_step as kernel
+    from coupler_orchestrator.master import native_step_channel as steps
 
     channel = "native step channel" if steps.enabled() else "grpc.aio"
     fmu_steps = "in C" if steps.wanted() and kernel.library() is not None else "through Python"

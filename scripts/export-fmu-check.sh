@@ -35,7 +35,7 @@ stage export
 bash scripts/install-grpc-dev.sh
 rm -rf "$OUT/Gain" "$OUT/Gain.fmu" "$OUT"/*.txt
 mkdir -p "$OUT/Gain"
-PORT=$(.venv/bin/python -c 'from coupler_orchestrator.fleet import free_port; print(free_port())')
+PORT=$(.venv/bin/python -c 'from coupler.testing import free_port; print(free_port())')
 .venv/bin/python -m coupler.examples gain --port "$PORT" >"$OUT/gain.log" 2>&1 &
 GAIN_PID=$!
 .venv/bin/coupler export-fmu "grpc://127.0.0.1:$PORT" --out "$OUT/Gain.fmu" 2>/dev/null

@@ -2,7 +2,7 @@
 
 import sys
 
-from coupler_orchestrator.cli import main
+from coupler_orchestrator.cli.main import main
 
 if __name__ == "__main__":
     sys.exit(main(["fleet", *sys.argv[1:]]))

@@ -31,7 +31,7 @@ mkdir -p "$OUT"
 cp -r deploy/k8s "$OUT/k8s"
 rm -rf "$OUT/k8s/railway/pki"
 # The Secrets' files, as a user makes them (docs/deployment.md): a throwaway CA here.
-"$UV" run --frozen python -m coupler.devcerts "$OUT/k8s/railway/pki" --name openrails-bridge \
+"$UV" run --frozen python -m coupler_dev.devcerts "$OUT/k8s/railway/pki" --name openrails-bridge \
   --name balise-fmu --name mapserver >/dev/null
 for kustomization in base railway; do
   render "$OUT/k8s/$kustomization" >"$OUT/$kustomization.yaml"

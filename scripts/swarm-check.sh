@@ -10,7 +10,7 @@
 #      it is in a swarm already; the node labelled coupler.openrails=true (the bridge's placement)
 #   3. host artifacts, base images, every image built (as the compose check; shared steps in
 #      scripts/lib/containers.sh)
-#   4. a development PKI (coupler.devcerts: CA, participant and orchestrator certificates, token)
+#   4. a development PKI (coupler_dev.devcerts: CA, participant and orchestrator certificates, token)
 #   5. the stack file: `docker stack config` of compose.yaml, compose.loopback.yaml (servers on
 #      127.0.0.1), compose.tls.yaml and compose.swarm.yaml, every service on the host's network
 #      (test traffic stays on loopback) and without the map's published port (none under host
@@ -112,7 +112,7 @@ docker-compose -p "$STACK" -f "$OUT/compose.build.yaml" build --parallel --force
 
 # --- 4. certificates and token: docker secrets ----------------------------------------------
 stage pki
-"$UV" run --frozen python -m coupler.devcerts "$OUT/pki"
+"$UV" run --frozen python -m coupler_dev.devcerts "$OUT/pki"
 export COUPLER_PKI=$OUT/pki
 
 # --- 5. the stack file ----------------------------------------------------------------------

@@ -29,7 +29,6 @@ import os
 import re
 import shutil
 import signal
-import socket
 import subprocess
 import time
 import uuid
@@ -37,6 +36,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
+
+from coupler.testing import free_port
 
 ROOT = Path(__file__).resolve().parents[2]
 DOCS = sorted(
@@ -164,12 +165,6 @@ def sandbox(tmp_path_factory: pytest.TempPathFactory) -> Path:
         pytest.fail(f"{routes} lacks the railway's route: run `make setup` (make test does)")
     shutil.copytree(routes, home / "build" / "routes")
     return home
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 def user_environment(marker: str, ports: dict[int, int]) -> dict[str, str]:

@@ -23,8 +23,9 @@ from typing import Any
 
 import pytest
 
-from coupler_orchestrator.export import ToolchainMissing, build_proxy
-from coupler_orchestrator.fleet import Fleet, FleetSpec, free_port
+from coupler.testing import free_port
+from coupler_orchestrator.tools.export_fmu import ToolchainMissing, build_proxy
+from coupler_orchestrator.tools.fleet import Fleet, FleetSpec
 
 ROOT = Path(__file__).resolve().parents[2]
 FLEET = ROOT / "scenarios" / "railway" / "fleet.toml"

@@ -25,9 +25,10 @@ from typing import Any
 import aiohttp
 import pytest
 
-from coupler_orchestrator.fleet import Fleet, FleetSpec, ServiceSpec
+from coupler.testing import free_port
 from coupler_orchestrator.options import RunOptions
 from coupler_orchestrator.runner import RunOutcome, run_scenario
+from coupler_orchestrator.tools.fleet import Fleet, FleetSpec, ServiceSpec
 from coupler_railway import load_infrastructure
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -56,12 +57,6 @@ BROWSER_ARGS = [
 ]
 
 pytestmark = pytest.mark.timeout(300)
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 @pytest.fixture(scope="module")

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from coupler_orchestrator.campaign import CampaignSpec, run_campaign
+from coupler_orchestrator.tools.campaign import CampaignSpec, run_campaign
 
 ROOT = Path(__file__).resolve().parents[2]
 

@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import csv
 import shutil
-import socket
 from pathlib import Path
 
 import fmpy
@@ -21,9 +20,10 @@ import numpy as np
 import pytest
 
 from balise_fmu.build import build_track_balises
-from coupler_orchestrator.fleet import Fleet, FleetSpec, ServiceSpec
+from coupler.testing import free_port
 from coupler_orchestrator.options import RunOptions
 from coupler_orchestrator.runner import run_scenario
+from coupler_orchestrator.tools.fleet import Fleet, FleetSpec, ServiceSpec
 
 ROOT = Path(__file__).resolve().parents[2]
 TEST_LINE = ROOT / "packages" / "railway" / "tests" / "data" / "test-line.railml"
@@ -70,12 +70,6 @@ SSD = """<?xml version="1.0" encoding="UTF-8"?>
   <ssd:Units><ssc:Unit name="m"><ssc:BaseUnit m="1"/></ssc:Unit></ssd:Units>
 </ssd:SystemStructureDescription>
 """
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 async def test_host_under_coupler_run_equals_fmpy(tmp_path: Path) -> None:

@@ -2,8 +2,8 @@
 
     ip netns exec NS python tests/multihost/netns_host.py FLEET.toml ROOT
 
-Starts the fleet file's services with ``coupler_orchestrator.fleet.Fleet`` (health checked from
-inside the namespace; ``grpcs://`` health with the ``COUPLER_TLS_*`` environment), prints
+Starts the fleet file's services with ``coupler_orchestrator.tools.fleet.Fleet`` (health checked
+from inside the namespace; ``grpcs://`` health with the ``COUPLER_TLS_*`` environment), prints
 ``ready`` and waits; SIGTERM or SIGINT stops every service. Exits 1 with the reason when a
 service does not become healthy.
 """
@@ -17,7 +17,7 @@ from pathlib import Path
 
 from coupler.errors import CouplerError
 from coupler.logs import configure_logging
-from coupler_orchestrator.fleet import Fleet, FleetSpec
+from coupler_orchestrator.tools.fleet import Fleet, FleetSpec
 
 
 async def serve(fleet_file: Path, root: Path) -> None:

@@ -43,7 +43,7 @@ from typing import Any
 
 import pytest
 
-from coupler.devcerts import DevPki, write_pki
+from coupler_dev.devcerts import DevPki, write_pki
 
 ROOT = Path(__file__).resolve().parents[2]
 HERE = Path(__file__).resolve().parent

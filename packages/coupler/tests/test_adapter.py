@@ -15,7 +15,7 @@ from coupler.adapter import Adapter, AdapterConfig, AdapterParticipant
 from coupler.channels import RunSetup, Value
 from coupler.client import RemoteParticipant
 from coupler.errors import ParticipantError, ScenarioError
-from coupler.server import ParticipantServer
+from coupler.testing import served
 
 MAPPING = """
 name = "Cart"
@@ -87,10 +87,8 @@ async def test_adapter_participant_maps_channels_to_fields(tmp_path: Path) -> No
     path = tmp_path / "cart.toml"
     path.write_text(MAPPING)
     adapter = CartAdapter()
-    server = ParticipantServer(AdapterParticipant(adapter, AdapterConfig.load(path)))
-    await server.start()
-    assert adapter.connected
-    try:
+    async with served(AdapterParticipant(adapter, AdapterConfig.load(path))) as server:
+        assert adapter.connected
         async with RemoteParticipant(server.address) as remote:
             description = await remote.describe()
             assert [c.name for c in description.channels] == ["push", "speed_kmh", "steps", "mass"]
@@ -104,8 +102,6 @@ async def test_adapter_participant_maps_channels_to_fields(tmp_path: Path) -> No
             out = await remote.do_step(1.0, 1.0, {})
             assert out == {"speed_kmh": pytest.approx(3.6), "steps": 2}
             await remote.terminate()
-    finally:
-        await server.stop(grace=0.1)
     assert not adapter.connected
 
 

@@ -2,7 +2,7 @@
 
     RemoteParticipant --grpcs:// (CA, client cert, token)--> ParticipantServer(Gain)
 
-Certificates are made fresh for every test module by ``coupler.devcerts`` (cryptography).
+Certificates are made fresh for every test module by ``coupler_dev.devcerts`` (cryptography).
 """
 
 from __future__ import annotations
@@ -14,12 +14,12 @@ import pytest
 
 from coupler.channels import RunSetup
 from coupler.client import RemoteParticipant
-from coupler.devcerts import DevPki, write_pki
 from coupler.errors import ParticipantError, ParticipantUnavailable, ScenarioError
 from coupler.examples.gain import GainParticipant
 from coupler.health import probe
 from coupler.security import ClientSecurity, ServerSecurity
 from coupler.server import ParticipantServer
+from coupler_dev.devcerts import DevPki, write_pki
 
 SETUP = RunSetup(run_id="tls", start_time=0.0, step_size=0.5)
 

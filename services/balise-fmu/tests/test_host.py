@@ -20,7 +20,7 @@ import pytest
 from coupler.channels import Causality, RunSetup, ValueType
 from coupler.client import RemoteParticipant
 from coupler.fmu import FmuParticipant
-from coupler.server import ParticipantServer
+from coupler.testing import served
 
 NUMERIC = (
     "last_balise_id",
@@ -63,15 +63,13 @@ async def remote(
     fmus: dict[int, Path], request: pytest.FixtureRequest
 ) -> AsyncIterator[tuple[Path, RemoteParticipant]]:
     fmu = fmus[request.param]
-    server = ParticipantServer(FmuParticipant(fmu, name="Balises"), port=0)
-    await server.start()
-    client = RemoteParticipant(server.address, name="Balises")
-    await client.open()
-    try:
-        yield fmu, client
-    finally:
-        await client.close()
-        await server.stop(grace=0.1)
+    async with served(FmuParticipant(fmu, name="Balises")) as server:
+        client = RemoteParticipant(server.address, name="Balises")
+        await client.open()
+        try:
+            yield fmu, client
+        finally:
+            await client.close()
 
 
 async def test_channels_come_from_the_model_description(

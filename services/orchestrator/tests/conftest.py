@@ -7,12 +7,10 @@ own thread, so that tests can call the ``coupler`` CLI (which runs its own loop)
 
 from __future__ import annotations
 
-import asyncio
 import contextlib
 import csv
 import io
 import json
-import threading
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -27,9 +25,11 @@ from coupler.logs import configure_logging
 from coupler.participant import Participant, Values
 from coupler.security import ServerSecurity
 from coupler.server import ParticipantServer
-from coupler_orchestrator import kernel, steps
-from coupler_orchestrator.cli import main
-from coupler_orchestrator.export import ToolchainMissing
+from coupler.testing import served_in_thread
+from coupler_orchestrator.cli.main import main
+from coupler_orchestrator.master import native_fmu_step as kernel
+from coupler_orchestrator.master import native_step_channel as steps
+from coupler_orchestrator.tools.export_fmu import ToolchainMissing
 
 REPO = Path(__file__).resolve().parents[3]
 DATA = Path(__file__).parent / "data"
@@ -133,26 +133,13 @@ def coupler(capsys: pytest.CaptureFixture[str]) -> Coupler:
     return Coupler(capsys)
 
 
-@contextlib.contextmanager
 def serving(
     participant: Participant, security: ServerSecurity | None = None, **options: Any
-) -> Iterator[ParticipantServer]:
+) -> contextlib.AbstractContextManager[ParticipantServer]:
     """``participant`` served on 127.0.0.1, port 0 (or as ``options`` say, e.g. on a
-    ``unix_socket``), by a loop in a background thread."""
-    loop = asyncio.new_event_loop()
-    thread = threading.Thread(target=loop.run_forever, name="participant-server", daemon=True)
-    thread.start()
-    server = ParticipantServer(
-        participant, **{"host": "127.0.0.1", "port": 0, "security": security, **options}
-    )
-    try:
-        asyncio.run_coroutine_threadsafe(server.start(), loop).result(10)
-        yield server
-    finally:
-        asyncio.run_coroutine_threadsafe(server.stop(0.1), loop).result(10)
-        loop.call_soon_threadsafe(loop.stop)
-        thread.join(10)
-        loop.close()
+    ``unix_socket``), by a loop in a background thread, so that a test can call the ``coupler``
+    CLI (which runs its own loop) in-process."""
+    return served_in_thread(participant, security=security, **options)
 
 
 class FailingGain(GainParticipant):

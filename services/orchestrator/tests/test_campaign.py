@@ -12,27 +12,25 @@ participants instead of per-run services; campaign files that cannot run are ref
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import csv
 import json
 import subprocess
 import sys
-import time
 from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
 
-from coupler.errors import CouplerError
-from coupler.health import probe
-from coupler_orchestrator.campaign import (
+from coupler.testing import free_port, process_group, wait_until_serving
+from coupler_orchestrator.cli.main import main
+from coupler_orchestrator.tools.campaign import (
     CampaignError,
     CampaignSpec,
     Output,
     reduce,
     run_campaign,
 )
-from coupler_orchestrator.cli import main
-from coupler_orchestrator.fleet import free_port
 
 REPO = Path(__file__).resolve().parents[3]
 EXAMPLE = REPO / "examples" / "ramp-gain"
@@ -172,38 +170,18 @@ y_final = "Gain.y"
     assert "completed earlier" not in capsys.readouterr().err
 
 
-async def serving(address: str, within: float = 30.0) -> None:
-    deadline = time.monotonic() + within
-    while True:
-        try:
-            await probe(address, connect_timeout=1.0)
-            return
-        except CouplerError:
-            if time.monotonic() > deadline:
-                raise
-            await asyncio.sleep(0.2)
-
-
 @pytest.fixture
 def gain_pool(fmus: dict[str, Path]) -> Iterator[list[int]]:
     """Two gain participants already running, each its own process."""
     ports = [free_port(), free_port()]
-    processes = [
-        subprocess.Popen(
-            [sys.executable, "-m", "coupler.examples", "gain", "--port", str(port)],
-            stdout=subprocess.DEVNULL,
-            stderr=subprocess.DEVNULL,
-        )
-        for port in ports
-    ]
-    try:
+    with contextlib.ExitStack() as processes:
         for port in ports:
-            asyncio.run(serving(f"grpc://127.0.0.1:{port}"))
+            command = [sys.executable, "-m", "coupler.examples", "gain", "--port", str(port)]
+            quiet = {"stdout": subprocess.DEVNULL, "stderr": subprocess.DEVNULL}
+            processes.enter_context(process_group(command, **quiet))
+        for port in ports:
+            asyncio.run(wait_until_serving(f"grpc://127.0.0.1:{port}"))
         yield ports
-    finally:
-        for process in processes:
-            process.terminate()
-            process.wait(10)
 
 
 def test_a_pool_of_running_participants_serves_one_run_each(

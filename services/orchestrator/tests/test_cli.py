@@ -12,7 +12,7 @@ from pathlib import Path
 
 from coupler.server import ParticipantServer
 from coupler_orchestrator.observer import RunEnd, RunInfo
-from coupler_orchestrator.progress import ProgressLines
+from coupler_orchestrator.outputs.progress import ProgressLines
 
 from .conftest import DATA, Coupler
 

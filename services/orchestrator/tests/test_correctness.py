@@ -26,7 +26,7 @@ from coupler.channels import Causality, Channel, Description, RunSetup, Value, V
 from coupler.messages import encode_message
 from coupler.participant import EndRun, Participant, Values
 from coupler_orchestrator.observer import Column
-from coupler_orchestrator.results import csv_field, formatter, row_formatter
+from coupler_orchestrator.outputs.csv import csv_field, formatter, row_formatter
 from coupler_railway.messages import TRAIN_STATE
 
 from .conftest import Coupler, serving

@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import json
 import os
-import socket
 import subprocess
 import sys
 import zipfile
@@ -20,6 +19,7 @@ import pytest
 from coupler.channels import Capabilities, Description
 from coupler.examples.gain import GainParticipant
 from coupler.server import ParticipantServer
+from coupler.testing import free_port
 
 from .conftest import DATA, Coupler, Stepper, serving
 
@@ -220,14 +220,8 @@ def test_loop_without_decoupling(coupler: Coupler, tmp_path: Path, command: str)
     assert coupler("validate", path, "--algorithm", "gauss-seidel", "--step", "0.5").code == 0
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
-
-
 def test_unreachable_participant(coupler: Coupler, tmp_path: Path) -> None:
-    port = _free_port()
+    port = free_port()
     path = ssd(
         tmp_path,
         f'      <ssd:Component name="Gain" type="application/x-coupler-grpc" '

@@ -24,19 +24,19 @@ from typing import Any
 import pytest
 
 from coupler.channels import Capabilities, Description, Value
-from coupler.devcerts import write_pki
 from coupler.examples.gain import GainParticipant
 from coupler.participant import EndRun, Values
 from coupler.security import ServerSecurity
 from coupler.server import ParticipantServer
-from coupler_orchestrator.export import (
+from coupler.testing import free_port
+from coupler_dev.devcerts import write_pki
+from coupler_orchestrator.tools.export_fmu import (
     BASE_SYSTEM,
     ToolchainMissing,
     build_proxy,
     fingerprint,
     write_fmu,
 )
-from coupler_orchestrator.fleet import free_port
 
 from .conftest import Coupler, serving
 

@@ -13,7 +13,6 @@ import csv
 import json
 import os
 import signal
-import socket
 import subprocess
 import sys
 import threading
@@ -27,6 +26,7 @@ import grpc
 import pytest
 
 from coupler.client import parse_address
+from coupler.testing import end_group, free_port, wait_until
 from coupler.v1 import component_pb2 as pb
 from coupler.v1 import component_pb2_grpc as pb_grpc
 
@@ -69,12 +69,6 @@ PACED = ("--realtime-factor", "5")
 second), and a fault caused then lands well before the run's end on a slow machine too."""
 
 
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
-
-
 @pytest.fixture
 def ssd(tmp_path: Path) -> Path:
     path = tmp_path / "faults.ssd"
@@ -94,6 +88,7 @@ class Gain:
                 stdout=subprocess.PIPE,
                 stderr=err,
                 text=True,
+                start_new_session=True,  # ``stop`` ends whatever it started too
             )
         assert self.process.stdout is not None
         line = self.process.stdout.readline()
@@ -103,11 +98,7 @@ class Gain:
         self.process.send_signal(sig)
 
     def stop(self) -> None:
-        if self.process.poll() is None:
-            self.process.kill()
-        self.process.wait(10)
-        if self.process.stdout is not None:
-            self.process.stdout.close()
+        end_group(self.process, grace=1)
 
 
 @contextmanager
@@ -256,12 +247,11 @@ def orchestrator(ssd: Path, out: Path, *args: str) -> subprocess.Popen[str]:
 
 
 def wait_for_rows(out: Path, count: int, within: float = 20.0) -> None:
-    deadline = time.monotonic() + within
-    while time.monotonic() < deadline:
-        if (out / "results.csv").exists() and len(rows(out)) >= count:
-            return
-        time.sleep(0.05)
-    raise AssertionError(f"fewer than {count} rows in {out} after {within} s")
+    wait_until(
+        lambda: (out / "results.csv").exists() and len(rows(out)) >= count,
+        within,
+        what=f"{count} rows in {out}",
+    )
 
 
 def test_a_killed_orchestrator_leaves_a_summary_and_frees_its_participants(

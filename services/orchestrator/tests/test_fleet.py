@@ -14,18 +14,17 @@ import json
 import os
 import re
 import signal
-import socket
 import subprocess
 import sys
 import threading
-import time
 from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
 
 from coupler.health import probe
-from coupler_orchestrator.fleet import FleetSpec, holders_of, port_is_free
+from coupler.testing import end_group, free_port, wait_until
+from coupler_orchestrator.tools.fleet import FleetSpec, holders_of, port_is_free
 
 DATA = Path(__file__).parent / "data"
 REPO = Path(__file__).resolve().parents[3]
@@ -42,12 +41,6 @@ health = "grpc://127.0.0.1:${{GAIN_PORT:-50051}}"
 """
 
 
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
-
-
 class Console:
     """A ``coupler`` process whose stdout and stderr lines are collected as they come."""
 
@@ -59,6 +52,7 @@ class Console:
             stdout=subprocess.PIPE,
             stderr=subprocess.PIPE,
             text=True,
+            start_new_session=True,  # its services are ended with it (``stop``)
         )
         self.out: list[str] = []
         self.err: list[str] = []
@@ -76,15 +70,14 @@ class Console:
             lines.append(line.rstrip("\n"))
 
     def wait_for(self, lines: list[str], pattern: str, timeout: float = 60.0) -> str:
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
-            for line in list(lines):
-                if re.search(pattern, line):
-                    return line
-            if self.process.poll() is not None and not any(r.is_alive() for r in self._readers):
-                break
-            time.sleep(0.05)
-        raise AssertionError(f"no line matching {pattern!r}; out={self.out} err={self.err}")
+        def found() -> str | None:
+            line = next((line for line in list(lines) if re.search(pattern, line)), None)
+            ended = self.process.poll() is not None and not any(r.is_alive() for r in self._readers)
+            if line is None and ended:
+                raise AssertionError(f"ended without {pattern!r}; out={self.out} err={self.err}")
+            return line
+
+        return wait_until(found, timeout, what=f"a line matching {pattern!r}; out={self.out}")
 
     def finish(self, timeout: float = 30.0) -> int:
         code = self.process.wait(timeout)
@@ -93,9 +86,7 @@ class Console:
         return code
 
     def stop(self) -> None:
-        if self.process.poll() is None:
-            self.process.kill()
-            self.process.wait(10)
+        end_group(self.process, close=False)
         for reader in self._readers:
             reader.join(5)
         for stream in (self.process.stdout, self.process.stderr):
@@ -217,10 +208,12 @@ def test_ctrl_c_during_a_run_says_where_and_when_it_stopped(
     run = Console(["fleet", "fleet.toml", "--exit", "--realtime-factor", "0.25"], fleet_dir, env)
     consoles.append(run)
     csv = fleet_dir / "out" / "results.csv"
-    deadline = time.monotonic() + 60
-    while not (csv.exists() and len(csv.read_text().splitlines()) >= 3):  # header, t=0, t=0.5
-        assert time.monotonic() < deadline and run.process.poll() is None, run.err
-        time.sleep(0.05)
+
+    def stepping() -> bool:
+        assert run.process.poll() is None, run.err
+        return csv.exists() and len(csv.read_text().splitlines()) >= 3  # header, t=0, t=0.5
+
+    wait_until(stepping, 60, what="the run's first rows")
     run.process.send_signal(signal.SIGINT)
     assert run.finish() == 130
     rows = len(csv.read_text().splitlines()) - 1

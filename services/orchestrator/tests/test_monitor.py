@@ -15,14 +15,14 @@ import aiohttp
 import pytest
 
 from coupler.server import ParticipantServer
-from coupler_orchestrator.monitor import (
+from coupler_orchestrator.options import RunOptions
+from coupler_orchestrator.outputs.monitor import (
     Decimated,
     MonitorError,
     MonitorServer,
     MonitorState,
     parse_address,
 )
-from coupler_orchestrator.options import RunOptions
 from coupler_orchestrator.runner import run_scenario
 
 from .conftest import DATA, REPO, Coupler

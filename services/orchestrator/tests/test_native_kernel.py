@@ -1,6 +1,6 @@
-"""The native FMU step (coupler_orchestrator.kernel): chosen for runs of in-process FMUs, the
-same bytes in results.csv as the step in Python, and left alone where it would not mean the
-same (a string connection).
+"""The native FMU step (coupler_orchestrator.master.native_fmu_step): chosen for runs of
+in-process FMUs, the same bytes in results.csv as the step in Python, and left alone where it
+would not mean the same (a string connection).
 
     Source (FMI 2 or 3) --ramp, counter--> Feed1 --real, int, bool--> Feed2 --real--> Feed3
                                            (Feedthrough2, FMI 2)
@@ -17,8 +17,8 @@ from pathlib import Path
 
 import pytest
 
-from coupler_orchestrator import kernel
-from coupler_orchestrator.plan import Plan
+from coupler_orchestrator.master import native_fmu_step as kernel
+from coupler_orchestrator.model import Plan
 
 from .conftest import Coupler
 

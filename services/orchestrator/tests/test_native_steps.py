@@ -1,6 +1,6 @@
-"""The native step channel (coupler_orchestrator.steps): built here, chosen by default, the
-same bytes in results.csv as Python's grpc.aio, and the same answers to a participant that
-ends the run or answers outside its description.
+"""The native step channel (coupler_orchestrator.master.native_step_channel): built here,
+chosen by default, the same bytes in results.csv as Python's grpc.aio, and the same answers to
+a participant that ends the run or answers outside its description.
 
 test_faults.py runs the killed, stopped and hung participants over both step paths,
 test_secure_run.py mutual TLS with a token.
@@ -17,8 +17,10 @@ from coupler.channels import RunSetup
 from coupler.client import RemoteParticipant
 from coupler.examples.gain import GainParticipant
 from coupler.participant import EndRun, Values
-from coupler_orchestrator import participants, ssp, steps
+from coupler_orchestrator import ssp
+from coupler_orchestrator.master import native_step_channel as steps
 from coupler_orchestrator.options import RunOptions
+from coupler_orchestrator.pipeline import participants
 
 from .conftest import Coupler, Outcome, build_native_steps, serving
 from .test_faults import SSD, gain

@@ -76,7 +76,7 @@ def test_html_is_self_contained(coupler: Coupler, runs: tuple[Path, Path], tmp_p
 async def test_html_renders_in_chromium(runs: tuple[Path, Path], tmp_path: Path) -> None:
     from playwright.async_api import async_playwright
 
-    from coupler_orchestrator.plot import plot
+    from coupler_orchestrator.tools.plot import plot
 
     out = plot(list(runs), ["Integ.x", "Source.*"], tmp_path / "plot.html", title="chain")
     async with async_playwright() as playwright:

@@ -14,7 +14,6 @@ import contextlib
 import json
 import math
 import os
-import socket
 import struct
 import subprocess
 import sys
@@ -27,19 +26,14 @@ from hypothesis import strategies as st
 from coupler.channels import Causality, Channel, Description, ValueType
 from coupler.errors import ScenarioError
 from coupler.server import ParticipantServer
+from coupler.testing import free_port
 from coupler_orchestrator import recording
 from coupler_orchestrator.observer import Column, RunEnd, RunInfo
-from coupler_orchestrator.replay import ReplayParticipant
+from coupler_orchestrator.pipeline.replay import ReplayParticipant
 
 from .conftest import DATA, Coupler
 
 BLOB = "00010203ff"
-
-
-def closed_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 @pytest.fixture
@@ -218,7 +212,7 @@ def test_replay_option_is_byte_identical(
     coupler: Coupler, tmp_path: Path, recorded: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """``--replay Gain=RESULTS``: the recording runs in-process in Gain's place."""
-    monkeypatch.setenv("GAIN_PORT", str(closed_port()))
+    monkeypatch.setenv("GAIN_PORT", str(free_port()))
     out = tmp_path / "replayed"
     outcome = coupler("run", DATA / "mixed.ssd", "--out", out, "--replay", f"Gain={recorded}")
     assert outcome.code == 0, outcome.err
@@ -404,7 +398,7 @@ def test_fleet_passes_record_on(
     coupler: Coupler, tmp_path: Path, fmus: dict[str, Path], monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """``coupler fleet FLEET --record Gain``: the fleet's run records Gain."""
-    monkeypatch.setenv("GAIN_PORT", str(closed_port()))
+    monkeypatch.setenv("GAIN_PORT", str(free_port()))
     fleet = tmp_path / "fleet.toml"
     fleet.write_text(
         f'[scenario]\nssp = "{DATA / "mixed.ssd"}"\nout = "{tmp_path / "out"}"\n\n'

@@ -14,10 +14,10 @@ from pathlib import Path
 
 import pytest
 
-from coupler.devcerts import DevPki, write_pki
 from coupler.examples.gain import GainParticipant
 from coupler.security import ServerSecurity
 from coupler.server import ParticipantServer
+from coupler_dev.devcerts import DevPki, write_pki
 
 from .conftest import DATA, Coupler, serving
 

@@ -19,12 +19,12 @@ from coupler.channels import Causality, Channel, Description, RunSetup, Value, V
 from coupler.errors import ValidationError
 from coupler.participant import Participant, Values
 from coupler_orchestrator import ssp
-from coupler_orchestrator.checks import check
-from coupler_orchestrator.options import Algorithm, RunOptions
-from coupler_orchestrator.ordering import execution_order
-from coupler_orchestrator.participants import Roster, Seat
+from coupler_orchestrator.model import Algorithm, Candidate, Roster
+from coupler_orchestrator.options import RunOptions
+from coupler_orchestrator.pipeline.checks import check
+from coupler_orchestrator.pipeline.ordering import execution_order
+from coupler_orchestrator.pipeline.wiring import converter, wire
 from coupler_orchestrator.ssp.units import affine, from_symbol
-from coupler_orchestrator.wiring import converter, wire
 
 DATA = Path(__file__).parent / "ssp" / "data"
 
@@ -71,13 +71,13 @@ class Mirror(Participant):
 
 
 async def roster_of(scenario: ssp.Scenario) -> Roster:
-    seats = {}
+    candidates = {}
     for component in scenario.components:
         mirror = Mirror(component)
-        seats[component.name] = Seat(
+        candidates[component.name] = Candidate(
             component=component, participant=mirror, description=await mirror.describe()
         )
-    return Roster(seats=seats)
+    return Roster(candidates=candidates)
 
 
 @pytest.fixture

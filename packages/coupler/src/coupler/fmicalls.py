@@ -117,7 +117,7 @@ class Calls:
         prefix = "fmi2" if version == "2.0" else "fmi3"
         self._do_step = functions[f"{prefix}DoStep"]
         self.native = NativeParts(slave.component, version, self._do_step, f"{prefix}DoStep")
-        """What a step loop in C needs besides the groups (``coupler_orchestrator.kernel``)."""
+        """What a step loop in C needs besides the groups (the orchestrator's native FMU step)."""
         self._prefix = prefix
         if version == "3.0":
             self._event = ctypes.c_bool()

@@ -41,7 +41,7 @@ from coupler.fmuchannels import (
     check_supported,
     unsized_array,
 )
-from coupler.participant import EndRun, Participant, StepNow, Values
+from coupler.participant import EndRun, Participant, Values
 from coupler.values import coerce
 
 T = TypeVar("T")
@@ -227,11 +227,9 @@ class FmuParticipant(Participant):
     async def do_step(self, time: float, step: float, inputs: Mapping[str, Value]) -> Values:
         return self.step_now(time, step, inputs)
 
-    def synchronous(self) -> StepNow | None:
-        return self.step_now
-
     def step_now(self, time: float, step: float, inputs: Mapping[str, Value]) -> Values:
-        """One step, on this thread: set the inputs, step, read the outputs."""
+        """One step, on this thread: set the inputs, step, read the outputs (``do_step``
+        without awaiting: a master in this process may call it directly)."""
         calls = self._calls
         if calls is None:
             return self._step_through_fmpy(time, step, inputs)
@@ -248,7 +246,7 @@ class FmuParticipant(Participant):
         except CallFailed as exc:
             raise self._failed(exc, time, step) from exc
 
-    # --- for a step loop in C (coupler_orchestrator.kernel), after Initialize -----------------
+    # --- for a step loop in C (the orchestrator's native FMU step), after Initialize -----------
 
     def prepared(self) -> Calls | None:
         """The instance's prepared calls; None when it steps through FMPy's own."""

@@ -9,24 +9,10 @@ from __future__ import annotations
 
 from abc import ABC, abstractmethod
 from collections.abc import Awaitable, Callable, Mapping
-from typing import Protocol
 
 from coupler.channels import Description, RunSetup, Value
 
 Values = dict[str, Value]
-StepNow = Callable[[float, float, Mapping[str, Value]], Values]
-"""A step taken on the caller's thread: (time, step, inputs) -> outputs."""
-
-
-class Split(Protocol):
-    """A step taken in two halves on the caller's thread, so that a master can have many
-    participants' requests on their way at once: ``send`` the request, ``receive`` the answer
-    (blocking until it is there or the call deadline has passed)."""
-
-    def send(self, time: float, step: float, inputs: Mapping[str, Value]) -> None: ...
-
-    def receive(self) -> Values: ...
-
 
 HealthReport = Callable[[str | None], Awaitable[None]]
 """``await report(None)``: ready for a run (SERVING); ``await report(reason)``: not
@@ -70,19 +56,6 @@ class Participant(ABC):
     @abstractmethod
     async def terminate(self, reason: str = "") -> None:
         """End the run and free its resources; the participant may be initialized again."""
-
-    def synchronous(self) -> StepNow | None:
-        """A way to step without awaiting, for participants that compute in this process on
-        the caller's thread (an FMU in-process); None for everyone else. A master may call it
-        instead of ``do_step``, with the same meaning and the same errors."""
-        return None
-
-    def split(self) -> Split | None:
-        """A way to step in two halves without awaiting (``Split``), for participants whose
-        requests can travel while the caller does other work (a remote participant on the
-        orchestrator's native step channel); None for everyone else. Asked after
-        ``initialize``; same meaning and errors as ``do_step``."""
-        return None
 
     async def open(self) -> None:  # noqa: B027 - optional hook, nothing to do by default
         """Get ready to serve: connect to the wrapped simulator, load files. Before describe."""

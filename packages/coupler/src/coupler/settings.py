@@ -9,12 +9,14 @@ participants), never collides with the orchestrator's client settings (``COUPLER
 
 from __future__ import annotations
 
-import argparse
 from pathlib import Path
 
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
+from coupler.arguments import add_security_arguments
 from coupler.security import ServerSecurity
+
+__all__ = ["ParticipantSettings", "SecuritySettings", "add_security_arguments"]
 
 
 class SecuritySettings(BaseSettings):
@@ -60,31 +62,3 @@ class ParticipantSettings(SecuritySettings):
     """DEBUG, INFO, WARNING or ERROR."""
     log_json: bool | None = None
     """JSON log lines; default: when stderr is not a terminal."""
-
-
-def add_security_arguments(parser: argparse.ArgumentParser) -> None:
-    """``--tls-cert``, ``--tls-key``, ``--tls-client-ca``, ``--token-file``, ``--insecure``,
-    ``--reflection``, ``--health-port``; unset options leave the environment's values (dest =
-    field names)."""
-    group = parser.add_argument_group("security (docs/security.md)")
-    group.add_argument("--tls-cert", type=Path, help="server certificate (PEM): serve TLS")
-    group.add_argument("--tls-key", type=Path, help="its private key (PEM)")
-    group.add_argument(
-        "--tls-client-ca", type=Path, help="require client certificates signed by this CA"
-    )
-    group.add_argument("--token-file", type=Path, help="require this bearer token on every call")
-    group.add_argument(
-        "--insecure",
-        action="store_true",
-        default=None,
-        help="allow plaintext on a non-loopback address",
-    )
-    group.add_argument(
-        "--reflection", action="store_true", default=None, help="serve gRPC reflection"
-    )
-    group.add_argument(
-        "--health-port",
-        type=int,
-        help="also serve the health service alone, plaintext, on this port (probes that "
-        "cannot do TLS)",
-    )

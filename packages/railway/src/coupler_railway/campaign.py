@@ -14,7 +14,7 @@ from coupler_railway.railml import load_infrastructure
 
 
 class FinishedRun(Protocol):
-    """What the campaign hands a derive function (coupler_orchestrator.campaign.Finished)."""
+    """What the campaign hands a derive function (coupler_orchestrator.tools.campaign.Finished)."""
 
     @property
     def directory(self) -> Path: ...

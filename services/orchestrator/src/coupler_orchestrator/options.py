@@ -8,18 +8,12 @@ from __future__ import annotations
 import uuid
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from enum import StrEnum
 from pathlib import Path
 
 from coupler.archives import DEFAULT_BUDGET_BYTES
 from coupler.security import ClientSecurity
-
-
-class Algorithm(StrEnum):
-    """Master algorithms."""
-
-    JACOBI = "jacobi"
-    GAUSS_SEIDEL = "gauss-seidel"
+from coupler_orchestrator.model import Algorithm
+from coupler_orchestrator.observer import RunEnd
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -53,10 +47,12 @@ class RunOptions:
     master's thread, built once per machine when the tool chain is installed, ``steps``), a
     run of in-process FMUs in C (``kernel``). False, or with ``COUPLER_NATIVE_STEPS=0``:
     Python's grpc.aio and one ctypes call per FMI call, with the same results."""
-    exit_when_stuck: bool = False
-    """When an in-process FMU hangs on the master's thread past its deadline (or through an
-    interrupt), end the process after the run's results are written (the command line does;
-    a library caller keeps its process and is told the run failed)."""
+    on_abandoned: Callable[[RunEnd], None] | None = field(default=None, compare=False)
+    """Called on the watchdog's thread when the run is abandoned because the master's thread
+    is stuck in a participant (an in-process FMU hanging past its deadline, or through an
+    interrupt), after every observer was told how it ended. The command line ends the process
+    there, the only way out of a thread stuck in C; a library caller that gives nothing keeps
+    its process and is told the run failed (or was aborted)."""
     unpack_limit: int = DEFAULT_BUDGET_BYTES
     """Bytes an .ssp and the FMUs it runs may unpack to, together (zip bombs)."""
     isolate_fmus: bool = False

@@ -23,24 +23,20 @@ from coupler.archives import Budget
 from coupler.channels import Description
 from coupler.errors import ScenarioError
 from coupler_orchestrator import ssp
-from coupler_orchestrator.checks import Checked, check
-from coupler_orchestrator.master import Master
+from coupler_orchestrator.master.loop import Master
+from coupler_orchestrator.model import Checked, Plan
 from coupler_orchestrator.observer import Observer, RunEnd
 from coupler_orchestrator.options import RunOptions
-from coupler_orchestrator.participants import opened
-from coupler_orchestrator.plan import Plan, build_plan
+from coupler_orchestrator.outputs.csv import CsvRecorder, Selection
+from coupler_orchestrator.outputs.files import check_writable
+from coupler_orchestrator.outputs.parquet import ParquetRecorder, parquet_available
+from coupler_orchestrator.outputs.summary import SummaryWriter, coupler_version
+from coupler_orchestrator.pipeline.checks import check
+from coupler_orchestrator.pipeline.participants import opened
+from coupler_orchestrator.pipeline.plan import build_plan
+from coupler_orchestrator.pipeline.wiring import wire
 from coupler_orchestrator.recording import SUFFIX as RECORDING_SUFFIX
 from coupler_orchestrator.recording import Recorder
-from coupler_orchestrator.results import (
-    CsvRecorder,
-    ParquetRecorder,
-    Selection,
-    SummaryWriter,
-    check_writable,
-    coupler_version,
-    parquet_available,
-)
-from coupler_orchestrator.wiring import wire
 
 log = structlog.get_logger("coupler.runner")
 

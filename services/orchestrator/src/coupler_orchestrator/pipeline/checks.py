@@ -26,19 +26,26 @@ import graphlib
 import math
 from collections import Counter
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field
 from functools import partial
 from typing import TypeVar
 
 from coupler.channels import Causality, Channel, Description, Value, ValueType, fits_fixed_step
 from coupler.errors import ChannelValueError, ScenarioError, ValidationError
-from coupler.participant import Participant
 from coupler.values import check as check_value
 from coupler.values import parse, widen
 from coupler_orchestrator import ssp
-from coupler_orchestrator.options import Algorithm, RunOptions
-from coupler_orchestrator.participants import Roster, Seat, where
-from coupler_orchestrator.replay import ReplayParticipant
+from coupler_orchestrator.model import (
+    Algorithm,
+    Candidate,
+    Checked,
+    Member,
+    Roster,
+    Route,
+    TimeGrid,
+)
+from coupler_orchestrator.options import RunOptions
+from coupler_orchestrator.pipeline.participants import where
+from coupler_orchestrator.pipeline.replay import ReplayParticipant
 from coupler_orchestrator.ssp.units import Affine, IncompatibleUnits, affine, from_symbol
 
 T = TypeVar("T")
@@ -61,80 +68,6 @@ _TRANSFORMED = {
 }
 
 
-@dataclass(frozen=True, kw_only=True)
-class TimeGrid:
-    """Communication points t_k = start + k * step, computed by multiplication, never summed."""
-
-    start: float
-    """t_0 [s]."""
-    step: float
-    """Base communication step h [s]."""
-    steps: int
-    """Number of base steps; the last point is start + steps * step."""
-
-    def time(self, k: int) -> float:
-        return self.start + k * self.step
-
-    @property
-    def stop(self) -> float:
-        return self.time(self.steps)
-
-
-@dataclass(frozen=True, kw_only=True)
-class Member:
-    """One participant of the run, as checked."""
-
-    name: str
-    """Component name in the scenario."""
-    participant: Participant
-    """Local (FMU) or remote; the master cannot tell."""
-    outputs: tuple[Channel, ...] = ()
-    """Outputs recorded, in column order."""
-    multiple: int = 1
-    """Steps every ``multiple`` base steps (per-component deltaTime = multiple x h)."""
-    step: float
-    """The step size it receives, exactly as configured: its deltaTime, else h [s]."""
-    deadline: float = 30.0
-    """Deadline of each of its calls [s]: its callTimeout setting, else --call-timeout."""
-    parameters: Mapping[str, Value] = field(default_factory=dict)
-    """Parameter values sent with Initialize, typed."""
-    start_inputs: Mapping[str, Value] = field(default_factory=dict)
-    """Start values of inputs sent with Initialize, typed."""
-
-
-@dataclass(frozen=True, kw_only=True)
-class Route:
-    """One connection, checked: the channels at both ends and the unit conversion between."""
-
-    connection: ssp.Connection
-    source: Channel
-    """The output (as the participant declares it) that drives the connection."""
-    target: Channel
-    """The input it drives."""
-    conversion: Affine | None = None
-    """Unit conversion from the source's unit to the target's; None when there is none."""
-    source_enum: ssp.Enumeration | None = None
-    """The SSD enumeration of the start connector (Enumeration connectors)."""
-    target_enum: ssp.Enumeration | None = None
-    """The SSD enumeration of the end connector."""
-
-
-@dataclass(frozen=True, kw_only=True)
-class Checked:
-    """A scenario that passed every check, and what the checks established."""
-
-    scenario: ssp.Scenario
-    grid: TimeGrid
-    algorithm: Algorithm
-    members: tuple[Member, ...]
-    """In scenario order."""
-    routes: tuple[Route, ...]
-    record_every: int = 1
-    """Results record every ``record_every``-th communication point (``--output-interval``)."""
-    warnings: tuple[str, ...]
-    """The scenario's warnings and the checks' own (units nobody understands)."""
-
-
 def check(scenario: ssp.Scenario, roster: Roster, options: RunOptions) -> Checked:
     """Every check; ValidationError listing every problem, earlier stages' problems first."""
     checker = _Checker(scenario, roster, options)
@@ -154,16 +87,18 @@ class _Checker:
         for connection in scenario.connections:
             self.structure(connection)
         self.drivers()
-        for seat in self.roster.seats.values():
-            if seat.description is not None:
-                self.seat(seat, seat.description)
+        for candidate in self.roster.candidates.values():
+            if candidate.description is not None:
+                self.candidate(candidate, candidate.description)
         routes = [r for c in scenario.connections if (r := self.route(c)) is not None]
         grid = self.guard(lambda: grid_of(scenario, self.options))
         overrides = self.overrides()
         members = []
-        for seat in self.roster.seats.values():
-            if seat.description is not None:
-                member = self.guard(partial(self.member, seat, overrides.get(seat.name, {}), grid))
+        for candidate in self.roster.candidates.values():
+            if candidate.description is not None:
+                member = self.guard(
+                    partial(self.member, candidate, overrides.get(candidate.name, {}), grid)
+                )
                 if member is not None:
                     members.append(member)
         algorithm = self.options.algorithm or algorithm_of(scenario)
@@ -261,10 +196,10 @@ class _Checker:
 
     # -- each participant against its component --------------------------------------------
 
-    def seat(self, seat: Seat, description: Description) -> None:
-        component = seat.component
+    def candidate(self, candidate: Candidate, description: Description) -> None:
+        component = candidate.component
         for connector in component.connectors:
-            self.connector(seat, connector, description)
+            self.connector(candidate, connector, description)
         driven = {
             c.end_connector for c in self.scenario.connections if c.end_element == component.name
         }
@@ -279,8 +214,10 @@ class _Checker:
                     f"connected nor has a start value; connect it or bind a value to it"
                 )
 
-    def connector(self, seat: Seat, connector: ssp.Connector, description: Description) -> None:
-        component = seat.component
+    def connector(
+        self, candidate: Candidate, connector: ssp.Connector, description: Description
+    ) -> None:
+        component = candidate.component
         what = f"{where(connector, component.file)}: connector '{component.name}.{connector.name}'"
         channel = description.channel(connector.name)
         if channel is None:
@@ -302,7 +239,7 @@ class _Checker:
             )
         if connector.unit and channel.unit and connector.unit != channel.unit:
             declared = self.scenario.units[connector.unit].base_unit
-            own = seat.units.get(channel.unit) or from_symbol(channel.unit)
+            own = candidate.units.get(channel.unit) or from_symbol(channel.unit)
             if own is None:
                 self.warnings.append(
                     f"{what}: the participant's unit '{channel.unit}' is not understood, so it "
@@ -318,8 +255,8 @@ class _Checker:
     # -- connections against the participants ------------------------------------------------
 
     def channel(self, element: str, name: str) -> Channel | None:
-        seat = self.roster.seats.get(element)
-        description = seat.description if seat else None
+        candidate = self.roster.candidates.get(element)
+        description = candidate.description if candidate else None
         return description.channel(name) if description else None
 
     def route(self, c: ssp.Connection) -> Route | None:
@@ -405,8 +342,8 @@ class _Checker:
         if connector is not None and connector.unit:
             return connector.unit, self.scenario.units[connector.unit].base_unit
         if channel.unit:
-            seat = self.roster.seats[element]
-            return channel.unit, seat.units.get(channel.unit) or from_symbol(channel.unit)
+            candidate = self.roster.candidates[element]
+            return channel.unit, candidate.units.get(channel.unit) or from_symbol(channel.unit)
         return None
 
     def units(
@@ -452,16 +389,16 @@ class _Checker:
             component, _, name = key.rpartition(".")
             if not component and single:
                 component = self.scenario.components[0].name
-            seat = self.roster.seats.get(component)
-            if seat is None or seat.description is None:
-                if seat is None:
-                    known = ", ".join(self.roster.seats) or "none"
+            candidate = self.roster.candidates.get(component)
+            if candidate is None or candidate.description is None:
+                if candidate is None:
+                    known = ", ".join(self.roster.candidates) or "none"
                     self.problems.append(
                         f"--param {key}: no component '{component}' (components: {known}); "
                         "write COMPONENT.NAME=VALUE"
                     )
                 continue
-            channel = seat.description.channel(name)
+            channel = candidate.description.channel(name)
             if channel is None or channel.causality is Causality.OUTPUT:
                 self.problems.append(
                     f"--param {key}: no parameter or input '{name}' on component '{component}'"
@@ -475,8 +412,10 @@ class _Checker:
                 self.problems.append(f"--param {key}={text}: not a valid {channel.type} ({exc})")
         return values
 
-    def member(self, seat: Seat, overrides: Mapping[str, Value], grid: TimeGrid | None) -> Member:
-        component, description = seat.component, seat.description
+    def member(
+        self, candidate: Candidate, overrides: Mapping[str, Value], grid: TimeGrid | None
+    ) -> Member:
+        component, description = candidate.component, candidate.description
         assert description is not None
         parameters: dict[str, Value] = {}
         start_inputs: dict[str, Value] = {}
@@ -504,8 +443,8 @@ class _Checker:
                 multiple = multiple_of(component, grid)
                 step = grid.step if component.delta_time is None else component.delta_time
                 self.fixed_step(component, description, step)
-                if isinstance(seat.participant, ReplayParticipant):
-                    problem = seat.participant.grid_problem(grid.start, step, grid.stop)
+                if isinstance(candidate.participant, ReplayParticipant):
+                    problem = candidate.participant.grid_problem(grid.start, step, grid.stop)
                     if problem is not None:
                         problems.append(
                             f"{where(component)}: component '{component.name}': {problem}"
@@ -516,7 +455,7 @@ class _Checker:
             raise ValidationError(problems)
         return Member(
             name=component.name,
-            participant=seat.participant,
+            participant=candidate.participant,
             outputs=description.of(Causality.OUTPUT),
             multiple=multiple,
             step=step,

@@ -10,8 +10,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-from coupler_orchestrator.options import Algorithm
-from coupler_orchestrator.wiring import Link
+from coupler_orchestrator.model import Algorithm, Link
 
 
 def execution_order(

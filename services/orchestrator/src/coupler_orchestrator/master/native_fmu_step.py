@@ -31,15 +31,13 @@ import structlog
 from coupler.channels import Value
 from coupler.fmicalls import CONVERT, Group
 from coupler.fmu import FmuParticipant
-from coupler_orchestrator.checks import Member
-from coupler_orchestrator.export import NativeLibrary, ToolchainMissing, cached_library
-from coupler_orchestrator.options import Algorithm
-from coupler_orchestrator.plan import Plan
-from coupler_orchestrator.watchdog import IN_PROCESS, Armed
+from coupler_orchestrator.master.watchdog import IN_PROCESS, Armed
+from coupler_orchestrator.model import Algorithm, Member, Plan
+from coupler_orchestrator.tools.export_fmu import NativeLibrary, ToolchainMissing, cached_library
 
 log = structlog.get_logger("coupler.kernel")
 
-SOURCE = Path(__file__).parent / "native" / "fmu_steps.c"
+SOURCE = Path(__file__).parent.parent / "native" / "fmu_steps.c"
 DONE = -1
 SET, STEP, GET, TERMINATE = 0, 1, 2, 3
 

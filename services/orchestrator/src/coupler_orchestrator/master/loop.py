@@ -5,12 +5,12 @@ to, step the members that are due, store their outputs, record. Jacobi steps all
 concurrently on the outputs of the previous communication point; Gauss-Seidel steps them one
 after another in the plan's order, each seeing what its predecessors just produced.
 
-Members that compute in this process (in-process FMUs, ``Participant.synchronous``) step on
-this thread without awaiting — while the remote members' steps are in flight — under the eye
-of a ``Watchdog`` that ends the run when such a step outlives its deadline. Remote members on
-the native step channel (``Participant.split``) are sent their requests first and answered
-last, on this thread too; the others are awaited. A run of in-process FMUs only is stepped
-by one call into C per base step (``kernel``), with the same meaning.
+How each member steps is chosen once (``steppers``): members that compute in this process
+(in-process FMUs) step on this thread without awaiting — while the remote members' steps are
+in flight — under the eye of a ``Watchdog`` that ends the run when such a step outlives its
+deadline. Remote members on the native step channel are sent their requests first and
+answered last, on this thread too; the others are awaited. A run of in-process FMUs only is stepped
+by one call into C per base step (``native_fmu_step``), with the same meaning.
 t_k = t_0 + k*h; each member steps from t_k by exactly its configured step (its deltaTime,
 else h), never by a difference of two communication points.
 """
@@ -19,8 +19,6 @@ from __future__ import annotations
 
 import asyncio
 import math
-import os
-import sys
 import time as wallclock
 from collections import defaultdict
 from collections.abc import Mapping, Sequence
@@ -30,14 +28,12 @@ import structlog
 
 from coupler.channels import RunSetup, Value
 from coupler.errors import CouplerError, ParticipantError, ParticipantTimeout
-from coupler.participant import EndRun, Split, StepNow, Values
-from coupler_orchestrator import kernel
-from coupler_orchestrator.checks import Member
+from coupler.participant import EndRun, Values
+from coupler_orchestrator.master import native_fmu_step
+from coupler_orchestrator.master.steppers import Split, StepNow, stepper_of
+from coupler_orchestrator.master.watchdog import Watchdog
+from coupler_orchestrator.model import Algorithm, Converter, Member, Plan
 from coupler_orchestrator.observer import Column, Observer, RunEnd, RunInfo
-from coupler_orchestrator.options import Algorithm
-from coupler_orchestrator.plan import Plan
-from coupler_orchestrator.watchdog import Watchdog
-from coupler_orchestrator.wiring import Converter
 
 log = structlog.get_logger("coupler.master")
 
@@ -136,7 +132,7 @@ class Master:
         """Members stepping in two halves on this thread (after Initialize), by name."""
         self._sent: dict[str, float] = {}
         """When each split member's request under way was sent [perf_counter]."""
-        self._kernel: kernel.Kernel | None = None
+        self._kernel: native_fmu_step.Kernel | None = None
         """Steps every member in C, when the plan allows it (after Initialize)."""
         self._watchdog: Watchdog | None = None
         self._wall_start = 0.0
@@ -268,19 +264,17 @@ class Master:
 
     def _watch_local_members(self) -> None:
         """Find the members that step on this thread and watch them while they do; prepare
-        the native FMU step when the plan allows it (``kernel``)."""
+        the native FMU step when the plan allows it (``native_fmu_step``)."""
         for m in self.plan.order:
-            stepper = m.participant.synchronous()
-            if stepper is not None:
-                self._local[m.name] = stepper
-                continue
-            halves = m.participant.split()
-            if halves is not None:
-                self._split[m.name] = halves
+            stepper = stepper_of(m.participant)
+            if stepper.now is not None:
+                self._local[m.name] = stepper.now
+            elif stepper.split is not None:
+                self._split[m.name] = stepper.split
         if self._local or self._split:
             self._watchdog = Watchdog(self._abandon)
             self._watchdog.start()
-        self._kernel = kernel.prepare(self.plan)
+        self._kernel = native_fmu_step.prepare(self.plan)
         if self._kernel is not None:
             assert self._watchdog is not None
             self._watchdog.follow(self._kernel.under_way)
@@ -305,9 +299,8 @@ class Master:
             reason=reason,
             time=grid.time(self.completed_steps),
         )
-        if self.plan.exit_when_stuck:
-            print(f"error: run {status}: {reason}", file=sys.stderr, flush=True)
-            os._exit(130 if status == "aborted" else 1)
+        if self.plan.on_abandoned is not None:
+            self.plan.on_abandoned(end)
 
     def _inputs(self, m: Member) -> Values:
         feed = self.feeds.get(m.name)
@@ -373,7 +366,7 @@ class Master:
         return outputs
 
     def _native_step(self, k: int) -> None:
-        """Every member stepped in C (``kernel``); a member that stops its step is told
+        """Every member stepped in C (``native_fmu_step``); a member that stops its step is told
         about as it is in Python: its error ends the run, its request to end it is kept and
         the members after it step on."""
         native = self._kernel

@@ -1,4 +1,5 @@
-"""A throwaway certificate authority for tests and local fleets: ``python -m coupler.devcerts DIR``.
+"""A throwaway certificate authority for tests and local fleets:
+``python -m coupler_dev.devcerts DIR``.
 
 Writes into DIR: ``ca.pem`` (the CA certificate both sides trust), ``server.pem`` /
 ``server-key.pem`` (for participants, valid for the names given with ``--name``, default
@@ -43,7 +44,7 @@ def _crypto() -> Any:
         from cryptography.x509.oid import ExtendedKeyUsageOID, NameOID
     except ImportError as exc:  # pragma: no cover - the dev environment has it
         raise SystemExit(
-            "coupler.devcerts needs the 'cryptography' package (pip install cryptography)"
+            "coupler_dev.devcerts needs the 'cryptography' package (pip install cryptography)"
         ) from exc
     return x509, hashes, serialization, ec, ExtendedKeyUsageOID, NameOID
 
@@ -157,7 +158,7 @@ def write_pki(directory: Path, names: tuple[str, ...] = DEFAULT_NAMES) -> DevPki
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m coupler.devcerts", description=__doc__)
+    parser = argparse.ArgumentParser(prog="python -m coupler_dev.devcerts", description=__doc__)
     parser.add_argument("directory", type=Path, help="where to write the files")
     parser.add_argument(
         "--name",

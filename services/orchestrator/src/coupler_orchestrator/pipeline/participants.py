@@ -9,9 +9,8 @@ together with everything else.
 from __future__ import annotations
 
 import asyncio
-from collections.abc import AsyncIterator, Mapping
+from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
-from dataclasses import dataclass, field
 from functools import partial
 from pathlib import Path
 
@@ -23,38 +22,11 @@ from coupler.fmu import FmuParticipant
 from coupler.fmuhost import IsolatedFmu
 from coupler.participant import Participant
 from coupler.security import ClientSecurity
-from coupler_orchestrator import ssp, steps
+from coupler_orchestrator import ssp
+from coupler_orchestrator.master.native_step_channel import NativeRemote, enabled
+from coupler_orchestrator.model import Candidate, Roster
 from coupler_orchestrator.options import RunOptions
-from coupler_orchestrator.replay import ReplayParticipant, parse_source
-from coupler_orchestrator.steps import NativeRemote
-
-
-@dataclass(frozen=True, kw_only=True)
-class Seat:
-    """One component and the participant that fills it."""
-
-    component: ssp.Component
-    participant: Participant
-    description: Description | None
-    """What the participant declared; None when it could not be opened or described."""
-    units: Mapping[str, ssp.BaseUnit] = field(default_factory=dict)
-    """Units the participant defines itself (an FMU's UnitDefinitions), by name."""
-
-    @property
-    def name(self) -> str:
-        return self.component.name
-
-
-@dataclass(frozen=True, kw_only=True)
-class Roster:
-    """Every component's seat, in scenario order, and what went wrong filling them."""
-
-    seats: Mapping[str, Seat]
-    problems: tuple[str, ...] = ()
-
-    def described(self) -> dict[str, Description]:
-        """Descriptions of the participants that could be described."""
-        return {n: s.description for n, s in self.seats.items() if s.description is not None}
+from coupler_orchestrator.pipeline.replay import ReplayParticipant, parse_source
 
 
 def where(item: ssp.Component | ssp.Connection | ssp.Connector, file: str = "") -> str:
@@ -85,7 +57,7 @@ def create(
             key=settings.tls_key,
             token_file=settings.token_file,
         )
-        remote = NativeRemote if steps.enabled(options.native_steps) else RemoteParticipant
+        remote = NativeRemote if enabled(options.native_steps) else RemoteParticipant
         return remote(
             component.source,
             name=component.name,
@@ -164,7 +136,7 @@ async def opened(
         results = await asyncio.gather(
             *(_describe(created[n]) for n in names), return_exceptions=True
         )
-        seats = {}
+        candidates = {}
         for name, result in zip(names, results, strict=True):
             component = scenario.component(name)
             assert component is not None
@@ -179,13 +151,13 @@ async def opened(
                 )
             else:
                 description = result
-            seats[name] = Seat(
+            candidates[name] = Candidate(
                 component=component,
                 participant=created[name],
                 description=description,
                 units=units_of(created[name]) if description is not None else {},
             )
-        yield Roster(seats=seats, problems=tuple(problems))
+        yield Roster(candidates=candidates, problems=tuple(problems))
     finally:
         await close_all(list(created.values()))
 

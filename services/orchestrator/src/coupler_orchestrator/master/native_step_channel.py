@@ -3,7 +3,7 @@
 A step through Python's ``grpc.aio`` crosses gRPC's poller thread and the event loop twice;
 on a small machine that costs more than the participant's own work (docs/performance.md).
 ``native/step_streams.cc`` drives a member's StepStream from the calling thread instead,
-through a completion queue of its own, and splits each step in two (``Participant.split``):
+through a completion queue of its own, and splits each step in two (``steppers.Split``):
 the master sends every due member its request, computes what it computes itself, then
 receives the answers. Requests and answers are encoded and decoded here, by the same codec
 as everywhere else, so the values are the same bytes either way.
@@ -29,17 +29,17 @@ from coupler import wire
 from coupler.channels import RunSetup, Value
 from coupler.client import RemoteParticipant, translate, uses_tls
 from coupler.errors import ParticipantError, ParticipantTimeout
-from coupler.participant import EndRun, Split, Values
+from coupler.participant import EndRun, Values
 from coupler.security import read_secret
 from coupler.v1 import component_pb2 as pb
-from coupler_orchestrator.export import (
+from coupler_orchestrator.tools.export_fmu import (
     NativeLibrary,
     ToolchainMissing,
     cached_library,
     toolchain_problem,
 )
 
-SOURCE = Path(__file__).parent / "native" / "step_streams.cc"
+SOURCE = Path(__file__).parent.parent / "native" / "step_streams.cc"
 ENVIRONMENT = "COUPLER_NATIVE_STEPS"
 """``0`` turns the native step channel off for every run of the process."""
 _OK, _FAILED, _TIMEOUT = 0, 1, 2
@@ -158,7 +158,7 @@ class NativeRemote(RemoteParticipant):
             )
         return int(stream)
 
-    def split(self) -> Split | None:
+    def split(self) -> NativeRemote | None:
         return self if self._native is not None else None
 
     def send(self, time: float, step: float, inputs: Mapping[str, Value]) -> None:

@@ -143,7 +143,7 @@ class FleetSpec:
         except (tomllib.TOMLDecodeError, KeyError, TypeError, ValueError) as exc:
             raise ScenarioError(
                 f"{path}: not a fleet file ({type(exc).__name__}: {exc}); see "
-                f"coupler_orchestrator.fleet for the format"
+                f"coupler_orchestrator.tools.fleet for the format"
             ) from exc
 
 

@@ -8,36 +8,9 @@ then the connection's transformation. A connection with nothing to do gets no co
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from dataclasses import dataclass
-
 from coupler.channels import Value, ValueType
 from coupler_orchestrator import ssp
-from coupler_orchestrator.checks import Checked, Route
-
-Converter = Callable[[Value], Value]
-
-
-@dataclass(frozen=True, kw_only=True)
-class Link:
-    """One connection: an output feeding an input, converted on the way."""
-
-    source: str
-    """Component that writes."""
-    output: str
-    """Its output channel."""
-    target: str
-    """Component that reads."""
-    input: str
-    """Its input channel."""
-    convert: Converter | None = None
-    """Widening, unit conversion and transformation; None is identity."""
-    decoupled: bool = False
-    """Gauss-Seidel may break a loop here (the target may see the previous step's value)."""
-
-    @property
-    def label(self) -> str:
-        return f"{self.source}.{self.output} -> {self.target}.{self.input}"
+from coupler_orchestrator.model import Checked, Converter, Link, Route
 
 
 def wire(checked: Checked) -> tuple[Link, ...]:

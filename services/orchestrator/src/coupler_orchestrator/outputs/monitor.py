@@ -37,7 +37,7 @@ from coupler_orchestrator.observer import Observer, RunEnd, RunInfo
 
 log = structlog.get_logger("coupler.monitor")
 
-STATIC = Path(__file__).parent / "static"
+STATIC = Path(__file__).parent.parent / "static"
 NUMERIC = frozenset({"Real", "Integer", "Boolean", "Enumeration", "UInt64"})
 """Column types the page can chart."""
 

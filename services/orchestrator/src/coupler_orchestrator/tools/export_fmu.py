@@ -67,7 +67,7 @@ log = structlog.get_logger("coupler.export")
 
 MODEL_IDENTIFIER = "CouplerProxy"
 ADDRESS_VARIABLE = "coupler_address"
-SOURCES = Path(__file__).parent / "proxy"
+SOURCES = Path(__file__).parent.parent / "proxy"
 INSTALL_HINT = (
     "install the C++ gRPC tool chain: `bash scripts/install-grpc-dev.sh` (Debian: apt-get "
     "install g++ pkg-config libgrpc++-dev libprotobuf-dev protobuf-compiler-grpc patchelf)"
@@ -436,7 +436,15 @@ def _model_description(
             variability="continuous",
             description="simulation time",
         )
-    structure = ElementTree.SubElement(root, "ModelStructure")
+    _model_structure(ElementTree.SubElement(root, "ModelStructure"), exported, fmi_version)
+    ElementTree.indent(root)
+    return ElementTree.tostring(root, encoding="UTF-8", xml_declaration=True) + b"\n"
+
+
+def _model_structure(
+    structure: ElementTree.Element, exported: Sequence[tuple[int, Channel]], fmi_version: int
+) -> None:
+    """The outputs, and the initial unknowns (the same), by index (FMI 2) or reference (3)."""
     outputs = [
         (index, vr)
         for index, (vr, c) in enumerate(exported, start=2)
@@ -455,8 +463,6 @@ def _model_description(
             ElementTree.SubElement(structure, "Output", valueReference=str(vr))
         for _, vr in outputs:
             ElementTree.SubElement(structure, "InitialUnknown", valueReference=str(vr))
-    ElementTree.indent(root)
-    return ElementTree.tostring(root, encoding="UTF-8", xml_declaration=True) + b"\n"
 
 
 def _variable(parent: ElementTree.Element, fmi_version: int, vr: int, channel: Channel) -> None:

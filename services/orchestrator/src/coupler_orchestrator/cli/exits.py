@@ -1,0 +1,9 @@
+"""Exit codes of the ``coupler`` command.
+
+0 the run completed (or a participant ended it early: ``terminated``; or Ctrl-C stopped a
+fleet's services after its run completed), 1 any problem (bad input, a participant failing:
+``failed``), 2 a wrong command line, 130 interrupted (Ctrl-C or SIGTERM during a run:
+``aborted``, the rows so far kept).
+"""
+
+EXIT_OK, EXIT_ERROR, EXIT_INTERRUPTED = 0, 1, 130

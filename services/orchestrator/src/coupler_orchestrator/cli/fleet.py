@@ -1,0 +1,78 @@
+"""``coupler fleet``: start a scenario's services as local processes, run it, keep them up."""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+from dataclasses import replace
+from pathlib import Path
+from typing import TYPE_CHECKING, TextIO
+
+from coupler_orchestrator.cli.exits import EXIT_OK
+from coupler_orchestrator.cli.parser import options_of, parser, record_options
+from coupler_orchestrator.cli.session import Session, shown
+
+if TYPE_CHECKING:
+    from coupler_orchestrator.tools.fleet import FleetSpec
+
+HELP = "start a scenario's services as local processes, run it, keep them up"
+
+
+def arguments(fleet: argparse.ArgumentParser) -> None:
+    fleet.add_argument(
+        "fleet", type=Path, help="fleet file (TOML), e.g. scenarios/railway/fleet.toml"
+    )
+    fleet.add_argument("--exit", action="store_true", help="stop the services when the run ends")
+    fleet.add_argument("--out", type=Path, help="results directory (default from the fleet file)")
+    fleet.add_argument(
+        "--realtime-factor", type=float, help="override the fleet file's pacing; 0 = unpaced"
+    )
+    fleet.add_argument("--health-timeout", type=float, default=60.0, help="[s] per service")
+    record_options(fleet)
+
+
+async def execute(args: argparse.Namespace, out: TextIO, session: Session) -> int:
+    from coupler_orchestrator.outputs.monitor import MonitorServer
+    from coupler_orchestrator.tools.fleet import FleetSpec
+
+    spec = FleetSpec.load(args.fleet)
+    run_argv = ["run", str(spec.ssp), "--out", str(args.out or spec.out), *spec.run_args]
+    run_argv += [f"--record={item}" for item in args.record]
+    run_argv += [f"--replay={item}" for item in args.replay]
+    if args.realtime_factor is not None:
+        run_argv += ["--realtime-factor", str(args.realtime_factor)]
+    run_args = parser().parse_args(run_argv)
+    async with contextlib.AsyncExitStack() as stack:
+        if run_args.monitor is not None:  # up as long as the fleet, from before its services
+            session.monitor = await stack.enter_async_context(MonitorServer(run_args.monitor))
+        return await _fleet_run(args, spec, run_args, out, session)
+
+
+async def _fleet_run(
+    args: argparse.Namespace,
+    spec: FleetSpec,
+    run_args: argparse.Namespace,
+    out: TextIO,
+    session: Session,
+) -> int:
+    import asyncio
+
+    from coupler_orchestrator.cli.run import run
+    from coupler_orchestrator.tools.fleet import Fleet
+
+    async with Fleet(spec, health_timeout=args.health_timeout) as fleet:
+        print(
+            f"fleet: {len(spec.services)} services healthy (logs in {shown(fleet.logs)})",
+            file=out,
+        )
+        for name, url in spec.urls.items():
+            print(f"{name}: {url}", file=out)
+        if session.monitor is not None:
+            print(f"monitor: {session.monitor.url}", file=out)
+        out.flush()
+        options = replace(options_of(run_args), on_waiting=session.waiting)
+        code = await run(run_args, options, out, session)
+        if code == EXIT_OK and not args.exit:
+            print("services stay up; Ctrl-C stops them", file=out, flush=True)
+            await asyncio.Event().wait()
+    return code

@@ -1,0 +1,225 @@
+"""The ``coupler`` command line: the top-level parser, one subcommand per module of this package
+(``COMMANDS``), and the options several commands share.
+
+Nothing here imports what a command needs to run: a command module imports its dependencies
+inside ``execute`` (as FMPy's ``cli.py`` does), so ``coupler --help`` answers at once.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+from collections.abc import Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from coupler.errors import CouplerError
+from coupler_orchestrator.model import Algorithm
+
+if TYPE_CHECKING:
+    from coupler.security import ClientSecurity
+    from coupler_orchestrator.options import RunOptions
+
+COMMANDS = {
+    "run": "run",
+    "validate": "validate",
+    "fleet": "fleet",
+    "campaign": "campaign",
+    "plot": "plot",
+    "replay": "replay",
+    "export-fmu": "export_fmu",
+    "describe": "describe",
+}
+"""Each command and its module in ``coupler_orchestrator.cli``, in the order ``--help`` lists
+them. A module has ``HELP`` (and may have ``DESCRIPTION``), ``arguments(parser)`` and
+``async execute(args, out, session) -> exit code``."""
+
+
+def parser() -> argparse.ArgumentParser:
+    top = argparse.ArgumentParser(
+        prog="coupler", description="Co-simulation of FMUs and gRPC participants from an SSP file."
+    )
+    top.add_argument("--log-level", default="WARNING", help="DEBUG, INFO, WARNING (default)")
+    top.add_argument(
+        "--log-format",
+        choices=["auto", "console", "json"],
+        default="auto",
+        help="log lines for people (console) or machines (json); default: console on a "
+        "terminal, else json",
+    )
+    commands = top.add_subparsers(dest="command", required=True)
+    for name, module_name in COMMANDS.items():
+        module = importlib.import_module(f"coupler_orchestrator.cli.{module_name}")
+        description = getattr(module, "DESCRIPTION", None)
+        command = commands.add_parser(
+            name, help=module.HELP, **({"description": description} if description else {})
+        )
+        module.arguments(command)
+        command.set_defaults(execute=module.execute)
+    return top
+
+
+def scenario_argument(command: argparse.ArgumentParser) -> None:
+    command.add_argument(
+        "ssp", type=Path, help=".ssp archive, unpacked SSP folder, .ssd file or a single .fmu"
+    )
+
+
+def run_options(command: argparse.ArgumentParser) -> None:
+    command.add_argument("--start-time", type=float, help="start time [s]")
+    command.add_argument("--stop-time", type=float, help="stop time [s]")
+    command.add_argument("--step", type=float, help="base communication step [s]")
+    command.add_argument(
+        "--algorithm",
+        choices=[a.value for a in Algorithm],
+        help="master algorithm (default: the SSD's OpenMCx stepType, sequential = "
+        "gauss-seidel, else jacobi)",
+    )
+    command.add_argument(
+        "--param",
+        action="append",
+        default=[],
+        metavar="COMPONENT.NAME=VALUE",
+        help="override a parameter or input start value (repeatable; a single FMU's "
+        "parameters may be given as NAME=VALUE)",
+    )
+    command.add_argument("--run-id", help="run id sent to participants (default: a random UUID)")
+    command.add_argument(
+        "--lease",
+        type=float,
+        help="[s] a participant ends the run after this long without a call (default: the "
+        "larger of 60 s and 4 call deadlines)",
+    )
+    command.add_argument(
+        "--connect-timeout",
+        type=float,
+        default=10.0,
+        help="[s] how long a participant may take to report SERVING (default 10)",
+    )
+    command.add_argument(
+        "--call-timeout",
+        type=float,
+        default=30.0,
+        help="[s] deadline of every call to a participant (default 30)",
+    )
+    command.add_argument(
+        "--unpack-limit",
+        type=int,
+        default=2048,
+        metavar="MB",
+        help="what an .ssp and the FMUs it runs may unpack to, together (default 2048 MB)",
+    )
+    command.add_argument(
+        "--isolate-fmus",
+        action="store_true",
+        help="run every FMU in a child process: a crash or hang of an FMU fails the run "
+        "cleanly instead of the orchestrator (per component: SSD annotation "
+        "org.coupler.component isolate)",
+    )
+    command.add_argument(
+        "--no-native-steps",
+        dest="native_steps",
+        action="store_false",
+        help="step everything through Python: remote participants over grpc.aio instead of the "
+        "native step channel (used when the C++ gRPC tool chain is installed), in-process FMUs "
+        "one ctypes call at a time instead of the native FMU step (C, built with gcc); the "
+        "same results either way (also COUPLER_NATIVE_STEPS=0)",
+    )
+    security_options(command)
+
+
+def record_options(command: argparse.ArgumentParser) -> None:
+    command.add_argument(
+        "--record",
+        action="append",
+        default=[],
+        metavar="COMPONENT[,...]",
+        help="record every output of these components at each of their communication points "
+        "into OUT/recordings/COMPONENT.crec, for replay (docs/replay.md)",
+    )
+    replay_option(command)
+
+
+def replay_option(command: argparse.ArgumentParser) -> None:
+    command.add_argument(
+        "--replay",
+        action="append",
+        default=[],
+        metavar="COMPONENT=RECORDING",
+        help="serve COMPONENT from a recording (a .crec file or a results directory) instead "
+        "of its participant (repeatable)",
+    )
+
+
+def security_options(command: argparse.ArgumentParser) -> None:
+    group = command.add_argument_group(
+        "security of grpcs:// participants (default: COUPLER_TLS_CA, COUPLER_TLS_CERT, "
+        "COUPLER_TLS_KEY, COUPLER_TOKEN_FILE; docs/security.md)"
+    )
+    group.add_argument("--tls-ca", type=Path, help="CA bundle (PEM) trusted for participants")
+    group.add_argument("--tls-cert", type=Path, help="client certificate (PEM), mutual TLS")
+    group.add_argument("--tls-key", type=Path, help="its private key (PEM)")
+    group.add_argument("--token-file", type=Path, help="bearer token sent with every call")
+
+
+def security_of(args: argparse.Namespace) -> ClientSecurity:
+    """The environment's client security with the command line's options on top."""
+    from coupler.security import ClientSecurity
+
+    return ClientSecurity.from_environment().override(
+        ClientSecurity(
+            ca=args.tls_ca, cert=args.tls_cert, key=args.tls_key, token_file=args.token_file
+        )
+    )
+
+
+def options_of(args: argparse.Namespace) -> RunOptions:
+    """The run's options from ``coupler run`` / ``validate``'s arguments. A run abandoned
+    because this process's thread is stuck in a participant ends the process
+    (``interrupts.end_abandoned``): a hung in-process FMU cannot be left any other way."""
+    from coupler_orchestrator.cli.interrupts import end_abandoned
+    from coupler_orchestrator.options import RunOptions
+
+    parameters = {}
+    for item in args.param:
+        key, sep, value = item.partition("=")
+        if not sep or not key:
+            raise CouplerError(f"--param {item!r}: write COMPONENT.NAME=VALUE")
+        parameters[key] = value
+    return RunOptions(
+        start_time=args.start_time,
+        stop_time=args.stop_time,
+        step_size=args.step,
+        algorithm=Algorithm(args.algorithm) if args.algorithm else None,
+        realtime_factor=getattr(args, "realtime_factor", None) or None,
+        parameters=parameters,
+        connect_timeout=args.connect_timeout,
+        call_timeout=args.call_timeout,
+        isolate_fmus=args.isolate_fmus,
+        native_steps=args.native_steps,
+        unpack_limit=args.unpack_limit * 1024 * 1024,
+        lease=args.lease,
+        security=security_of(args),
+        on_abandoned=end_abandoned,
+        output_interval=getattr(args, "output_interval", None),
+        output_variables=tuple(getattr(args, "output_variables", ())),
+        parquet=getattr(args, "parquet", False),
+        record=tuple(
+            name.strip()
+            for item in getattr(args, "record", ())
+            for name in item.split(",")
+            if name.strip()
+        ),
+        replays=_replays_of(getattr(args, "replay", ())),
+        **({"run_id": args.run_id} if args.run_id else {}),
+    )
+
+
+def _replays_of(items: Sequence[str]) -> dict[str, Path]:
+    replays = {}
+    for item in items:
+        component, sep, path = item.partition("=")
+        if not sep or not component or not path:
+            raise CouplerError(f"--replay {item!r}: write COMPONENT=RECORDING")
+        replays[component] = Path(path)
+    return replays

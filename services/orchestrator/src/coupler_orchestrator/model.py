@@ -1,0 +1,189 @@
+"""The run's data types, one name per concept, in the order the pipeline makes them.
+
+Nothing here does anything: each stage reads what the one before made and makes the next
+(docs/orchestrator.md, "How a run flows"):
+
+    participants -> Roster of Candidates   (2: each component's participant, described)
+    checks       -> Checked: TimeGrid, Members, Routes   (3: what passed every check)
+    wiring       -> Links   (4: one converter per connection)
+    plan         -> Plan    (6: what the master executes)
+
+It imports nothing heavy at run time, so that the command line can name the choices.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from enum import StrEnum
+from typing import TYPE_CHECKING
+
+from coupler.channels import Channel, Description, Value
+
+if TYPE_CHECKING:
+    from coupler.participant import Participant
+    from coupler_orchestrator import ssp
+    from coupler_orchestrator.observer import RunEnd
+    from coupler_orchestrator.ssp.units import Affine
+
+
+class Algorithm(StrEnum):
+    """Master algorithms."""
+
+    JACOBI = "jacobi"
+    GAUSS_SEIDEL = "gauss-seidel"
+
+
+@dataclass(frozen=True, kw_only=True)
+class Candidate:
+    """One component and the participant that fills it, as it described itself: a member of
+    the run once the checks pass (``Member``)."""
+
+    component: ssp.Component
+    participant: Participant
+    description: Description | None
+    """What the participant declared; None when it could not be opened or described."""
+    units: Mapping[str, ssp.BaseUnit] = field(default_factory=dict)
+    """Units the participant defines itself (an FMU's UnitDefinitions), by name."""
+
+    @property
+    def name(self) -> str:
+        return self.component.name
+
+
+@dataclass(frozen=True, kw_only=True)
+class Roster:
+    """Every component's candidate, in scenario order, and what went wrong filling them."""
+
+    candidates: Mapping[str, Candidate]
+    problems: tuple[str, ...] = ()
+
+    def described(self) -> dict[str, Description]:
+        """Descriptions of the participants that could be described."""
+        return {n: s.description for n, s in self.candidates.items() if s.description is not None}
+
+
+@dataclass(frozen=True, kw_only=True)
+class TimeGrid:
+    """Communication points t_k = start + k * step, computed by multiplication, never summed."""
+
+    start: float
+    """t_0 [s]."""
+    step: float
+    """Base communication step h [s]."""
+    steps: int
+    """Number of base steps; the last point is start + steps * step."""
+
+    def time(self, k: int) -> float:
+        return self.start + k * self.step
+
+    @property
+    def stop(self) -> float:
+        return self.time(self.steps)
+
+
+@dataclass(frozen=True, kw_only=True)
+class Member:
+    """One participant of the run, as checked."""
+
+    name: str
+    """Component name in the scenario."""
+    participant: Participant
+    """Local (FMU) or remote; the master cannot tell."""
+    outputs: tuple[Channel, ...] = ()
+    """Outputs recorded, in column order."""
+    multiple: int = 1
+    """Steps every ``multiple`` base steps (per-component deltaTime = multiple x h)."""
+    step: float
+    """The step size it receives, exactly as configured: its deltaTime, else h [s]."""
+    deadline: float = 30.0
+    """Deadline of each of its calls [s]: its callTimeout setting, else --call-timeout."""
+    parameters: Mapping[str, Value] = field(default_factory=dict)
+    """Parameter values sent with Initialize, typed."""
+    start_inputs: Mapping[str, Value] = field(default_factory=dict)
+    """Start values of inputs sent with Initialize, typed."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class Route:
+    """One connection, checked: the channels at both ends and the unit conversion between."""
+
+    connection: ssp.Connection
+    source: Channel
+    """The output (as the participant declares it) that drives the connection."""
+    target: Channel
+    """The input it drives."""
+    conversion: Affine | None = None
+    """Unit conversion from the source's unit to the target's; None when there is none."""
+    source_enum: ssp.Enumeration | None = None
+    """The SSD enumeration of the start connector (Enumeration connectors)."""
+    target_enum: ssp.Enumeration | None = None
+    """The SSD enumeration of the end connector."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class Checked:
+    """A scenario that passed every check, and what the checks established."""
+
+    scenario: ssp.Scenario
+    grid: TimeGrid
+    algorithm: Algorithm
+    members: tuple[Member, ...]
+    """In scenario order."""
+    routes: tuple[Route, ...]
+    record_every: int = 1
+    """Results record every ``record_every``-th communication point (``--output-interval``)."""
+    warnings: tuple[str, ...]
+    """The scenario's warnings and the checks' own (units nobody understands)."""
+
+
+Converter = Callable[[Value], Value]
+
+
+@dataclass(frozen=True, kw_only=True)
+class Link:
+    """One connection: an output feeding an input, converted on the way."""
+
+    source: str
+    """Component that writes."""
+    output: str
+    """Its output channel."""
+    target: str
+    """Component that reads."""
+    input: str
+    """Its input channel."""
+    convert: Converter | None = None
+    """Widening, unit conversion and transformation; None is identity."""
+    decoupled: bool = False
+    """Gauss-Seidel may break a loop here (the target may see the previous step's value)."""
+
+    @property
+    def label(self) -> str:
+        return f"{self.source}.{self.output} -> {self.target}.{self.input}"
+
+
+@dataclass(frozen=True, kw_only=True)
+class Plan:
+    """Everything the master needs."""
+
+    members: tuple[Member, ...]
+    """In scenario order (the order of results columns)."""
+    order: tuple[Member, ...]
+    """The same members in the order the algorithm steps them."""
+    links: tuple[Link, ...]
+    """Every connection."""
+    grid: TimeGrid
+    """The communication points."""
+    algorithm: Algorithm
+    """Master algorithm."""
+    run_id: str
+    """Identifies the run in logs, participants and results; unique per run."""
+    lease: float
+    """Lease granted with Initialize [s]: a participant ends the run after this long without a
+    call."""
+    realtime_factor: float | None = None
+    """Pace simulated time at this multiple of wall time; None runs as fast as possible."""
+    on_abandoned: Callable[[RunEnd], None] | None = None
+    """Told when the run is abandoned, its thread stuck (``RunOptions.on_abandoned``)."""
+    native: bool = False
+    """Step in-process FMUs in C when the plan allows it (``master.native_fmu_step``)."""

@@ -1,0 +1,179 @@
+"""results.csv: a header ``time,Component.connector,...`` then one row per recorded communication
+point.
+
+Reals are written with ``repr`` (the shortest text that reads back to the same double),
+Booleans as 1/0, strings as they are (CSV-quoted), binary values as JSON text when their channel
+names a registered protobuf message (``coupler.messages``), else as hex. Rows are buffered and
+flushed at least once a second and on every exit path, so a crash loses at most the last second
+and an interrupted or failed run keeps every completed row.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import fnmatch
+import os
+import time as wallclock
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import IO, Any
+
+from coupler import messages
+from coupler.channels import Value
+from coupler_orchestrator.observer import Column, Observer, RunEnd, RunInfo
+from coupler_orchestrator.outputs.files import write_failed
+
+FLUSH_EVERY_S = 1.0
+"""Longest time a written row may stay in the buffer [s]."""
+
+
+def format_value(value: Value, column: Column | None = None) -> str:
+    """The CSV text of one value of ``column``."""
+    if isinstance(value, bool):
+        return "1" if value else "0"
+    if isinstance(value, float):
+        return repr(value)
+    if isinstance(value, bytes):
+        if column is not None and column.message_type and messages.known(column.message_type):
+            return messages.message_json(column.message_type, value) if value else ""
+        return value.hex()
+    return str(value)
+
+
+def formatter(column: Column) -> Callable[[Value], str]:
+    """``format_value`` for one column as a CSV field (quoted as the csv module quotes it),
+    chosen once: the CSV writer calls it for every cell."""
+    if column.type == "Real":
+        return repr
+    if column.type == "Boolean":
+        return lambda value: "1" if value else "0"
+    if column.type in ("Integer", "Enumeration", "UInt64"):
+        return str
+    return lambda value: csv_field(format_value(value, column))
+
+
+PLAIN = {"Real": "%r", "Integer": "%s", "Enumeration": "%s", "UInt64": "%s"}
+"""Column types whose cell is the value's repr or str (what ``formatter`` chooses for them),
+written by a %-format."""
+
+
+def row_formatter(columns: Sequence[Column], picked: Sequence[int]) -> Callable[..., str]:
+    """``(time, row) -> line``: the CSV line of the ``picked`` columns of a row, exactly the
+    cells ``formatter`` makes, through one %-format made once (the columns of PLAIN types go
+    in as they are, the others through their formatter first)."""
+    template = ",".join(["%r", *(PLAIN.get(columns[i].type, "%s") for i in picked)]) + "\n"
+    special = [
+        (j, formatter(columns[i])) for j, i in enumerate(picked) if columns[i].type not in PLAIN
+    ]
+    indices = list(picked)
+
+    def line(time: float, row: Sequence[Value]) -> str:
+        cells: list[Any] = [time]
+        cells += [row[i] for i in indices]
+        for j, format_cell in special:
+            cells[j + 1] = format_cell(cells[j + 1])
+        return template % tuple(cells)
+
+    return line
+
+
+def csv_field(text: str) -> str:
+    """``text`` as a field of a CSV row, quoted when it holds a comma, a quote or a newline:
+    exactly what the csv module writes with lineterminator "\\n" (a lone carriage return is
+    left as is, as the csv module does)."""
+    if "," in text or '"' in text or "\n" in text:
+        return '"' + text.replace('"', '""') + '"'
+    return text
+
+
+@dataclass(frozen=True, kw_only=True)
+class Selection:
+    """Which columns and which communication points results.csv records."""
+
+    patterns: tuple[str, ...] = ()
+    """Column names or globs (``Gain.*``, ``*.speed``); empty: every column."""
+    every: int = 1
+    """Record every ``every``-th communication point (t_0 always)."""
+
+    def columns(self, columns: Sequence[Column]) -> list[int]:
+        """Indices of the selected columns, in column order."""
+        if not self.patterns:
+            return list(range(len(columns)))
+        return [
+            i
+            for i, c in enumerate(columns)
+            if any(fnmatch.fnmatchcase(c.name, p) for p in self.patterns)
+        ]
+
+
+def _cut(path: Path, good: int) -> None:
+    """Cut a file after its last complete line at or after byte ``good`` (best effort): every
+    row that reached the disk whole stays, no half-written row survives."""
+    with contextlib.suppress(OSError), path.open("rb") as file:
+        file.seek(good)
+        tail = file.read()
+        os.truncate(path, good + tail.rfind(b"\n") + 1)
+
+
+class CsvRecorder(Observer):
+    """Writes results.csv: buffered, flushed once a second and when the run ends."""
+
+    def __init__(self, path: Path, selection: Selection | None = None) -> None:
+        self.path = path
+        self.selection = selection or Selection()
+        self._file: IO[str] | None = None
+        self._line: Callable[[float, Sequence[Value]], str] = row_formatter([], [])
+        self._count = 0
+        self._flushed = 0.0
+        self._good = 0
+        """Bytes of results.csv known to hold only complete rows (flushed without error)."""
+
+    def started(self, info: RunInfo) -> None:
+        picked = self.selection.columns(info.columns)
+        columns = [info.columns[i] for i in picked]
+        self._line = row_formatter(info.columns, picked)
+        try:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            self._file = self.path.open("w", encoding="utf-8", newline="", buffering=1 << 16)
+            header = ["time", *(csv_field(c.name) for c in columns)]
+            self._file.write(",".join(header) + "\n")
+            self._file.flush()
+            self._good = self._file.tell()
+        except OSError as exc:
+            self._fail(exc)
+        self._flushed = wallclock.monotonic()
+
+    def stepped(self, time: float, row: Sequence[Value]) -> None:
+        count, self._count = self._count, self._count + 1
+        if count % self.selection.every or self._file is None:
+            return
+        try:
+            self._file.write(self._line(time, row))
+            now = wallclock.monotonic()
+            if now - self._flushed >= FLUSH_EVERY_S:
+                self._file.flush()
+                self._good = self._file.tell()
+                self._flushed = now
+        except OSError as exc:
+            self._fail(exc)
+
+    def finished(self, end: RunEnd) -> None:
+        file = self._file
+        if file is None:
+            return
+        try:
+            file.flush()
+        except OSError as exc:
+            self._fail(exc)
+        self._file = None
+        file.close()
+
+    def _fail(self, exc: OSError) -> None:
+        """Drop what could not be written whole, keep every complete row, say why."""
+        file, self._file = self._file, None
+        if file is not None:
+            with contextlib.suppress(OSError):
+                file.close()  # may fail again flushing the rest; the cut below removes it
+        _cut(self.path, self._good)
+        raise write_failed(self.path, exc) from exc

@@ -1,0 +1,39 @@
+"""Stage 6: the frozen plan the master executes — members, links, the execution order computed
+once, the time grid and the run's settings. Nothing here knows SSP."""
+
+from __future__ import annotations
+
+from coupler_orchestrator.master.native_step_channel import wanted
+from coupler_orchestrator.model import Checked, Link, Plan
+from coupler_orchestrator.options import RunOptions
+from coupler_orchestrator.pipeline.ordering import execution_order
+
+
+def build_plan(checked: Checked, links: tuple[Link, ...], options: RunOptions) -> Plan:
+    """The plan of a checked scenario and its links."""
+    by_name = {m.name: m for m in checked.members}
+    order = execution_order(list(by_name), links, checked.algorithm)
+    return Plan(
+        members=checked.members,
+        order=tuple(by_name[n] for n in order),
+        links=links,
+        grid=checked.grid,
+        algorithm=checked.algorithm,
+        run_id=options.run_id,
+        lease=lease_of(options, checked),
+        realtime_factor=options.realtime_factor or None,
+        on_abandoned=options.on_abandoned,
+        native=wanted(options.native_steps),
+    )
+
+
+def lease_of(options: RunOptions, checked: Checked) -> float:
+    """The lease: given, else the larger of 60 s and four call deadlines, and at least three
+    paced steps of the slowest member (so pacing never looks like silence)."""
+    if options.lease is not None:
+        return options.lease
+    lease = max(60.0, 4 * options.call_timeout)
+    if options.realtime_factor:
+        slowest = max((m.multiple for m in checked.members), default=1)
+        lease = max(lease, 3 * checked.grid.step * slowest / options.realtime_factor)
+    return lease

@@ -1,0 +1,1 @@
+"""Commands built on runs: campaigns, fleets of local services, export-fmu and plot."""

@@ -1,0 +1,249 @@
+"""One run of a campaign, as a worker executes it (here, or a Dask task): its services started on
+free ports (or its pool entry taken), ``coupler run`` as a process in a scratch folder, its
+results reduced to the table's values; the run's files sent back whole."""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import csv
+import importlib
+import itertools
+import json
+import math
+import os
+import shutil
+import sys
+import tempfile
+import time
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+from coupler.errors import CouplerError
+from coupler_orchestrator.tools.campaign.spec import (
+    CampaignError,
+    Derive,
+    Output,
+    ScenarioSpec,
+)
+from coupler_orchestrator.tools.campaign.variants import RUN_OPTIONS, Scalar, number_or_text
+from coupler_orchestrator.tools.fleet import Fleet, FleetError, FleetSpec, free_port, port_variables
+
+COMPLETED = ("completed", "terminated")
+"""Run statuses a re-run skips."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class Finished:
+    """What a ``[[derive]]`` function is given: one finished run."""
+
+    directory: Path
+    """Its results.csv and summary.json."""
+    variant: Mapping[str, Scalar]
+    root: Path
+    """The campaign's root (the project checkout)."""
+    columns: Mapping[str, list[str]]
+    """results.csv, column name -> cells (text)."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class RunJob:
+    """One run, as sent to a worker (picklable)."""
+
+    index: int
+    key: str
+    variant: dict[str, Scalar]
+    scenario: ScenarioSpec
+    outputs: tuple[Output, ...]
+    derive: tuple[Derive, ...]
+    env: dict[str, str] | None = None
+    """A pool entry; None: start the fleet's services on free ports."""
+
+
+@dataclass(kw_only=True)
+class RunReport:
+    """One run's row of the campaign table, and its files (from the worker)."""
+
+    index: int
+    key: str
+    variant: dict[str, Scalar]
+    status: str
+    """completed, terminated, failed, aborted, timeout or skipped-from-earlier statuses."""
+    reason: str = ""
+    wall_time_s: float | None = None
+    realtime_factor: float | None = None
+    values: dict[str, Scalar | None] = field(default_factory=dict)
+    worker: str = ""
+    files: dict[str, bytes] = field(default_factory=dict)
+
+
+def execute(job: RunJob) -> RunReport:
+    """Run ``job`` to its report (a Dask task; blocks)."""
+    return asyncio.run(run_job(job))
+
+
+async def run_job(job: RunJob) -> RunReport:
+    """Start the run's services (or take its pool entry), run it as a ``coupler run`` process in
+    a scratch folder, reduce its results; never raises for the run's own failures."""
+    report = RunReport(index=job.index, key=job.key, variant=job.variant, status="failed")
+    report.worker = os.uname().nodename
+    scratch = Path(tempfile.mkdtemp(prefix=f"coupler-run-{job.index}-"))
+    started = time.monotonic()
+    ran = False
+    try:
+        try:
+            async with asyncio.timeout(job.scenario.timeout):
+                await _run_with_services(job, scratch)
+        except TimeoutError:
+            report.status = "timeout"
+            report.reason = (
+                f"the run did not end within {job.scenario.timeout:g} s ([scenario] timeout)"
+            )
+        except (CouplerError, OSError) as exc:
+            report.reason = str(exc)
+        else:
+            ran = True
+        await asyncio.to_thread(_collect, job, scratch, report, ran)
+    finally:
+        await asyncio.to_thread(shutil.rmtree, scratch, True)
+    if report.wall_time_s is None:
+        report.wall_time_s = round(time.monotonic() - started, 3)
+    return report
+
+
+def _collect(job: RunJob, scratch: Path, report: RunReport, ran: bool) -> None:
+    """The run's status from its summary.json (when its process ran), values and files."""
+    if ran:
+        try:
+            summary = json.loads((scratch / "summary.json").read_text(encoding="utf-8"))
+            report.status, report.reason = summary["status"], summary.get("reason", "")
+            report.wall_time_s = summary.get("wall_time_s")
+            report.realtime_factor = summary.get("realtime_factor")
+        except (OSError, ValueError, KeyError):
+            report.reason = "the run wrote no summary: " + _error_of(scratch / "run.log")
+    try:
+        if (scratch / "results.csv").is_file():
+            report.values = _values(job, scratch)
+    except Exception as exc:  # a derive function is user code: its failure is the run's reason
+        report.reason = (report.reason + "; " if report.reason else "") + f"outputs: {exc}"
+    for path in scratch.iterdir():
+        if path.is_file() and not path.name.startswith("."):
+            report.files[path.name] = path.read_bytes()
+
+
+async def _run_with_services(job: RunJob, scratch: Path) -> None:
+    scenario = job.scenario
+    if job.env is not None or scenario.fleet is None:
+        await _coupler_run(job, scratch, {**os.environ, **(job.env or {})})
+        return
+    for attempt in range(3):  # another process may take a free port before the fleet binds it
+        env = {**os.environ, **{name: str(free_port()) for name in port_variables(scenario.fleet)}}
+        spec = replace(FleetSpec.load(scenario.fleet, root=scenario.root, env=env), out=scratch)
+        fleet = Fleet(spec, health_timeout=scenario.health_timeout)
+        try:
+            fleet.check_ports()
+        except FleetError:
+            if attempt == 2:
+                raise
+            continue
+        async with fleet:
+            await _coupler_run(job, scratch, env)
+        return
+
+
+async def _coupler_run(job: RunJob, scratch: Path, env: Mapping[str, str]) -> None:
+    scenario = job.scenario
+    command = [
+        sys.executable, "-m", "coupler_orchestrator", "--log-format", "json",
+        "run", str(scenario.ssp), "--out", str(scratch), "--no-progress",
+        "--run-id", f"campaign-{job.index}-{job.key}",
+    ]  # fmt: skip
+    if scenario.stop_time is not None:
+        command += ["--stop-time", repr(scenario.stop_time)]
+    command += scenario.args
+    for key, value in job.variant.items():
+        text = ("true" if value else "false") if isinstance(value, bool) else str(value)
+        command += [RUN_OPTIONS[key], text] if key in RUN_OPTIONS else ["--param", f"{key}={text}"]
+    with (scratch / "run.log").open("wb") as output:
+        output.write(("$ " + " ".join(command) + "\n").encode())
+        output.flush()
+        process = await asyncio.create_subprocess_exec(
+            *command, cwd=scenario.root, env=dict(env), stdout=output, stderr=output
+        )
+        try:
+            await process.wait()
+        finally:
+            if process.returncode is None:  # timed out or the campaign was interrupted
+                with contextlib.suppress(ProcessLookupError):
+                    process.terminate()
+                try:
+                    await asyncio.wait_for(asyncio.shield(process.wait()), 10)
+                except TimeoutError:
+                    process.kill()
+                    await process.wait()
+
+
+def _values(job: RunJob, scratch: Path) -> dict[str, Scalar | None]:
+    columns = read_columns(scratch / "results.csv")
+    values: dict[str, Scalar | None] = {}
+    for output in job.outputs:
+        if output.channel not in columns:
+            raise CampaignError(
+                f"output {output.name}: channel '{output.channel}' is not in results.csv "
+                f"(its columns: {', '.join(list(columns)[1:])})"
+            )
+        values[output.name] = reduce(output, columns[output.channel])
+    finished = Finished(
+        directory=scratch, variant=job.variant, root=job.scenario.root, columns=columns
+    )
+    for derive in job.derive:
+        module, _, name = derive.function.partition(":")
+        try:
+            function = getattr(importlib.import_module(module), name)
+        except (ImportError, AttributeError) as exc:
+            raise CampaignError(f"[[derive]] {derive.function}: {exc}") from None
+        values.update(function(finished, **derive.options))
+    return values
+
+
+def _error_of(path: Path) -> str:
+    """The run's ``error:`` line, else the last lines of its log."""
+    try:
+        lines = path.read_text(errors="replace").strip().splitlines()
+    except OSError:
+        return "(no log)"
+    starts = [i for i, line in enumerate(lines) if line.startswith("error: ")]
+    if not starts:
+        return " | ".join(lines[-5:]) or "(empty log)"
+    error = [lines[starts[-1]].removeprefix("error: ")]
+    error += [line.strip() for line in lines[starts[-1] + 1 :] if line.startswith((" ", "\t"))]
+    return " ".join(error)
+
+
+def read_columns(path: Path) -> dict[str, list[str]]:
+    """results.csv as column name -> cells."""
+    with path.open(encoding="utf-8", newline="") as file:
+        reader = csv.reader(file)
+        header = next(reader, [])
+        cells: list[list[str]] = [[] for _ in header]
+        for row in reader:
+            for column, cell in zip(cells, row, strict=False):
+                column.append(cell)
+    return dict(zip(header, cells, strict=True))
+
+
+def reduce(output: Output, cells: Sequence[str]) -> Scalar | None:
+    """``output`` over a column's cells (numbers where the cells are numbers)."""
+    if not cells:
+        return None
+    if output.reduction == "count_changes":
+        return sum(1 for a, b in itertools.pairwise(cells) if a != b)
+    if output.reduction in ("first", "last"):
+        return number_or_text(cells[0] if output.reduction == "first" else cells[-1])
+    numbers = [float(c) for c in cells if c != ""]
+    if not numbers:
+        return None
+    if output.reduction == "mean":
+        return math.fsum(numbers) / len(numbers)
+    return max(numbers) if output.reduction == "max" else min(numbers)
