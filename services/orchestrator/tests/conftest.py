@@ -27,9 +27,8 @@ from coupler.logs import configure_logging
 from coupler.participant import Participant, Values
 from coupler.security import ServerSecurity
 from coupler.server import ParticipantServer
-from coupler_orchestrator import kernel, steps
+from coupler_orchestrator import kernel, native, steps
 from coupler_orchestrator.cli import main
-from coupler_orchestrator.export import ToolchainMissing
 
 REPO = Path(__file__).resolve().parents[3]
 DATA = Path(__file__).parent / "data"
@@ -97,20 +96,20 @@ class Coupler:
         return json.loads((out_dir / "summary.json").read_text())  # type: ignore[no-any-return]
 
 
-def build_native_steps() -> None:
-    """The native step channel, built (a failing build fails the test; only a missing tool
-    chain skips it)."""
-    try:
-        steps.build(log_to_stderr=False)
-    except ToolchainMissing as exc:
-        pytest.skip(str(exc))
+def require_native(module: native.NativeModule) -> None:
+    """A module of coupler-native, loaded from the installed package (one that does not load
+    fails the test; only coupler-native not installed at all skips it, saying so)."""
+    if module() is None:
+        if module.problem == native.MISSING:
+            pytest.skip(module.problem)
+        pytest.fail(f"{module.what}: {module.problem}")
 
 
 @pytest.fixture(params=["native", "grpc.aio"])
 def step_path(request: pytest.FixtureRequest, monkeypatch: pytest.MonkeyPatch) -> str:
     """Remote steps over the native step channel and over Python's grpc.aio."""
     if request.param == "native":
-        build_native_steps()
+        require_native(steps.library)
     else:
         monkeypatch.setenv(steps.ENVIRONMENT, "0")
     return str(request.param)
@@ -118,10 +117,10 @@ def step_path(request: pytest.FixtureRequest, monkeypatch: pytest.MonkeyPatch) -
 
 @pytest.fixture(params=["C", "Python"])
 def fmu_path(request: pytest.FixtureRequest, monkeypatch: pytest.MonkeyPatch) -> str:
-    """In-process FMUs stepped by the native FMU step (C; a failing build fails the test) and
-    through Python (``COUPLER_NATIVE_STEPS=0``)."""
+    """In-process FMUs stepped by the native FMU step (C; coupler-native's) and through Python
+    (``COUPLER_NATIVE_STEPS=0``)."""
     if request.param == "C":
-        kernel.build()
+        require_native(kernel.library)
     else:
         monkeypatch.setenv(steps.ENVIRONMENT, "0")
     return str(request.param)

@@ -20,7 +20,7 @@ import pytest
 from coupler_orchestrator import kernel
 from coupler_orchestrator.plan import Plan
 
-from .conftest import Coupler
+from .conftest import Coupler, require_native
 
 ROUTES = [
     ("Source", "ramp", "Feed1", "real_in"),
@@ -95,7 +95,7 @@ def chain(
 @pytest.fixture
 def prepared(monkeypatch: pytest.MonkeyPatch) -> list[kernel.Kernel | None]:
     """What ``kernel.prepare`` gave each run of the test (None: the run stepped in Python)."""
-    kernel.build()
+    require_native(kernel.library)
     made: list[kernel.Kernel | None] = []
     real = kernel.prepare
 

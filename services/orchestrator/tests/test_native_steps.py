@@ -20,7 +20,7 @@ from coupler.participant import EndRun, Values
 from coupler_orchestrator import participants, ssp, steps
 from coupler_orchestrator.options import RunOptions
 
-from .conftest import Coupler, Outcome, build_native_steps, serving
+from .conftest import Coupler, Outcome, require_native, serving
 from .test_faults import SSD, gain
 
 pytestmark = pytest.mark.usefixtures("fmus")
@@ -28,9 +28,8 @@ pytestmark = pytest.mark.usefixtures("fmus")
 
 @pytest.fixture(scope="module")
 def native() -> Iterator[None]:
-    """The step channel, built and loaded."""
-    build_native_steps()
-    assert steps.library() is not None
+    """The step channel, loaded from coupler-native."""
+    require_native(steps.library)
     yield
 
 
@@ -140,7 +139,7 @@ def test_an_answer_outside_the_description_fails_the_run(
 
 
 def test_without_the_library_remote_steps_take_grpc_aio(monkeypatch: pytest.MonkeyPatch) -> None:
-    """No tool chain, no build: the run takes the Python path, nothing else changes."""
+    """Without coupler-native: the run takes the Python path, nothing else changes."""
     monkeypatch.setattr(steps, "library", lambda: None)
     assert not steps.enabled()
     assert type(participants.create(component(), RunOptions())) is RemoteParticipant
