@@ -8,6 +8,7 @@ in a process of their own (fmpy_driver.py): a failing FMU cannot take the test s
 from __future__ import annotations
 
 import asyncio
+import importlib.util
 import json
 import os
 import re
@@ -29,13 +30,8 @@ from coupler.examples.gain import GainParticipant
 from coupler.participant import EndRun, Values
 from coupler.security import ServerSecurity
 from coupler.server import ParticipantServer
-from coupler_orchestrator.export import (
-    BASE_SYSTEM,
-    ToolchainMissing,
-    build_proxy,
-    fingerprint,
-    write_fmu,
-)
+from coupler_orchestrator import export
+from coupler_orchestrator.export import fingerprint, write_fmu
 from coupler_orchestrator.fleet import free_port
 
 from .conftest import Coupler, serving
@@ -76,13 +72,26 @@ GAIN_SSD = """<?xml version="1.0" encoding="UTF-8"?>
 """
 
 
+BASE_SYSTEM = re.compile(
+    r"^(linux-vdso|ld-linux|libc|libm|libdl|libpthread|librt|libstdc\+\+|libgcc_s)[.-]"
+)
+"""Libraries every Linux the FMU runs on has (glibc, the C++ runtime); all others are bundled."""
+
+
+def installed_proxy() -> Path:
+    """The proxy binary and its libraries, as coupler-native holds them (skipped only when
+    coupler-native is not installed; an installed one without them fails)."""
+    try:
+        return export.proxy_binaries()
+    except export.ProxyMissing as exc:
+        if importlib.util.find_spec("coupler_native") is None:
+            pytest.skip(str(exc))
+        raise
+
+
 @pytest.fixture(scope="session")
 def proxy_binaries() -> Path:
-    """The proxy binary and its libraries, built once (skipped without the C++ tool chain)."""
-    try:
-        return build_proxy(log=False)
-    except ToolchainMissing as exc:
-        pytest.skip(str(exc))
+    return installed_proxy()
 
 
 @pytest.fixture(scope="session")
