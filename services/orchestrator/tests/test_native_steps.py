@@ -67,6 +67,10 @@ def test_the_same_bytes_as_grpc_aio(
     """FMU -> remote Gain -> FMU: the remote member's request leaves before the FMUs compute
     (Jacobi) or in order (Gauss-Seidel); results.csv byte for byte as over grpc.aio."""
     recorded = {}
+    stepped = {
+        "native": {"path": "native step channel", "reason": "its StepStream over C++ gRPC"},
+        "aio": {"path": "Python", "reason": steps.why_python(None, asked=False)},
+    }
     with gain(monkeypatch):
         for path, flag in (("native", ()), ("aio", ("--no-native-steps",))):
             out = tmp_path / path
@@ -78,6 +82,7 @@ def test_the_same_bytes_as_grpc_aio(
             gain_summary = coupler.summary(out)["participants"]["Gain"]
             assert gain_summary["steps"] == 200
             assert 0 < gain_summary["do_step_latency_ms"]["p50"] < 1000
+            assert gain_summary["step_path"] == stepped[path]
     assert recorded["native"] == recorded["aio"]
     assert recorded["native"].count(b"\n") == 202  # header and t = 0 .. 20 s
 

@@ -72,6 +72,13 @@ def parser() -> argparse.ArgumentParser:
     )
     _run_options(run)
     run.add_argument(
+        "-v",
+        "--verbose",
+        action="store_true",
+        help="also print how each participant stepped (native FMU step, native step channel "
+        "or Python) and why; summary.json records it either way",
+    )
+    run.add_argument(
         "--output-interval",
         type=float,
         metavar="S",
@@ -257,9 +264,9 @@ def _run_options(command: argparse.ArgumentParser) -> None:
         dest="native_steps",
         action="store_false",
         help="step everything through Python: remote participants over grpc.aio instead of the "
-        "native step channel (used when the C++ gRPC tool chain is installed), in-process FMUs "
-        "one ctypes call at a time instead of the native FMU step (C, built with gcc); the "
-        "same results either way (also COUPLER_NATIVE_STEPS=0)",
+        "native step channel (C++ gRPC), in-process FMUs one ctypes call at a time instead of "
+        "the native FMU step (C), both from the coupler-native package; the same results "
+        "either way (also COUPLER_NATIVE_STEPS=0)",
     )
     _security_options(command)
 
@@ -584,6 +591,9 @@ async def _run(
     )
     print(f"results: {outcome.results_csv}", file=out)
     print(f"summary: {outcome.summary_json}", file=out)
+    if getattr(args, "verbose", False):
+        for name, stepped in end.step_paths.items():
+            print(f"stepped: {name}: {stepped.path} ({stepped.reason})", file=out)
     for recording in outcome.recordings:
         print(f"recording: {recording}", file=out)
     if end.status == "terminated":

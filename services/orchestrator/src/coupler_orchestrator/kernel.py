@@ -39,6 +39,9 @@ from coupler_orchestrator.watchdog import IN_PROCESS, Armed
 
 log = structlog.get_logger("coupler.kernel")
 
+USED = "every member is an in-process FMU, every connection a plain copy"
+OFF = "native steps are off (--no-native-steps or COUPLER_NATIVE_STEPS=0)"
+
 library = NativeModule("_fmu_steps", "the native FMU step")
 """``library()``: the native FMU step (``ffi``, ``lib``), or None (why is said once)."""
 
@@ -289,22 +292,22 @@ def _row_getter(positions: Sequence[int]) -> Callable[[list[Value]], list[Value]
     return lambda values: [values[i] for i in positions]
 
 
-def prepare(plan: Plan) -> Kernel | None:
+def prepare(plan: Plan) -> tuple[Kernel | None, str]:
     """The kernel for this plan (after Initialize), when the plan asks for it (``native``)
-    and it means exactly what the step in Python means; None otherwise (why is logged)."""
+    and it means exactly what the step in Python means, else None; and why (logged)."""
     if not plan.native:
-        return None
+        return None, OFF
     reason = unsuitable(plan)
     if reason is None:
         native = library()
         if native is None:
-            return None
+            return None, str(library.problem)
         try:
             kernel = Kernel(plan, native)
         except _Unsuitable as exc:
             reason = str(exc)
         else:
             log.debug("native_fmu_step", members=len(plan.order))
-            return kernel
+            return kernel, USED
     log.debug("native_fmu_step_unused", reason=reason)
-    return None
+    return None, reason

@@ -52,6 +52,17 @@ def enabled(asked: bool = True) -> bool:
     return wanted(asked) and library() is not None
 
 
+def why_python(participant: object, asked: bool) -> str:
+    """Why a remote participant (after Initialize) steps over ``grpc.aio``."""
+    if not wanted(asked):
+        return "native steps are off (--no-native-steps or COUPLER_NATIVE_STEPS=0)"
+    if library() is None:
+        return str(library.problem)
+    if isinstance(participant, NativeRemote):
+        return "the participant offers no StepStream"
+    return "not a gRPC participant (its steps are Python calls)"
+
+
 class NativeRemote(RemoteParticipant):
     """A remote participant whose steps travel over the native step channel (``split``);
     every other call, and the steps of a participant without StepStream, as
@@ -60,13 +71,15 @@ class NativeRemote(RemoteParticipant):
     def __init__(self, address: str, **options: Any) -> None:
         super().__init__(address, streaming=False, **options)
         native = library()
-        self._ffi, self._lib = (native.ffi, native.lib) if native is not None else (None, None)
+        self._ffi: Any = None
+        self._lib: Any = None
         self._native: Any = None
         """The open stream (a ``cs_stream *``)."""
         if native is not None:
-            self._data = self._ffi.new("const char **")
-            self._size = self._ffi.new("size_t *")
-            self._code = self._ffi.new("int *")
+            self._ffi, self._lib = native.ffi, native.lib
+            self._data = native.ffi.new("const char **")
+            self._size = native.ffi.new("size_t *")
+            self._code = native.ffi.new("int *")
 
     async def initialize(self, setup: RunSetup) -> Values:
         outputs = await super().initialize(setup)
