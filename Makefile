@@ -6,7 +6,8 @@ FMU_DIR := build/fmus
 RAILML := scenarios/railway/data/annaberg-schwarzenberg.railml
 
 .PHONY: setup sync proto proto-check lint test demo demo-example fmus faulty-fmus track-fmu \
-        assets browser grpc-dev bench compose-check swarm-check k8s-check export-fmu-check clean
+        assets browser grpc-dev wheels bench compose-check swarm-check k8s-check export-fmu-check \
+        native-check clean
 
 $(UV):
 	python3 -m venv .venv-uv && .venv-uv/bin/pip install --quiet uv
@@ -14,8 +15,26 @@ $(UV):
 # Everything a fresh machine needs: the workspace, the FMUs, the map's browser assets.
 setup: sync fmus faulty-fmus track-fmu assets
 
-sync: $(UV)
+# The workspace. Its coupler-native member is compiled by its build backend (CMake, with
+# Debian's C++ gRPC: grpc-dev) into a wheel that uv installs; uv rebuilds it only when its
+# sources change (its cache-keys), so a sync with nothing changed takes a fraction of a second.
+sync: $(UV) grpc-dev
 	$(UV) sync --frozen --quiet
+
+# The wheels the service images and `make native-check` install (build/wheels): coupler-native
+# (compiled and repaired: it bundles gRPC, needs nothing from the system) and coupler (what a
+# participant author installs). Rebuilt only when their sources change; the native build
+# folder is kept between builds, so only what changed recompiles.
+NATIVE_SOURCES := $(shell find packages/coupler-native -name build -prune -o -type f -print) \
+                  proto/coupler/v1/component.proto
+COUPLER_SOURCES := $(shell find packages/coupler -name __pycache__ -prune -o -type f -print)
+wheels: build/wheels/.built
+
+build/wheels/.built: $(NATIVE_SOURCES) $(COUPLER_SOURCES) | $(UV) grpc-dev
+	rm -rf build/wheels
+	$(UV) build --quiet --wheel --package coupler-native -o build/wheels
+	$(UV) build --quiet --wheel --package coupler -o build/wheels
+	touch $@
 
 # Generated code comes from here only; never edit packages/coupler/src/coupler/v1 by hand.
 proto: sync
@@ -58,7 +77,7 @@ assets:
 browser:
 	@bash scripts/install-chromium.sh
 
-# Debian's C++ gRPC tool chain for `coupler export-fmu` (root only; its tests skip without it).
+# Debian's C++ gRPC tool chain that coupler-native's wheel is built with (root only).
 grpc-dev:
 	@bash scripts/install-grpc-dev.sh
 
@@ -95,6 +114,11 @@ swarm-check:
 # An exported FMU run in a container of the bare base image (no gRPC installed) vs the host.
 export-fmu-check:
 	bash scripts/export-fmu-check.sh
+
+# The built wheels in a container of the base image without a compiler: runs step natively,
+# export-fmu works; and a participant written against the coupler wheel alone.
+native-check:
+	bash scripts/native-check.sh
 
 # deploy/k8s rendered with kustomize and validated against the Kubernetes schema (no cluster).
 k8s-check: sync
