@@ -1,7 +1,7 @@
 """``coupler export-fmu``: the exported FMU driven by FMPy, by Coupler itself and by libcosim.
 
-The proxy binary is really built (g++, Debian's gRPC; scripts/install-grpc-dev.sh, which `make
-test` runs) and really talks to a real gRPC participant on loopback. FMUs are driven by FMPy
+The proxy binary is the one the installed coupler-native wheel ships (built by `make setup`)
+and really talks to a real gRPC participant on loopback. FMUs are driven by FMPy
 in a process of their own (fmpy_driver.py): a failing FMU cannot take the test session along.
 """
 
@@ -267,6 +267,32 @@ def test_exported_from_the_command_line_with_the_address_baked_in(
     answer, printed = drive(tmp_path, [gain_run(out)])
     assert "results" in answer, printed
     assert answer["results"][0]["y"][-1] == Y
+
+
+def test_export_needs_no_compiler_and_copies_the_installed_binaries(
+    gain: ParticipantServer, tmp_path: Path, proxy_binaries: Path
+) -> None:
+    """`coupler export-fmu` as a user runs it, with nothing on PATH but the environment's own
+    commands (no g++, pkg-config or protoc): the FMU's binaries are coupler-native's, byte
+    for byte."""
+    scripts = Path(sys.executable).parent
+    out = tmp_path / "Gain.fmu"
+    done = subprocess.run(
+        [scripts / "coupler", "export-fmu", address(gain), "--out", out, "--fmi", "3"],
+        capture_output=True,
+        text=True,
+        env={"PATH": str(scripts), "HOME": str(tmp_path)},
+        check=False,
+    )
+    assert done.returncode == 0, done.stderr
+    with zipfile.ZipFile(out) as fmu:
+        copied = {
+            Path(name).name: fmu.read(name)
+            for name in fmu.namelist()
+            if name.startswith("binaries/x86_64-linux/")
+        }
+    assert copied == {path.name: path.read_bytes() for path in proxy_binaries.iterdir()}
+    assert not (tmp_path / ".cache").exists()  # nothing built or cached on the way
 
 
 def test_a_changed_participant_is_refused_at_instantiation(
