@@ -10,8 +10,10 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import csv
+import importlib.abc
 import io
 import json
+import sys
 import threading
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass
@@ -103,6 +105,24 @@ def require_native(module: native.NativeModule) -> None:
         if module.problem == native.MISSING:
             pytest.skip(module.problem)
         pytest.fail(f"{module.what}: {module.problem}")
+
+
+class _Uninstalled(importlib.abc.MetaPathFinder):
+    """Finds no coupler_native, as where the package is not installed."""
+
+    def find_spec(self, name: str, path: Any, target: Any = None) -> None:
+        if name == "coupler_native":
+            raise ModuleNotFoundError(f"No module named {name!r}", name=name)
+
+
+@pytest.fixture
+def without_coupler_native(monkeypatch: pytest.MonkeyPatch) -> None:
+    """coupler-native as if it were not installed (a platform it has no wheel for)."""
+    for name in [m for m in sys.modules if m.split(".")[0] == "coupler_native"]:
+        monkeypatch.delitem(sys.modules, name)
+    monkeypatch.setattr(sys, "meta_path", [_Uninstalled(), *sys.meta_path])
+    monkeypatch.setattr(kernel, "library", native.NativeModule("_fmu_steps", "the FMU step"))
+    monkeypatch.setattr(steps, "library", native.NativeModule("_step_streams", "the channel"))
 
 
 @pytest.fixture(params=["native", "grpc.aio"])

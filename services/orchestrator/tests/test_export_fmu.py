@@ -582,3 +582,14 @@ def test_a_participant_ending_the_run_ends_it_through_the_fmu(
     summary = coupler.summary(tmp_path / "out")
     assert summary["status"] == "terminated", summary
     assert float(coupler.results(tmp_path / "out")[-1]["time"]) == 0.5
+
+
+@pytest.mark.usefixtures("without_coupler_native")
+def test_export_without_coupler_native_says_what_to_install(
+    gain: ParticipantServer, coupler: Coupler, tmp_path: Path
+) -> None:
+    outcome = coupler("export-fmu", address(gain), "--out", tmp_path / "Gain.fmu")
+    assert outcome.code == 1
+    assert "coupler-native package, which is not installed" in outcome.err, outcome.err
+    assert "Traceback" not in outcome.err
+    assert not (tmp_path / "Gain.fmu").exists()

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import pytest
 
-from coupler_orchestrator import kernel
+from coupler_orchestrator import kernel, native
 from coupler_orchestrator.plan import Plan
 
 from .conftest import Coupler, require_native
@@ -187,3 +187,20 @@ def test_what_is_recorded_is_picked_from_the_same_row(
         "time,Source.counter,Feed2.real_out,Feed2.int_out,Feed2.bool_out,Feed2.string_out"
     )
     assert len(lines) == 42  # header and t = 0, 0.05 .. 2 s
+
+
+@pytest.mark.usefixtures("without_coupler_native")
+def test_without_coupler_native_fmus_step_in_python_and_say_why(
+    coupler: Coupler, fmus: Mapping[str, Path], tmp_path: Path
+) -> None:
+    """Where coupler-native is not installed (no wheel for the platform) nothing is built or
+    loaded from elsewhere: the run steps through Python and summary.json says why."""
+    out = tmp_path / "out"
+    outcome = coupler("run", chain(tmp_path, fmus, "Source2", ROUTES), "--out", out, *PARAMS)
+    assert outcome.code == 0, outcome.err
+    assert outcome.err == ""  # not installed is no warning: the Python path is a normal one
+    for stepped in coupler.summary(out)["participants"].values():
+        assert stepped["step_path"] == {
+            "path": "Python",
+            "reason": f"in-process; not in C: {native.MISSING}",
+        }

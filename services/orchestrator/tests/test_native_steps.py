@@ -17,7 +17,7 @@ from coupler.channels import RunSetup
 from coupler.client import RemoteParticipant
 from coupler.examples.gain import GainParticipant
 from coupler.participant import EndRun, Values
-from coupler_orchestrator import participants, ssp, steps
+from coupler_orchestrator import native, participants, ssp, steps
 from coupler_orchestrator.options import RunOptions
 
 from .conftest import Coupler, Outcome, require_native, serving
@@ -143,11 +143,13 @@ def test_an_answer_outside_the_description_fails_the_run(
     assert len(coupler.results(tmp_path)) == 6  # t = 0 .. 0.5 s, nothing lost
 
 
-def test_without_the_library_remote_steps_take_grpc_aio(monkeypatch: pytest.MonkeyPatch) -> None:
-    """Without coupler-native: the run takes the Python path, nothing else changes."""
-    monkeypatch.setattr(steps, "library", lambda: None)
+@pytest.mark.usefixtures("without_coupler_native")
+def test_without_coupler_native_remote_steps_take_grpc_aio() -> None:
+    """Without coupler-native: the run takes the Python path and says why."""
     assert not steps.enabled()
-    assert type(participants.create(component(), RunOptions())) is RemoteParticipant
+    created = participants.create(component(), RunOptions())
+    assert type(created) is RemoteParticipant
+    assert steps.why_python(created, asked=True) == native.MISSING
 
 
 @pytest.mark.usefixtures("native")
