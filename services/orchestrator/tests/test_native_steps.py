@@ -17,7 +17,8 @@ from coupler.channels import RunSetup
 from coupler.client import RemoteParticipant
 from coupler.examples.gain import GainParticipant
 from coupler.participant import EndRun, Values
-from coupler_orchestrator import native, participants, ssp, steps
+from coupler_orchestrator import participants, ssp, steps
+from coupler_orchestrator.native import MISSING
 from coupler_orchestrator.options import RunOptions
 
 from .conftest import Coupler, Outcome, require_native, serving
@@ -149,7 +150,7 @@ def test_without_coupler_native_remote_steps_take_grpc_aio() -> None:
     assert not steps.enabled()
     created = participants.create(component(), RunOptions())
     assert type(created) is RemoteParticipant
-    assert steps.why_python(created, asked=True) == native.MISSING
+    assert steps.why_python(created, asked=True) == MISSING
 
 
 @pytest.mark.usefixtures("native")
