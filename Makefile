@@ -125,4 +125,5 @@ k8s-check: sync
 	bash scripts/k8s-check.sh
 
 clean:
-	rm -rf .venv .venv-uv build .pytest_cache .mypy_cache .ruff_cache test-artifacts results
+	rm -rf .venv .venv-uv build packages/coupler-native/build .pytest_cache .mypy_cache .ruff_cache \
+	  test-artifacts results
