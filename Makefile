@@ -7,7 +7,8 @@ RAILML := scenarios/railway/data/annaberg-schwarzenberg.railml
 ROUTE := build/routes/annaberg-schwarzenberg
 
 .PHONY: setup sync proto proto-check lint test demo demo-example fmus faulty-fmus track-fmu \
-        route assets browser grpc-dev bench compose-check swarm-check k8s-check export-fmu-check clean
+        route assets browser grpc-dev wheels bench compose-check swarm-check k8s-check \
+        export-fmu-check native-check clean
 
 $(UV):
 	python3 -m venv .venv-uv && .venv-uv/bin/pip install --quiet uv
@@ -16,8 +17,26 @@ $(UV):
 # the map's browser assets.
 setup: sync fmus faulty-fmus track-fmu route assets
 
-sync: $(UV)
+# The workspace. Its coupler-native member is compiled by its build backend (CMake, with
+# Debian's C++ gRPC: grpc-dev) into a wheel that uv installs; uv rebuilds it only when its
+# sources change (its cache-keys), so a sync with nothing changed takes a fraction of a second.
+sync: $(UV) grpc-dev
 	$(UV) sync --frozen --quiet
+
+# The wheels the service images and `make native-check` install (build/wheels): coupler-native
+# (compiled and repaired: it bundles gRPC, needs nothing from the system) and coupler (what a
+# participant author installs). Rebuilt only when their sources change; the native build
+# folder is kept between builds, so only what changed recompiles.
+NATIVE_SOURCES := $(shell find packages/coupler-native -name build -prune -o -type f -print) \
+                  proto/coupler/v1/component.proto
+COUPLER_SOURCES := $(shell find packages/coupler -name __pycache__ -prune -o -type f -print)
+wheels: build/wheels/.built
+
+build/wheels/.built: $(NATIVE_SOURCES) $(COUPLER_SOURCES) | $(UV) grpc-dev
+	rm -rf build/wheels
+	$(UV) build --quiet --wheel --package coupler-native -o build/wheels
+	$(UV) build --quiet --wheel --package coupler -o build/wheels
+	touch $@
 
 # Generated code comes from here only; never edit packages/coupler/src/coupler/v1 by hand.
 proto: sync
@@ -69,7 +88,7 @@ assets:
 browser:
 	@bash scripts/install-chromium.sh
 
-# Debian's C++ gRPC tool chain for `coupler export-fmu` (root only; its tests skip without it).
+# Debian's C++ gRPC tool chain that coupler-native's wheel is built with (root only).
 grpc-dev:
 	@bash scripts/install-grpc-dev.sh
 
@@ -79,7 +98,8 @@ lint: sync
 	$(UV) run --frozen ruff check .
 	$(UV) run --frozen ruff format --check .
 	$(UV) run --frozen lint-imports
-	$(UV) run --frozen mypy packages/coupler/src packages/coupler-dev/src packages/railway/src services/*/src
+	$(UV) run --frozen mypy packages/coupler/src packages/coupler-dev/src packages/coupler-native/src \
+	  packages/railway/src services/*/src
 
 test: setup browser grpc-dev
 	$(UV) run --frozen pytest
@@ -109,9 +129,15 @@ swarm-check:
 export-fmu-check:
 	bash scripts/export-fmu-check.sh
 
+# The built wheels in a container of the base image without a compiler: runs step natively,
+# export-fmu works; and a participant written against the coupler wheel alone.
+native-check:
+	bash scripts/native-check.sh
+
 # deploy/k8s rendered with kustomize and validated against the Kubernetes schema (no cluster).
 k8s-check: sync
 	bash scripts/k8s-check.sh
 
 clean:
-	rm -rf .venv .venv-uv build .pytest_cache .mypy_cache .ruff_cache test-artifacts results
+	rm -rf .venv .venv-uv build packages/coupler-native/build .pytest_cache .mypy_cache .ruff_cache \
+	  test-artifacts results

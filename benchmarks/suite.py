@@ -296,13 +296,13 @@ def libcosim_loop(n: int, steps: int) -> float | None:
 
 def export_gain(folder: Path, port: int) -> Path | None:
     """The example gain participant exported as an FMI 2 FMU (coupler export-fmu), pointing at
-    ``port``; None without the C++ gRPC tool chain."""
+    ``port``; None without coupler-native (which holds the proxy's binaries)."""
     from coupler.examples.gain import GainParticipant
-    from coupler_orchestrator.tools.export_fmu import ExportError, build_proxy, write_fmu
+    from coupler_orchestrator.tools.export_fmu import ProxyMissing, proxy_binaries, write_fmu
 
     try:
-        binaries = build_proxy(log=False)
-    except ExportError:
+        binaries = proxy_binaries()
+    except ProxyMissing:
         return None
     description = asyncio.run(GainParticipant().describe())
     address = f"grpc://127.0.0.1:{port}"
@@ -701,7 +701,7 @@ async def proxy_fmu(
         await serving([port])
         fmu = await asyncio.to_thread(export_gain, work, port)
         if fmu is None:
-            log("  skipped: no C++ gRPC tool chain (scripts/install-grpc-dev.sh)")
+            log("  skipped: coupler-native (the proxy FMU's binaries) is not installed")
         else:
             direct_ssd, through_ssd = ring_ssd(work, [port]), proxy_ssd(work, fmu)
             steps = sizes.remote_steps

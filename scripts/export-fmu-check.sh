@@ -32,7 +32,6 @@ bash scripts/base-image.sh
 
 stage export
 [[ -x .venv/bin/coupler ]] || make setup
-bash scripts/install-grpc-dev.sh
 rm -rf "$OUT/Gain" "$OUT/Gain.fmu" "$OUT"/*.txt
 mkdir -p "$OUT/Gain"
 PORT=$(.venv/bin/python -c 'from coupler.testing import free_port; print(free_port())')

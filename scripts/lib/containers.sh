@@ -106,12 +106,14 @@ build_ca() {
   fi
 }
 
-# FMUs and Leaflet (the images copy them), and the check's ports free on 127.0.0.1.
+# FMUs, Leaflet and coupler-native's wheel (the images copy them), and the check's ports free
+# on 127.0.0.1.
 host_artifacts() {
   if [[ ! -f build/fmus/Driver2.fmu || ! -f build/fmus/TrackBalises.fmu ||
         ! -f services/mapserver/src/mapserver/static/vendor/leaflet/leaflet.js ]]; then
     make setup
   fi
+  make --no-print-directory wheels
   python3 - "$CHECK" "$MOCK_PORT" "$BRIDGE_PORT" "$BALISE_PORT" "$MAP_PORT" "$MAP_HTTP_PORT" \
       "$@" <<'PY'
 import socket, sys

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import asyncio
 import csv
+import importlib.util
 import json
 import os
 import subprocess
@@ -24,7 +25,7 @@ from typing import Any
 import pytest
 
 from coupler.testing import free_port
-from coupler_orchestrator.tools.export_fmu import ToolchainMissing, build_proxy
+from coupler_orchestrator.tools import export_fmu as export
 from coupler_orchestrator.tools.fleet import Fleet, FleetSpec
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -63,10 +64,13 @@ pytestmark = pytest.mark.timeout(300)
 
 @pytest.fixture(scope="module")
 def proxy_binaries() -> Path:
+    """The proxy FMU's binaries of the installed coupler-native (skipped only without it)."""
     try:
-        return build_proxy(log=False)
-    except ToolchainMissing as exc:
-        pytest.skip(str(exc))
+        return export.proxy_binaries()
+    except export.ProxyMissing as exc:
+        if importlib.util.find_spec("coupler_native") is None:
+            pytest.skip(str(exc))
+        raise
 
 
 @asynccontextmanager

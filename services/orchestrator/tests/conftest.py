@@ -9,8 +9,10 @@ from __future__ import annotations
 
 import contextlib
 import csv
+import importlib.abc
 import io
 import json
+import sys
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -26,10 +28,10 @@ from coupler.participant import Participant, Values
 from coupler.security import ServerSecurity
 from coupler.server import ParticipantServer
 from coupler.testing import served_in_thread
+from coupler_orchestrator import native
 from coupler_orchestrator.cli.main import main
 from coupler_orchestrator.master import native_fmu_step as kernel
 from coupler_orchestrator.master import native_step_channel as steps
-from coupler_orchestrator.tools.export_fmu import ToolchainMissing
 
 REPO = Path(__file__).resolve().parents[3]
 DATA = Path(__file__).parent / "data"
@@ -97,20 +99,38 @@ class Coupler:
         return json.loads((out_dir / "summary.json").read_text())  # type: ignore[no-any-return]
 
 
-def build_native_steps() -> None:
-    """The native step channel, built (a failing build fails the test; only a missing tool
-    chain skips it)."""
-    try:
-        steps.build(log_to_stderr=False)
-    except ToolchainMissing as exc:
-        pytest.skip(str(exc))
+def require_native(module: native.NativeModule) -> None:
+    """A module of coupler-native, loaded from the installed package (one that does not load
+    fails the test; only coupler-native not installed at all skips it, saying so)."""
+    if module() is None:
+        if module.problem == native.MISSING:
+            pytest.skip(module.problem)
+        pytest.fail(f"{module.what}: {module.problem}")
+
+
+class _Uninstalled(importlib.abc.MetaPathFinder):
+    """Finds no coupler_native, as where the package is not installed."""
+
+    def find_spec(self, name: str, path: Any, target: Any = None) -> None:
+        if name == "coupler_native":
+            raise ModuleNotFoundError(f"No module named {name!r}", name=name)
+
+
+@pytest.fixture
+def without_coupler_native(monkeypatch: pytest.MonkeyPatch) -> None:
+    """coupler-native as if it were not installed (a platform it has no wheel for)."""
+    for name in [m for m in sys.modules if m.split(".")[0] == "coupler_native"]:
+        monkeypatch.delitem(sys.modules, name)
+    monkeypatch.setattr(sys, "meta_path", [_Uninstalled(), *sys.meta_path])
+    monkeypatch.setattr(kernel, "library", native.NativeModule("_fmu_steps", "the FMU step"))
+    monkeypatch.setattr(steps, "library", native.NativeModule("_step_streams", "the channel"))
 
 
 @pytest.fixture(params=["native", "grpc.aio"])
 def step_path(request: pytest.FixtureRequest, monkeypatch: pytest.MonkeyPatch) -> str:
     """Remote steps over the native step channel and over Python's grpc.aio."""
     if request.param == "native":
-        build_native_steps()
+        require_native(steps.library)
     else:
         monkeypatch.setenv(steps.ENVIRONMENT, "0")
     return str(request.param)
@@ -118,10 +138,10 @@ def step_path(request: pytest.FixtureRequest, monkeypatch: pytest.MonkeyPatch) -
 
 @pytest.fixture(params=["C", "Python"])
 def fmu_path(request: pytest.FixtureRequest, monkeypatch: pytest.MonkeyPatch) -> str:
-    """In-process FMUs stepped by the native FMU step (C; a failing build fails the test) and
-    through Python (``COUPLER_NATIVE_STEPS=0``)."""
+    """In-process FMUs stepped by the native FMU step (C; coupler-native's) and through Python
+    (``COUPLER_NATIVE_STEPS=0``)."""
     if request.param == "C":
-        kernel.build()
+        require_native(kernel.library)
     else:
         monkeypatch.setenv(steps.ENVIRONMENT, "0")
     return str(request.param)

@@ -1,13 +1,14 @@
 """``coupler export-fmu``: the exported FMU driven by FMPy, by Coupler itself and by libcosim.
 
-The proxy binary is really built (g++, Debian's gRPC; scripts/install-grpc-dev.sh, which `make
-test` runs) and really talks to a real gRPC participant on loopback. FMUs are driven by FMPy
+The proxy binary is the one the installed coupler-native wheel ships (built by `make setup`)
+and really talks to a real gRPC participant on loopback. FMUs are driven by FMPy
 in a process of their own (fmpy_driver.py): a failing FMU cannot take the test session along.
 """
 
 from __future__ import annotations
 
 import asyncio
+import importlib.util
 import json
 import os
 import re
@@ -30,13 +31,8 @@ from coupler.security import ServerSecurity
 from coupler.server import ParticipantServer
 from coupler.testing import free_port
 from coupler_dev.devcerts import write_pki
-from coupler_orchestrator.tools.export_fmu import (
-    BASE_SYSTEM,
-    ToolchainMissing,
-    build_proxy,
-    fingerprint,
-    write_fmu,
-)
+from coupler_orchestrator.tools import export_fmu as export
+from coupler_orchestrator.tools.export_fmu import fingerprint, write_fmu
 
 from .conftest import Coupler, serving
 
@@ -76,13 +72,26 @@ GAIN_SSD = """<?xml version="1.0" encoding="UTF-8"?>
 """
 
 
+BASE_SYSTEM = re.compile(
+    r"^(linux-vdso|ld-linux|libc|libm|libdl|libpthread|librt|libstdc\+\+|libgcc_s)[.-]"
+)
+"""Libraries every Linux the FMU runs on has (glibc, the C++ runtime); all others are bundled."""
+
+
+def installed_proxy() -> Path:
+    """The proxy binary and its libraries, as coupler-native holds them (skipped only when
+    coupler-native is not installed; an installed one without them fails)."""
+    try:
+        return export.proxy_binaries()
+    except export.ProxyMissing as exc:
+        if importlib.util.find_spec("coupler_native") is None:
+            pytest.skip(str(exc))
+        raise
+
+
 @pytest.fixture(scope="session")
 def proxy_binaries() -> Path:
-    """The proxy binary and its libraries, built once (skipped without the C++ tool chain)."""
-    try:
-        return build_proxy(log=False)
-    except ToolchainMissing as exc:
-        pytest.skip(str(exc))
+    return installed_proxy()
 
 
 @pytest.fixture(scope="session")
@@ -258,6 +267,32 @@ def test_exported_from_the_command_line_with_the_address_baked_in(
     answer, printed = drive(tmp_path, [gain_run(out)])
     assert "results" in answer, printed
     assert answer["results"][0]["y"][-1] == Y
+
+
+def test_export_needs_no_compiler_and_copies_the_installed_binaries(
+    gain: ParticipantServer, tmp_path: Path, proxy_binaries: Path
+) -> None:
+    """`coupler export-fmu` as a user runs it, with nothing on PATH but the environment's own
+    commands (no g++, pkg-config or protoc): the FMU's binaries are coupler-native's, byte
+    for byte."""
+    scripts = Path(sys.executable).parent
+    out = tmp_path / "Gain.fmu"
+    done = subprocess.run(
+        [scripts / "coupler", "export-fmu", address(gain), "--out", out, "--fmi", "3"],
+        capture_output=True,
+        text=True,
+        env={"PATH": str(scripts), "HOME": str(tmp_path)},
+        check=False,
+    )
+    assert done.returncode == 0, done.stderr
+    with zipfile.ZipFile(out) as fmu:
+        copied = {
+            Path(name).name: fmu.read(name)
+            for name in fmu.namelist()
+            if name.startswith("binaries/x86_64-linux/")
+        }
+    assert copied == {path.name: path.read_bytes() for path in proxy_binaries.iterdir()}
+    assert not (tmp_path / ".cache").exists()  # nothing built or cached on the way
 
 
 def test_a_changed_participant_is_refused_at_instantiation(
@@ -547,3 +582,14 @@ def test_a_participant_ending_the_run_ends_it_through_the_fmu(
     summary = coupler.summary(tmp_path / "out")
     assert summary["status"] == "terminated", summary
     assert float(coupler.results(tmp_path / "out")[-1]["time"]) == 0.5
+
+
+@pytest.mark.usefixtures("without_coupler_native")
+def test_export_without_coupler_native_says_what_to_install(
+    gain: ParticipantServer, coupler: Coupler, tmp_path: Path
+) -> None:
+    outcome = coupler("export-fmu", address(gain), "--out", tmp_path / "Gain.fmu")
+    assert outcome.code == 1
+    assert "coupler-native package, which is not installed" in outcome.err, outcome.err
+    assert "Traceback" not in outcome.err
+    assert not (tmp_path / "Gain.fmu").exists()

@@ -57,7 +57,9 @@ async def test_the_page_charts_a_picked_channel_and_each_participants_latency(
     from playwright.async_api import async_playwright
 
     async with MonitorServer("127.0.0.1:0") as monitor:
-        running = asyncio.create_task(run(8.0, 2.0, monitor, tmp_path))  # 4 s of wall time
+        # 8 s of wall time: long enough for a browser that starts slowly on a busy machine to
+        # see the chart move
+        running = asyncio.create_task(run(8.0, 1.0, monitor, tmp_path))
         async with async_playwright() as playwright:
             browser = await playwright.chromium.launch(
                 executable_path=str(CHROMIUM), args=BROWSER_ARGS

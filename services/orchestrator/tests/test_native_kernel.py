@@ -17,10 +17,11 @@ from pathlib import Path
 
 import pytest
 
+from coupler_orchestrator import native
 from coupler_orchestrator.master import native_fmu_step as kernel
 from coupler_orchestrator.model import Plan
 
-from .conftest import Coupler
+from .conftest import Coupler, require_native
 
 ROUTES = [
     ("Source", "ramp", "Feed1", "real_in"),
@@ -95,13 +96,14 @@ def chain(
 @pytest.fixture
 def prepared(monkeypatch: pytest.MonkeyPatch) -> list[kernel.Kernel | None]:
     """What ``kernel.prepare`` gave each run of the test (None: the run stepped in Python)."""
-    kernel.build()
+    require_native(kernel.library)
     made: list[kernel.Kernel | None] = []
     real = kernel.prepare
 
-    def spy(plan: Plan) -> kernel.Kernel | None:
-        made.append(real(plan))
-        return made[-1]
+    def spy(plan: Plan) -> tuple[kernel.Kernel | None, str]:
+        chosen = real(plan)
+        made.append(chosen[0])
+        return chosen
 
     monkeypatch.setattr(kernel, "prepare", spy)
     return made
@@ -122,6 +124,10 @@ def test_fmus_step_in_c_with_the_same_bytes_as_in_python(
 ) -> None:
     ssd = chain(tmp_path, fmus, source, ROUTES)
     recorded = {}
+    stepped = {
+        "C": {"path": "native FMU step", "reason": kernel.USED},
+        "Python": {"path": "Python", "reason": f"in-process; not in C: {kernel.OFF}"},
+    }
     for path, flag in (("C", ()), ("Python", ("--no-native-steps",))):
         out = tmp_path / path
         outcome = coupler("run", ssd, "--out", out, "--algorithm", algorithm, *PARAMS, *flag)
@@ -131,6 +137,7 @@ def test_fmus_step_in_c_with_the_same_bytes_as_in_python(
         for name in ("Source", "Feed1", "Feed2", "Feed3"):
             assert summary["participants"][name]["steps"] == 200
             assert 0 < summary["participants"][name]["do_step_latency_ms"]["p50"] < 1000
+            assert summary["participants"][name]["step_path"] == stepped[path]
     assert [made is not None for made in prepared] == [True, False]
     assert recorded["C"] == recorded["Python"]
     lines = recorded["C"].decode().splitlines()
@@ -147,12 +154,17 @@ def test_a_string_connection_steps_in_python(
 ) -> None:
     """A string lives in its FMU's memory only until that FMU's next call: the step in C
     would copy a pointer that the source's own step invalidates, so the run steps in
-    Python (and the string arrives)."""
+    Python (and the string arrives); `coupler run -v` and summary.json say so, and why."""
     ssd = chain(tmp_path, fmus, "Source2", [*ROUTES, STRING])
     out = tmp_path / "out"
-    outcome = coupler("run", ssd, "--out", out, *PARAMS)
+    outcome = coupler("run", ssd, "--out", out, "-v", *PARAMS)
     assert outcome.code == 0, outcome.err
     assert prepared == [None]
+    why = "in-process; not in C: Feed2.string_in (String) is fed a String by Feed1.string_out"
+    for name in ("Source", "Feed1", "Feed2", "Feed3"):
+        assert f"stepped: {name}: Python ({why})" in outcome.out, outcome.out
+        stepped = coupler.summary(out)["participants"][name]["step_path"]
+        assert stepped == {"path": "Python", "reason": why}
     rows = coupler.results(out)
     assert rows[-1]["Feed2.string_out"] == rows[-1]["Feed1.string_out"]
 
@@ -176,3 +188,20 @@ def test_what_is_recorded_is_picked_from_the_same_row(
         "time,Source.counter,Feed2.real_out,Feed2.int_out,Feed2.bool_out,Feed2.string_out"
     )
     assert len(lines) == 42  # header and t = 0, 0.05 .. 2 s
+
+
+@pytest.mark.usefixtures("without_coupler_native")
+def test_without_coupler_native_fmus_step_in_python_and_say_why(
+    coupler: Coupler, fmus: Mapping[str, Path], tmp_path: Path
+) -> None:
+    """Where coupler-native is not installed (no wheel for the platform) nothing is built or
+    loaded from elsewhere: the run steps through Python and summary.json says why."""
+    out = tmp_path / "out"
+    outcome = coupler("run", chain(tmp_path, fmus, "Source2", ROUTES), "--out", out, *PARAMS)
+    assert outcome.code == 0, outcome.err
+    assert outcome.err == ""  # not installed is no warning: the Python path is a normal one
+    for stepped in coupler.summary(out)["participants"].values():
+        assert stepped["step_path"] == {
+            "path": "Python",
+            "reason": f"in-process; not in C: {native.MISSING}",
+        }

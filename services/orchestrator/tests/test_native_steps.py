@@ -19,10 +19,11 @@ from coupler.examples.gain import GainParticipant
 from coupler.participant import EndRun, Values
 from coupler_orchestrator import ssp
 from coupler_orchestrator.master import native_step_channel as steps
+from coupler_orchestrator.native import MISSING
 from coupler_orchestrator.options import RunOptions
 from coupler_orchestrator.pipeline import participants
 
-from .conftest import Coupler, Outcome, build_native_steps, serving
+from .conftest import Coupler, Outcome, require_native, serving
 from .test_faults import SSD, gain
 
 pytestmark = pytest.mark.usefixtures("fmus")
@@ -30,9 +31,8 @@ pytestmark = pytest.mark.usefixtures("fmus")
 
 @pytest.fixture(scope="module")
 def native() -> Iterator[None]:
-    """The step channel, built and loaded."""
-    build_native_steps()
-    assert steps.library() is not None
+    """The step channel, loaded from coupler-native."""
+    require_native(steps.library)
     yield
 
 
@@ -70,6 +70,10 @@ def test_the_same_bytes_as_grpc_aio(
     """FMU -> remote Gain -> FMU: the remote member's request leaves before the FMUs compute
     (Jacobi) or in order (Gauss-Seidel); results.csv byte for byte as over grpc.aio."""
     recorded = {}
+    stepped = {
+        "native": {"path": "native step channel", "reason": "its StepStream over C++ gRPC"},
+        "aio": {"path": "Python", "reason": steps.why_python(None, asked=False)},
+    }
     with gain(monkeypatch):
         for path, flag in (("native", ()), ("aio", ("--no-native-steps",))):
             out = tmp_path / path
@@ -81,6 +85,7 @@ def test_the_same_bytes_as_grpc_aio(
             gain_summary = coupler.summary(out)["participants"]["Gain"]
             assert gain_summary["steps"] == 200
             assert 0 < gain_summary["do_step_latency_ms"]["p50"] < 1000
+            assert gain_summary["step_path"] == stepped[path]
     assert recorded["native"] == recorded["aio"]
     assert recorded["native"].count(b"\n") == 202  # header and t = 0 .. 20 s
 
@@ -141,11 +146,13 @@ def test_an_answer_outside_the_description_fails_the_run(
     assert len(coupler.results(tmp_path)) == 6  # t = 0 .. 0.5 s, nothing lost
 
 
-def test_without_the_library_remote_steps_take_grpc_aio(monkeypatch: pytest.MonkeyPatch) -> None:
-    """No tool chain, no build: the run takes the Python path, nothing else changes."""
-    monkeypatch.setattr(steps, "library", lambda: None)
+@pytest.mark.usefixtures("without_coupler_native")
+def test_without_coupler_native_remote_steps_take_grpc_aio() -> None:
+    """Without coupler-native: the run takes the Python path and says why."""
     assert not steps.enabled()
-    assert type(participants.create(component(), RunOptions())) is RemoteParticipant
+    created = participants.create(component(), RunOptions())
+    assert type(created) is RemoteParticipant
+    assert steps.why_python(created, asked=True) == MISSING
 
 
 @pytest.mark.usefixtures("native")

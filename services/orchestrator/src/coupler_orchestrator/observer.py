@@ -8,8 +8,8 @@ job (a full disk) raises a CouplerError, which ends the run as ``failed`` with t
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-from dataclasses import dataclass
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
 
 from coupler.channels import Value
 
@@ -71,6 +71,18 @@ class RunEnd:
     """``terminated``: the component that asked to end the run; else empty."""
     request: str = ""
     """``terminated``: the reason that component gave, as it gave it."""
+    step_paths: Mapping[str, StepPath] = field(default_factory=dict)
+    """How each member stepped, by name (empty when the run ended before its first step)."""
+
+
+@dataclass(frozen=True)
+class StepPath:
+    """How a member stepped, and why that way."""
+
+    path: str
+    """``native FMU step`` (in C, with every other member), ``native step channel`` (its
+    StepStream over C++ gRPC) or ``Python``."""
+    reason: str
 
 
 class Observer:

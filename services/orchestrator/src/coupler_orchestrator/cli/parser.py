@@ -121,9 +121,9 @@ def run_options(command: argparse.ArgumentParser) -> None:
         dest="native_steps",
         action="store_false",
         help="step everything through Python: remote participants over grpc.aio instead of the "
-        "native step channel (used when the C++ gRPC tool chain is installed), in-process FMUs "
-        "one ctypes call at a time instead of the native FMU step (C, built with gcc); the "
-        "same results either way (also COUPLER_NATIVE_STEPS=0)",
+        "native step channel (C++ gRPC), in-process FMUs one ctypes call at a time instead of "
+        "the native FMU step (C), both from the coupler-native package; the same results "
+        "either way (also COUPLER_NATIVE_STEPS=0)",
     )
     security_options(command)
 

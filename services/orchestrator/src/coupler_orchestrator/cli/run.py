@@ -29,6 +29,13 @@ def arguments(run: argparse.ArgumentParser) -> None:
     scenario_argument(run)
     run_options(run)
     run.add_argument(
+        "-v",
+        "--verbose",
+        action="store_true",
+        help="also print how each participant stepped (native FMU step, native step channel "
+        "or Python) and why; summary.json records it either way",
+    )
+    run.add_argument(
         "--output-interval",
         type=float,
         metavar="S",
@@ -105,6 +112,9 @@ async def run(args: argparse.Namespace, options: RunOptions, out: TextIO, sessio
     )
     print(f"results: {outcome.results_csv}", file=out)
     print(f"summary: {outcome.summary_json}", file=out)
+    if getattr(args, "verbose", False):
+        for name, stepped in end.step_paths.items():
+            print(f"stepped: {name}: {stepped.path} ({stepped.reason})", file=out)
     for recording in outcome.recordings:
         print(f"recording: {recording}", file=out)
     if end.status == "terminated":

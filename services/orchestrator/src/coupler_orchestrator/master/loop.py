@@ -29,11 +29,11 @@ import structlog
 from coupler.channels import RunSetup, Value
 from coupler.errors import CouplerError, ParticipantError, ParticipantTimeout
 from coupler.participant import EndRun, Values
-from coupler_orchestrator.master import native_fmu_step
+from coupler_orchestrator.master import native_fmu_step, native_step_channel
 from coupler_orchestrator.master.steppers import Split, StepNow, stepper_of
 from coupler_orchestrator.master.watchdog import Watchdog
 from coupler_orchestrator.model import Algorithm, Converter, Member, Plan
-from coupler_orchestrator.observer import Column, Observer, RunEnd, RunInfo
+from coupler_orchestrator.observer import Column, Observer, RunEnd, RunInfo, StepPath
 
 log = structlog.get_logger("coupler.master")
 
@@ -134,6 +134,8 @@ class Master:
         """When each split member's request under way was sent [perf_counter]."""
         self._kernel: native_fmu_step.Kernel | None = None
         """Steps every member in C, when the plan allows it (after Initialize)."""
+        self._paths: dict[str, StepPath] = {}
+        """How each member steps, and why (after Initialize; summary.json tells it)."""
         self._watchdog: Watchdog | None = None
         self._wall_start = 0.0
         self._abandoned = False
@@ -201,6 +203,7 @@ class Master:
                 steps=self.completed_steps,
                 end_time=self._time_reached(),
                 wall_time=wallclock.perf_counter() - wall_start,
+                step_paths=self._paths,
                 **self._requested(status),
             )
             self._finish(end)
@@ -274,12 +277,29 @@ class Master:
         if self._local or self._split:
             self._watchdog = Watchdog(self._abandon)
             self._watchdog.start()
-        self._kernel = native_fmu_step.prepare(self.plan)
+        self._kernel, why = native_fmu_step.prepare(self.plan)
+        self._paths = self._step_paths(why)
         if self._kernel is not None:
             assert self._watchdog is not None
             self._watchdog.follow(self._kernel.under_way)
             for m, keys in self._store_keys.items():  # the Initialize answers
                 self._kernel.place(m, {c: self.store[key] for c, key in keys.items()})
+
+    def _step_paths(self, kernel_reason: str) -> dict[str, StepPath]:
+        """How each member steps: all in C (the native FMU step), over the native step
+        channel, or in Python; and why."""
+        if self._kernel is not None:
+            return {m.name: StepPath("native FMU step", kernel_reason) for m in self.plan.order}
+        paths = {}
+        for m in self.plan.order:
+            if m.name in self._split:
+                paths[m.name] = StepPath("native step channel", "its StepStream over C++ gRPC")
+            elif m.name in self._local:
+                paths[m.name] = StepPath("Python", f"in-process; not in C: {kernel_reason}")
+            else:
+                why = native_step_channel.why_python(m.participant, self.plan.native)
+                paths[m.name] = StepPath("Python", why)
+        return paths
 
     def _abandon(self, status: str, reason: str) -> None:
         """End the run from the watchdog's thread: this thread is stuck in a participant."""
@@ -290,6 +310,7 @@ class Master:
             steps=self.completed_steps,
             end_time=self._time_reached(),
             wall_time=wallclock.perf_counter() - self._wall_start,
+            step_paths=self._paths,
         )
         self._finish(end)
         self._abandoned = True

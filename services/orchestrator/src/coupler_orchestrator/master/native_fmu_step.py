@@ -1,8 +1,9 @@
 """The native FMU step: every in-process FMU of a run stepped by one call into C per base step.
 
 Stepping an FMU from Python costs a ctypes call per FMI call (setters, DoStep, a getter per
-type), each far dearer than the FMU's own work for a small model. ``native/fmu_steps.c`` runs
-the loop over them in C instead: each member's inputs copied from the outputs they are
+type), each far dearer than the FMU's own work for a small model. The native FMU step
+(``coupler_native._fmu_steps``: ``packages/coupler-native/csrc/fmu_steps.c``) runs the loop
+over them in C instead: each member's inputs copied from the outputs they are
 connected to, set, stepped, every output read into one array per type. Python then reads a
 step's results row with one slice per array.
 
@@ -13,17 +14,16 @@ no strings: a string lives in its FMU's memory only until that FMU's next call).
 with ``--no-native-steps`` / ``COUPLER_NATIVE_STEPS=0``, the members step through Python with
 the same results (``tests/test_native_kernel.py`` compares them byte for byte).
 
-The library is built with gcc on first use (well under a second, once per machine) and cached
-beside the native step channel's.
+It is compiled when the coupler-native wheel is built; its structs are declared once, by
+``csrc/fmu_steps.h``, which its cffi binding reads. Without coupler-native installed, runs step
+through Python.
 """
 
 from __future__ import annotations
 
 import ctypes
-import shutil
 from collections.abc import Callable, Mapping, Sequence
 from operator import itemgetter
-from pathlib import Path
 from typing import Any
 
 import structlog
@@ -33,85 +33,20 @@ from coupler.fmicalls import CONVERT, Group
 from coupler.fmu import FmuParticipant
 from coupler_orchestrator.master.watchdog import IN_PROCESS, Armed
 from coupler_orchestrator.model import Algorithm, Member, Plan
-from coupler_orchestrator.tools.export_fmu import NativeLibrary, ToolchainMissing, cached_library
+from coupler_orchestrator.native import NativeModule
 
 log = structlog.get_logger("coupler.kernel")
 
-SOURCE = Path(__file__).parent.parent / "native" / "fmu_steps.c"
-DONE = -1
-SET, STEP, GET, TERMINATE = 0, 1, 2, 3
+USED = "every member is an in-process FMU, every connection a plain copy"
+OFF = "native steps are off (--no-native-steps or COUPLER_NATIVE_STEPS=0)"
+
+library = NativeModule("_fmu_steps", "the native FMU step")
+"""``library()``: the native FMU step (``ffi``, ``lib``), or None (why is said once)."""
 
 
-class _Call(ctypes.Structure):
-    _fields_ = [
-        ("function", ctypes.c_void_p),
-        ("refs", ctypes.c_void_p),
-        ("count", ctypes.c_size_t),
-        ("buffer", ctypes.c_void_p),
-    ]
-
-
-class _Copy(ctypes.Structure):
-    _fields_ = [("target", ctypes.c_void_p), ("source", ctypes.c_void_p), ("size", ctypes.c_size_t)]
-
-
-class _Member(ctypes.Structure):
-    _fields_ = [
-        ("instance", ctypes.c_void_p),
-        ("do_step", ctypes.c_void_p),
-        ("step", ctypes.c_double),
-        ("version", ctypes.c_int),
-        ("slot", ctypes.c_int),
-        ("copies", ctypes.c_int),
-        ("copy", ctypes.POINTER(_Copy)),
-        ("sets", ctypes.c_int),
-        ("set", ctypes.POINTER(_Call)),
-        ("gets", ctypes.c_int),
-        ("get", ctypes.POINTER(_Call)),
-        ("event", ctypes.c_bool),
-        ("terminate", ctypes.c_bool),
-        ("early", ctypes.c_bool),
-        ("last", ctypes.c_double),
-    ]
-
-
-def build() -> Path:
-    """The shared library, built with gcc on first use (quietly: well under a second) and
-    cached; ToolchainMissing without gcc."""
-    if shutil.which("gcc") is None:
-        raise ToolchainMissing("cannot build the native FMU step: gcc not found on PATH")
-    return cached_library(
-        SOURCE,
-        compiler="gcc",
-        flags=["-shared", "-fPIC", "-O2", "-std=c11", "-Wall", "-Wextra"],
-        versions=[["gcc", "--version"]],
-        prefix="libcoupler-fmu-steps",
-        what="the native FMU step",
-        log_to_stderr=False,
-    )
-
-
-def _declare(lib: ctypes.CDLL) -> None:
-    lib.ck_step.restype = ctypes.c_int
-    lib.ck_step.argtypes = [
-        ctypes.POINTER(_Member),
-        ctypes.c_int,
-        ctypes.c_int,
-        ctypes.c_int,
-        ctypes.c_double,
-        ctypes.POINTER(ctypes.c_double),
-        ctypes.POINTER(ctypes.c_double),
-        ctypes.POINTER(ctypes.c_int),
-    ]
-
-
-library = NativeLibrary(build, _declare, "the native FMU step")
-"""``library()``: the loaded native FMU step, or None (why is said once; quietly without gcc,
-as on a machine that only runs, such as a slim container)."""
-
-
-def _address(function: Any) -> int:
-    return ctypes.cast(function, ctypes.c_void_p).value or 0
+def _address(pointer: Any) -> int:
+    """The address a ctypes pointer, function or ``c_void_p`` holds."""
+    return ctypes.cast(pointer, ctypes.c_void_p).value or 0
 
 
 def _element(group: Group) -> Any:
@@ -159,8 +94,8 @@ def unsuitable(plan: Plan) -> str | None:
 class Kernel:
     """The in-process FMUs of one plan, stepped in C (``unsuitable(plan)`` must be None)."""
 
-    def __init__(self, plan: Plan, lib: ctypes.CDLL) -> None:
-        self._lib = lib
+    def __init__(self, plan: Plan, native: Any) -> None:
+        self._ffi, self._lib = native.ffi, native.lib
         self._order = plan.order
         slots = {m.name: i for i, m in enumerate(plan.members)}
         planes: dict[tuple[Any, str], _Plane] = {}
@@ -191,10 +126,10 @@ class Kernel:
         feeds: dict[str, list[tuple[str, tuple[str, str]]]] = {}
         for link in plan.links:
             feeds.setdefault(link.target, []).append((link.input, (link.source, link.output)))
-        self._keep: list[Any] = []  # every ctypes object the C side points into
+        self._keep: list[Any] = []  # every array the C side points into
         self._sets: list[list[Group]] = []
         """Each member's setter groups (in stepping order), to name a failed one."""
-        self._members = (_Member * len(plan.order))()
+        self._members = self._ffi.new("ck_member[]", len(plan.order))
         for i, m in enumerate(plan.order):
             self._fill(
                 self._members[i], m, slots[m.name], gets.get(m.name, []), feeds.get(m.name, [])
@@ -202,6 +137,13 @@ class Kernel:
         self.timing = (ctypes.c_double * len(plan.members))()
         self._watch = (ctypes.c_double * 2)(-1.0, 0.0)
         self._stop = (ctypes.c_int * 3)()
+        pointer = self._ffi.cast
+        self._arrays = (
+            pointer("double *", ctypes.addressof(self.timing)),
+            pointer("double *", ctypes.addressof(self._watch)),
+            pointer("int *", ctypes.addressof(self._stop)),
+        )
+        """``timing``, the watchdog's and the stop's arrays as the C side takes them."""
         self._jacobi = int(plan.algorithm is Algorithm.JACOBI)
         self._time = 0.0
         self._what = [f"{m.name}.DoStep" for m in plan.members]
@@ -212,9 +154,28 @@ class Kernel:
         assert isinstance(m.participant, FmuParticipant)
         return m.participant
 
+    def _calls(self, calls: Sequence[tuple[Any, Any, int, int]]) -> Any:
+        """A ``ck_call[]`` of (function, value references, count, buffer address)."""
+        pointer = self._ffi.cast
+        made = self._ffi.new(
+            "ck_call[]",
+            [
+                (
+                    pointer("void *", _address(function)),
+                    pointer("unsigned int *", ctypes.addressof(refs)),
+                    count,
+                    pointer("void *", buffer),
+                )
+                for function, refs, count, buffer in calls
+            ]
+            or 1,
+        )
+        self._keep.append(made)
+        return made
+
     def _fill(
         self,
-        native: _Member,
+        native: Any,
         m: Member,
         slot: int,
         gets: Sequence[tuple[Group, _Plane, int]],
@@ -224,31 +185,24 @@ class Kernel:
         calls = participant.prepared()
         assert calls is not None
         parts = calls.native
-        native.instance = parts.instance
-        native.do_step = _address(parts.do_step)
+        pointer = self._ffi.cast
+        native.instance = pointer("void *", _address(parts.instance))
+        native.do_step = pointer("void *", _address(parts.do_step))
         native.step = m.step
         native.version = 3 if parts.version == "3.0" else 2
         native.slot = slot
-        get = (_Call * max(1, len(gets)))()
-        for g, (group, plane, first) in enumerate(gets):
-            get[g] = _Call(
-                _address(group.function),
-                ctypes.addressof(group.refs),
-                group.count,
-                plane.address(first),
-            )
-        native.gets, native.get = len(gets), get
+        native.gets = len(gets)
+        native.get = self._calls(
+            [(g.function, g.refs, g.count, plane.address(first)) for g, plane, first in gets]
+        )
         source = dict(feed)
         sets = participant.input_groups(tuple(source)) if source else []
-        set_ = (_Call * max(1, len(sets)))()
+        native.sets = len(sets)
+        native.set = self._calls(
+            [(g.function, g.refs, g.count, ctypes.addressof(g.buffer)) for g in sets]
+        )
         copies = []
-        for s, group in enumerate(sets):
-            set_[s] = _Call(
-                _address(group.function),
-                ctypes.addressof(group.refs),
-                group.count,
-                ctypes.addressof(group.buffer),
-            )
+        for group in sets:
             size = ctypes.sizeof(_element(group))
             for j, name in enumerate(group.names):
                 plane, index, origin = self._slot[source[name]]
@@ -258,12 +212,15 @@ class Kernel:
                         f"{source[name][0]}.{source[name][1]}"
                     )
                 copies.append(
-                    _Copy(ctypes.addressof(group.buffer) + j * size, plane.address(index), size)
+                    (
+                        pointer("void *", ctypes.addressof(group.buffer) + j * size),
+                        pointer("void *", plane.address(index)),
+                        size,
+                    )
                 )
-        native.sets, native.set = len(sets), set_
-        copy = (_Copy * max(1, len(copies)))(*copies)
+        copy = self._ffi.new("ck_copy[]", copies or 1)
+        self._keep.append(copy)
         native.copies, native.copy = len(copies), copy
-        self._keep += [get, set_, copy]
         self._sets.append(sets)
 
     def place(self, member: str, outputs: Mapping[str, Value]) -> None:
@@ -288,18 +245,10 @@ class Kernel:
         stepped, else the index of the member that stopped the step and what it means (an
         error, or ``EndRun``: step on from the next member)."""
         self._time = time
-        stop = self._stop
         index = self._lib.ck_step(
-            self._members,
-            len(self._order),
-            self._jacobi,
-            start,
-            time,
-            self.timing,
-            self._watch,
-            stop,
+            self._members, len(self._order), self._jacobi, start, time, *self._arrays
         )
-        if index == DONE:
+        if index == self._lib.CK_DONE:
             return None
         return index, self._meaning(index, time)
 
@@ -307,13 +256,14 @@ class Kernel:
         m = self._order[index]
         participant = self._participant(m)
         call, group, status = self._stop
-        if call == TERMINATE:
+        lib = self._lib
+        if call == lib.CK_CALL_TERMINATE:
             return participant.terminated(time, m.step, self._members[index].last)
         calls = participant.prepared()
         assert calls is not None
-        if call == GET:
+        if call == lib.CK_CALL_GET:
             name = calls.outputs[group].call
-        elif call == SET:
+        elif call == lib.CK_CALL_SET:
             name = self._sets[index][group].call
         else:
             name = calls.native.call
@@ -340,22 +290,22 @@ def _row_getter(positions: Sequence[int]) -> Callable[[list[Value]], list[Value]
     return lambda values: [values[i] for i in positions]
 
 
-def prepare(plan: Plan) -> Kernel | None:
+def prepare(plan: Plan) -> tuple[Kernel | None, str]:
     """The kernel for this plan (after Initialize), when the plan asks for it (``native``)
-    and it means exactly what the step in Python means; None otherwise (why is logged)."""
+    and it means exactly what the step in Python means, else None; and why (logged)."""
     if not plan.native:
-        return None
+        return None, OFF
     reason = unsuitable(plan)
     if reason is None:
-        lib = library()
-        if lib is None:
-            return None
+        native = library()
+        if native is None:
+            return None, str(library.problem)
         try:
-            kernel = Kernel(plan, lib)
+            kernel = Kernel(plan, native)
         except _Unsuitable as exc:
             reason = str(exc)
         else:
             log.debug("native_fmu_step", members=len(plan.order))
-            return kernel
+            return kernel, USED
     log.debug("native_fmu_step_unused", reason=reason)
-    return None
+    return None, reason

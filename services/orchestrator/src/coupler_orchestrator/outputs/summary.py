@@ -103,6 +103,12 @@ class SummaryWriter(Observer):
             ],
             **self.extra,
         }
+        if end is not None:
+            for name, stepped in end.step_paths.items():
+                self.summary["participants"][name]["step_path"] = {
+                    "path": stepped.path,
+                    "reason": stepped.reason,
+                }
         self._written = wallclock.monotonic()
         write_json(self.path, self.summary)
 

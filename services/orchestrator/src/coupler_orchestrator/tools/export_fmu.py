@@ -6,11 +6,10 @@ run a Coupler participant as if it were an FMU. The FMU holds:
 - ``modelDescription.xml`` (FMI 2.0 or 3.0) made from the participant's Describe answer: one
   variable per channel (value references 1..N in the description's order) plus the String
   parameter ``coupler_address`` (value reference 0) whose start is the exported address;
-- ``binaries/<platform>/CouplerProxy.so``, built once per machine from the C++ sources in
-  ``proxy/`` with Debian's gRPC and protobuf (``scripts/install-grpc-dev.sh``) by the FMU
-  builder's compiler step and packed by its archive writer (``coupler.fmubuild``), and beside it
-  every shared library it needs that is not part of the base system (``$ORIGIN`` run path), so
-  the FMU runs where gRPC is not installed;
+- ``binaries/<platform>/CouplerProxy.so`` and beside it every shared library it needs that is
+  not part of the base system (``$ORIGIN`` run path), so the FMU runs where gRPC is not
+  installed: the folder ``coupler_native.PROXY``, compiled from ``csrc/proxy/`` when the
+  coupler-native wheel was built and copied here as it is (no compiler at export time);
 - ``resources/coupler-proxy.txt``: the address, the call deadline, the description's
   fingerprint and one line per channel, read by the binary at instantiation.
 
@@ -21,71 +20,41 @@ naming what changed. docs/export-fmu.md is the user's guide.
 
 from __future__ import annotations
 
-import ctypes
-import hashlib
-import inspect
 import math
-import os
-import re
-import shutil
-import subprocess
-import sys
-import tempfile
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from xml.etree import ElementTree
-
-import structlog
-from google.protobuf import descriptor_pb2
 
 from coupler import wire
 from coupler.channels import Causality, Channel, Description, ValueType
 from coupler.client import RemoteParticipant, parse_address
 from coupler.errors import CouplerError
-from coupler.fmubuild import compile_library, fmi_headers, write_archive
+from coupler.fmubuild import write_archive
 from coupler.security import ClientSecurity
-from coupler.v1 import component_pb2
 
 __all__ = [
-    "BASE_SYSTEM",
     "MODEL_IDENTIFIER",
     "ExportError",
     "Exported",
-    "NativeLibrary",
-    "ToolchainMissing",
-    "build_proxy",
-    "cache_root",
-    "cached_library",
+    "ProxyMissing",
     "export_fmu",
     "fingerprint",
-    "toolchain_problem",
+    "proxy_binaries",
     "write_fmu",
 ]
 
-log = structlog.get_logger("coupler.export")
-
 MODEL_IDENTIFIER = "CouplerProxy"
 ADDRESS_VARIABLE = "coupler_address"
-SOURCES = Path(__file__).parent.parent / "proxy"
-INSTALL_HINT = (
-    "install the C++ gRPC tool chain: `bash scripts/install-grpc-dev.sh` (Debian: apt-get "
-    "install g++ pkg-config libgrpc++-dev libprotobuf-dev protobuf-compiler-grpc patchelf)"
-)
-
-BASE_SYSTEM = re.compile(
-    r"^(linux-vdso|ld-linux|libc|libm|libdl|libpthread|librt|libstdc\+\+|libgcc_s)[.-]"
-)
-"""Libraries every Linux the FMU runs on has (glibc, the C++ runtime); all others are bundled."""
 _PLATFORM = {2: "linux64", 3: "x86_64-linux"}
 
 
 class ExportError(CouplerError):
-    """The FMU cannot be exported: no tool chain, a participant that cannot be exported."""
+    """The FMU cannot be exported: no proxy binaries, a participant that cannot be exported."""
 
 
-class ToolchainMissing(ExportError):
-    """The C++ gRPC tool chain the proxy binary is built with is not installed."""
+class ProxyMissing(ExportError):
+    """coupler-native, which holds the proxy FMU's binaries, is not installed."""
 
 
 @dataclass(frozen=True)
@@ -115,216 +84,22 @@ def fingerprint(description: Description) -> str:
 # --- the proxy binary -------------------------------------------------------------------------
 
 
-def toolchain_problem(
-    tools: Sequence[str] = ("g++", "pkg-config", "protoc", "grpc_cpp_plugin", "patchelf", "ldd"),
-    packages: Sequence[str] = ("grpc++", "protobuf"),
-) -> str | None:
-    """What is missing to build against C++ gRPC (``tools`` on PATH, ``packages`` known to
-    pkg-config); None when nothing is."""
-    missing = [tool for tool in tools if shutil.which(tool) is None]
-    if missing:
-        return f"{', '.join(missing)} not found"
-    probe = subprocess.run(["pkg-config", "--exists", *packages], capture_output=True, check=False)
-    if probe.returncode != 0:
-        return f"pkg-config finds no {'/'.join(packages)} (libgrpc++-dev)"
-    return None
-
-
-def cache_root() -> Path:
-    """Where built binaries are kept: ``$COUPLER_CACHE``, else ``~/.cache/coupler``."""
-    if explicit := os.environ.get("COUPLER_CACHE"):
-        return Path(explicit)
-    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
-    return Path(base) / "coupler"
-
-
-def cached_library(
-    source: Path,
-    *,
-    compiler: str,
-    flags: Sequence[str],
-    libraries: Sequence[str] = (),
-    versions: Sequence[Sequence[str]],
-    prefix: str,
-    what: str,
-    log_to_stderr: bool = True,
-) -> Path:
-    """A shared library of one source file, built on first use under ``cache_root()`` and
-    kept under a key of the source, the flags and what the ``versions`` commands print (the
-    compiler's and the libraries' versions); FmuBuildError when the compiler fails."""
-    key = hashlib.sha256(source.read_bytes())
-    key.update("\0".join([compiler, *flags, *libraries]).encode())
-    for command in versions:
-        key.update(subprocess.run(command, capture_output=True, check=False).stdout)
-    library = cache_root() / f"{prefix}-{key.hexdigest()[:16]}.so"
-    if library.is_file():
-        return library
-    if log_to_stderr:
-        print(f"building {what} (once per machine)", file=sys.stderr)
-    library.parent.mkdir(parents=True, exist_ok=True)
-    with tempfile.TemporaryDirectory(dir=library.parent, prefix=".build-") as scratch:
-        built = Path(scratch) / library.name
-        compile_library(compiler, [*flags, str(source), *libraries, "-o", str(built)], what=what)
-        built.replace(library)  # whole or not at all
-    return library
-
-
-class NativeLibrary:
-    """A shared library built by ``build`` and loaded on the first call; the call then gives
-    it, or None when it cannot be had — said once: quietly (logged) without its tool chain
-    (``ToolchainMissing``), as a warning on stderr when the build fails (a bug)."""
-
-    def __init__(
-        self, build: Callable[[], Path], declare: Callable[[ctypes.CDLL], None], what: str
-    ) -> None:
-        self._build = build
-        self._declare = declare
-        """Sets the functions' argument and result types."""
-        self.what = what
-        self._loaded: ctypes.CDLL | None = None
-        self.problem: str | None = None
-
-    def __call__(self) -> ctypes.CDLL | None:
-        if self._loaded is not None or self.problem is not None:
-            return self._loaded
-        try:
-            lib = ctypes.CDLL(str(self._build()))
-        except ToolchainMissing as exc:
-            self.problem = str(exc)
-            log.info("native_library_unavailable", library=self.what, reason=self.problem)
-            return None
-        except (CouplerError, OSError) as exc:
-            self.problem = str(exc)
-            print(f"warning: {self.what} unavailable: {exc}", file=sys.stderr)
-            return None
-        self._declare(lib)
-        self._loaded = lib
-        return lib
-
-
-def _protocol_descriptor() -> bytes:
-    """The protocol as compiled into the Python package, for protoc (--descriptor_set_in): the
-    binary speaks exactly the protocol of the Coupler that exported it."""
-    files = descriptor_pb2.FileDescriptorSet()
-    component_pb2.DESCRIPTOR.CopyToProto(files.file.add())
-    return files.SerializeToString()
-
-
-def _run(command: Sequence[str], what: str, cwd: Path | None = None) -> str:
-    done = subprocess.run(list(command), capture_output=True, text=True, check=False, cwd=cwd)
-    if done.returncode != 0:
-        raise ExportError(f"{what} failed ({' '.join(command[:3])} ...):\n{done.stderr[-4000:]}")
-    return done.stdout
-
-
-def _bundled_libraries(binary: Path) -> list[Path]:
-    """The shared libraries ``binary`` loads that are not part of the base system."""
-    found = []
-    for line in _run(["ldd", str(binary)], "ldd").splitlines():
-        name, arrow, rest = line.strip().partition(" => ")
-        if not arrow or BASE_SYSTEM.match(name):
-            continue
-        path = rest.split(" (")[0].strip()
-        if path == "not found":
-            raise ToolchainMissing(
-                f"{binary.name} needs {name}, which is not installed; {INSTALL_HINT}"
-            )
-        found.append(Path(path))
-    return found
-
-
-def build_proxy(*, cache: Path | None = None, log: bool = True) -> Path:
-    """A folder holding CouplerProxy.so and every library it needs (RUNPATH ``$ORIGIN``),
-    built on first use and cached (``$COUPLER_CACHE``, else ``~/.cache/coupler``) under a key
-    of the sources, the protocol and the compiler."""
-    if problem := toolchain_problem():
-        raise ToolchainMissing(f"cannot build the proxy binary: {problem}; {INSTALL_HINT}")
-    sources = sorted(SOURCES.glob("*.cc")) + sorted(SOURCES.glob("*.h"))
-    protocol = _protocol_descriptor()
-    key = hashlib.sha256()
-    for path in sources:
-        key.update(path.name.encode() + b"\0" + path.read_bytes())
-    key.update(protocol)
-    key.update(inspect.getsource(build_proxy).encode())  # how it is built
-    key.update(_run(["g++", "--version"], "g++ --version").encode())
-    key.update(_run(["pkg-config", "--modversion", "grpc++", "protobuf"], "pkg-config").encode())
-    folder = (cache or cache_root()) / f"proxy-{key.hexdigest()[:16]}"
-    if (folder / f"{MODEL_IDENTIFIER}.so").is_file():
-        return folder
-    if log:
-        print("building the proxy binary (once per machine, about a minute)", file=sys.stderr)
-    folder.parent.mkdir(parents=True, exist_ok=True)
-    with tempfile.TemporaryDirectory(dir=folder.parent, prefix=".build-") as scratch:
-        work = Path(scratch)
-        (work / "gen").mkdir()
-        (work / "component.pb").write_bytes(protocol)
-        _run(
-            [
-                "protoc",
-                "--descriptor_set_in=component.pb",
-                "--cpp_out=gen",
-                "--grpc_out=gen",
-                f"--plugin=protoc-gen-grpc={shutil.which('grpc_cpp_plugin')}",
-                component_pb2.DESCRIPTOR.name,
-            ],
-            "protoc",
-            cwd=work,
+def proxy_binaries() -> Path:
+    """The folder of the proxy FMU's binaries (``CouplerProxy.so`` and the libraries it loads),
+    as the installed coupler-native package holds it; ProxyMissing without it."""
+    try:
+        import coupler_native
+    except ModuleNotFoundError as exc:
+        raise ProxyMissing(
+            "coupler export-fmu copies the proxy FMU's binaries from the coupler-native "
+            "package, which is not installed (its wheel is built for Linux x86_64; in the "
+            "repository: make setup)"
+        ) from exc
+    folder = coupler_native.PROXY
+    if not (folder / coupler_native.PROXY_BINARY).is_file():
+        raise ProxyMissing(
+            f"{folder} holds no {coupler_native.PROXY_BINARY}: reinstall coupler-native"
         )
-        generated = sorted((work / "gen").rglob("*.cc"))
-        bin_dir = work / "bin"
-        bin_dir.mkdir()
-        flags = _run(["pkg-config", "--cflags", "--libs", "grpc++", "protobuf"], "pkg-config")
-        common = ["-shared", "-fPIC", "-O2", "-std=c++17", "-Wall", "-Wextra"]
-        includes = [f"-I{work / 'gen'}", f"-I{fmi_headers()}", f"-I{SOURCES}"]
-        # The protocol (generated code) and the gRPC client in one library with a versioned
-        # soname: a process loading several exported FMUs loads it once, as protobuf requires
-        # (a .proto registered twice in one process is fatal).
-        core = f"libcoupler-proxy-{key.hexdigest()[:12]}.so"
-        compile_library(
-            "g++",
-            [
-                *common,
-                *includes,
-                str(SOURCES / "proxy_core.cc"),
-                *map(str, generated),
-                *flags.split(),
-                f"-Wl,-soname,{core}",
-                "-Wl,-rpath,$ORIGIN",
-                "-o",
-                str(bin_dir / core),
-            ],
-            what="the proxy's gRPC client",
-        )
-        out = bin_dir / f"{MODEL_IDENTIFIER}.so"
-        compile_library(
-            "g++",
-            [
-                *common,
-                "-fvisibility=hidden",
-                *includes,
-                str(SOURCES / "fmi2_proxy.cc"),
-                str(SOURCES / "fmi3_proxy.cc"),
-                str(bin_dir / core),
-                *flags.split(),
-                "-Wl,-rpath,$ORIGIN",
-                "-o",
-                str(out),
-            ],
-            what="the proxy binary",
-        )
-        for library in _bundled_libraries(out):
-            copy = bin_dir / library.name
-            if copy.exists():
-                continue
-            shutil.copy2(library, copy)
-            copy.chmod(0o755)
-            _run(["patchelf", "--set-rpath", "$ORIGIN", str(copy)], "patchelf")
-        # the cache entry appears whole or not at all
-        try:
-            (work / "bin").rename(folder)
-        except OSError:
-            if not (folder / f"{MODEL_IDENTIFIER}.so").is_file():
-                raise
     return folder
 
 
@@ -578,7 +353,7 @@ def write_fmu(
     out = Path(out)
     if out.suffix != ".fmu":
         raise ExportError(f"--out {out}: the file name must end in .fmu")
-    binaries = binaries or build_proxy()
+    binaries = binaries or proxy_binaries()
     platform = _PLATFORM[fmi_version]
     members: dict[str, Path | bytes] = {
         "modelDescription.xml": _model_description(
@@ -613,7 +388,7 @@ async def export_fmu(
         raise ExportError(f"--out {out}: the file name must end in .fmu")
     if "://" not in address:
         address = f"grpc://{address}"  # what the binary reads: always with its scheme
-    binaries = build_proxy()  # before connecting: the tool chain is the likelier problem
+    binaries = proxy_binaries()  # before connecting: a missing package is the likelier problem
     participant = RemoteParticipant(
         address, connect_timeout=connect_timeout, call_timeout=call_timeout, security=security
     )

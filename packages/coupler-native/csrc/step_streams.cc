@@ -1,8 +1,8 @@
-// The orchestrator's native step channel (coupler_orchestrator/steps.py loads it with ctypes):
-// a remote member's StepStream driven from the calling thread through a completion queue of
-// its own, without gRPC's asyncio integration in between. Messages stay serialized (the
-// Python side encodes DoStepRequest and decodes DoStepResponse), so this file knows the
-// protocol only by the method's name.
+// The orchestrator's native step channel (step_streams.h;
+// coupler_orchestrator/master/native_step_channel.py calls it through the cffi binding of that
+// header): a remote member's StepStream driven from the calling thread through a completion
+// queue of its own, without gRPC's asyncio integration in between. Messages stay serialized (the Python side encodes DoStepRequest and decodes
+// DoStepResponse), so this file knows the protocol only by the method's name.
 //
 // A step is split in two, so that the requests of every member are on the wire before any
 // answer is awaited: cs_send() writes a request and asks for the answer; cs_receive() waits
@@ -10,6 +10,7 @@
 // Every call returns at once or by its deadline; none of them throws.
 
 #include <chrono>
+#include <cstddef>
 #include <memory>
 #include <string>
 #include <vector>
@@ -17,11 +18,14 @@
 #include <grpcpp/generic/generic_stub.h>
 #include <grpcpp/grpcpp.h>
 
+extern "C" {
+#include "step_streams.h"
+}
+
 namespace {
 
 const char* const METHOD = "/coupler.v1.GRPCComponentService/StepStream";
 enum Op : uintptr_t { START = 1, WRITE = 2, READ = 3, FINISH = 4 };
-enum Result { OK = 0, FAILED = 1, TIMEOUT = 2 };
 
 using Deadline = std::chrono::system_clock::time_point;
 
@@ -137,22 +141,22 @@ cs_stream* cs_open(const char* target, int tls, const char* roots, const char* k
 
 const char* cs_error(cs_stream* s) { return s->error.c_str(); }
 
-// Writes one serialized DoStepRequest and asks for the answer; FAILED when the stream has
+// Writes one serialized DoStepRequest and asks for the answer; CS_FAILED when the stream has
 // ended (cs_receive then tells its status) or the previous answer was not received.
 int cs_send(cs_stream* s, const char* data, size_t size) {
-  if (!s->call || s->broken || s->pending > 0 || s->finishing) return FAILED;
+  if (!s->call || s->broken || s->pending > 0 || s->finishing) return CS_FAILED;
   grpc::Slice slice(data, size);
   s->request = grpc::ByteBuffer(&slice, 1);
   s->read_done = false;
   s->pending += 2;
   s->call->Write(s->request, tag(WRITE));
   s->call->Read(&s->reply, tag(READ));
-  return OK;
+  return CS_OK;
 }
 
-// Waits up to `timeout` seconds for the answer to cs_send(): OK with the serialized
-// DoStepResponse in (*data, *size), valid until the next call on this stream; FAILED with the
-// stream's final status (*code, and cs_error()); TIMEOUT, the stream cancelled.
+// Waits up to `timeout` seconds for the answer to cs_send(): CS_OK with the serialized
+// DoStepResponse in (*data, *size), valid until the next call on this stream; CS_FAILED with the
+// stream's final status (*code, and cs_error()); CS_TIMEOUT, the stream cancelled.
 int cs_receive(cs_stream* s, double timeout, const char** data, size_t* size, int* code) {
   Deadline deadline = after(timeout);
   while (!s->broken && !(s->read_done && s->pending == 0)) {
@@ -162,7 +166,7 @@ int cs_receive(cs_stream* s, double timeout, const char** data, size_t* size, in
       s->finished = true;  // the deadline is the status: nothing more to wait for
       s->broken = true;
       *code = static_cast<int>(grpc::StatusCode::DEADLINE_EXCEEDED);
-      return TIMEOUT;
+      return CS_TIMEOUT;
     }
   }
   if (s->broken) {
@@ -170,7 +174,7 @@ int cs_receive(cs_stream* s, double timeout, const char** data, size_t* size, in
     s->finish(deadline);
     *code = static_cast<int>(s->status.error_code());
     s->error = s->status.error_message();
-    return FAILED;
+    return CS_FAILED;
   }
   std::vector<grpc::Slice> slices;
   s->reply.Dump(&slices);
@@ -179,7 +183,7 @@ int cs_receive(cs_stream* s, double timeout, const char** data, size_t* size, in
     s->reply_bytes.append(reinterpret_cast<const char*>(slice.begin()), slice.size());
   *data = s->reply_bytes.data();
   *size = s->reply_bytes.size();
-  return OK;
+  return CS_OK;
 }
 
 // Ends the stream, half-closing it and waiting up to `timeout` for the participant's status

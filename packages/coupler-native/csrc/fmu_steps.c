@@ -1,11 +1,12 @@
 /* The in-process FMUs' step loop in C: one call from Python steps every member of a base step.
  *
- * Python (coupler_orchestrator.kernel) prepares everything once per run: each member's FMI
- * functions, instance, value references and buffers (the outputs' buffers are slices of one
- * array per type, so Python reads a whole row with one slice per type), and the routing of
- * every connection as a copy from an output's slot to an input's slot. A step is then plain C:
- * copy the connected values, set them, fmi2DoStep / fmi3DoStep, get every output. No allocation,
- * no Python, no ctypes conversion per call.
+ * Python (coupler_orchestrator.master.native_fmu_step, through the cffi binding of fmu_steps.h,
+ * which declares the structs) prepares everything once per run: each member's FMI functions,
+ * instance, value references and buffers (the outputs' buffers are slices of one array per
+ * type, so Python reads a whole row with one slice per type), and the routing of every
+ * connection as a copy from an output's slot to an input's slot. A step is then plain C: copy
+ * the connected values, set them, fmi2DoStep / fmi3DoStep, get every output. No allocation, no
+ * Python, no conversion per call.
  *
  * Jacobi copies every member's inputs before the first member steps (all on the outputs of
  * t_k); Gauss-Seidel copies each member's just before it steps (it sees its predecessors'
@@ -23,44 +24,14 @@
 #include <string.h>
 #include <time.h>
 
+#include "fmu_steps.h"
+
 enum { FMI2 = 2, FMI3 = 3 };
-enum { DONE = -1 };
-enum { CALL_SET = 0, CALL_STEP = 1, CALL_GET = 2, CALL_TERMINATE = 3 };
 
 typedef int (*fmi2_access)(void *, const unsigned int *, size_t, void *);
 typedef int (*fmi3_access)(void *, const unsigned int *, size_t, void *, size_t);
 typedef int (*fmi2_step)(void *, double, double, int);
 typedef int (*fmi3_step)(void *, double, double, bool, bool *, bool *, bool *, double *);
-
-typedef struct {
-    void *function;
-    const unsigned int *refs;
-    size_t count;
-    void *buffer;
-} ck_call;
-
-typedef struct {
-    void *target;
-    const void *source;
-    size_t size;
-} ck_copy;
-
-typedef struct {
-    void *instance;
-    void *do_step;
-    double step;
-    int version;
-    int slot;
-    int copies;
-    const ck_copy *copy;
-    int sets;
-    const ck_call *set;
-    int gets;
-    const ck_call *get;
-    /* fmi3DoStep's answers */
-    bool event, terminate, early;
-    double last;
-} ck_member;
 
 static double monotonic(void) {
     struct timespec now;
@@ -98,17 +69,15 @@ static bool access_all(const ck_member *m, const ck_call *calls, int count, int 
 static bool do_step(ck_member *m, double time, int *stop) {
     if (m->version == FMI2) {
         int result = ((fmi2_step)m->do_step)(m->instance, time, m->step, 1);
-        return result > 1 && stopped(stop, CALL_STEP, 0, result);
+        return result > 1 && stopped(stop, CK_CALL_STEP, 0, result);
     }
     m->event = m->terminate = m->early = false;
     int result = ((fmi3_step)m->do_step)(m->instance, time, m->step, true, &m->event,
                                          &m->terminate, &m->early, &m->last);
-    if (result > 1) return stopped(stop, CALL_STEP, 0, result);
-    return m->terminate && stopped(stop, CALL_TERMINATE, 0, result);
+    if (result > 1) return stopped(stop, CK_CALL_STEP, 0, result);
+    return m->terminate && stopped(stop, CK_CALL_TERMINATE, 0, result);
 }
 
-/* Steps members[from..n) at `time`; DONE, or the index of the member that stopped the step
- * with stop[0] = CALL_*, stop[1] = which set/get and stop[2] = the FMI status. */
 int ck_step(ck_member *members, int n, int jacobi, int from, double time, double *timing,
             volatile double *watch, int *stop) {
     if (jacobi && from == 0)
@@ -119,11 +88,11 @@ int ck_step(ck_member *members, int n, int jacobi, int from, double time, double
         watch[1] = began;
         watch[0] = (double)m->slot;
         if (!jacobi) copy_inputs(m);
-        bool halted = access_all(m, m->set, m->sets, CALL_SET, stop) || do_step(m, time, stop) ||
-                      access_all(m, m->get, m->gets, CALL_GET, stop);
+        bool halted = access_all(m, m->set, m->sets, CK_CALL_SET, stop) || do_step(m, time, stop) ||
+                      access_all(m, m->get, m->gets, CK_CALL_GET, stop);
         timing[m->slot] = monotonic() - began;
         watch[0] = -1.0;
         if (halted) return i;
     }
-    return DONE;
+    return CK_DONE;
 }

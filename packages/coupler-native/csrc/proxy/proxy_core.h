@@ -163,7 +163,7 @@ bool write_values(Proxy& proxy, const unsigned vr[], size_t n, const T value[], 
   return true;
 }
 
-// The description's fingerprint, as coupler_orchestrator.export computes it: FNV-1a 64 (hex)
+// The description's fingerprint, as coupler_orchestrator.tools.export_fmu computes it: FNV-1a 64 (hex)
 // of the sorted lines "name|causality|type|unit" of every channel, joined by newlines.
 std::string fingerprint_of(const coupler::v1::DescribeResponse& description);
 

@@ -1,0 +1,36 @@
+/* The native step channel's interface (step_streams.cc implements it; the cffi binding reads
+ * this file as its cdef, so no preprocessor lines here: the includer brings <stddef.h>).
+ *
+ * A remote member's StepStream, driven from the calling thread. A step is split in two, so
+ * that the requests of every member are on the wire before any answer is awaited: cs_send()
+ * writes a request and asks for the answer; cs_receive() waits for it (or for the stream's
+ * end, or for the step's deadline, which cancels the stream). Every call returns at once or by
+ * its deadline; none of them throws.
+ */
+
+typedef struct cs_stream cs_stream;
+
+enum { CS_OK = 0, CS_FAILED = 1, CS_TIMEOUT = 2 };
+
+/* Opens the step stream to `target` (host:port or unix:PATH); with `tls`, PEM texts (each may
+ * be empty) for the roots, the client's key and its chain. `metadata` holds `count` pairs
+ * (key, value). Never NULL: cs_error() is empty when the stream is open, else says why (the
+ * stream must still be closed). */
+cs_stream *cs_open(const char *target, int tls, const char *roots, const char *key,
+                   const char *chain, const char *const *metadata, int count, double timeout);
+
+/* Why the stream failed (empty while it is fine); valid until the next call on it. */
+const char *cs_error(cs_stream *s);
+
+/* Writes one serialized DoStepRequest and asks for the answer; CS_FAILED when the stream has
+ * ended (cs_receive then tells its status) or the previous answer was not received. */
+int cs_send(cs_stream *s, const char *data, size_t size);
+
+/* Waits up to `timeout` seconds for the answer to cs_send(): CS_OK with the serialized
+ * DoStepResponse in (*data, *size), valid until the next call on this stream; CS_FAILED with
+ * the stream's final status (*code, and cs_error()); CS_TIMEOUT, the stream cancelled. */
+int cs_receive(cs_stream *s, double timeout, const char **data, size_t *size, int *code);
+
+/* Ends the stream, half-closing it and waiting up to `timeout` for the participant's status
+ * (then cancelling it), and frees it. Safe in any state. */
+void cs_close(cs_stream *s, double timeout);
