@@ -447,6 +447,11 @@ class _Reader:
                 raise self.error(
                     r.element, "is not connected to the line", "chain it by connections"
                 )
+        self.check_junctions(lines)
+        return lines
+
+    def check_junctions(self, lines: list[_Line]) -> None:
+        """Each track of a line begins where the one before it ends (within the tolerance)."""
         for line in lines:
             for a, b in itertools.pairwise(line.tracks):
                 gap = _distance(a.points[-1], b.points[0])
@@ -456,7 +461,6 @@ class _Reader:
                         f"is {gap:.1f} m away from the end of track {a.track.id!r}",
                         "make the coordinates at the junction coincide",
                     )
-        return lines
 
     def build_model(self, raw: list[_RawTrack], frame: LocalFrame | None) -> TrackModel:
         gradients: list[GradientChange] = []

@@ -273,6 +273,42 @@ def _load_tdb(
     return nodes, items
 
 
+def _vector_section(
+    sections_block: Block, index: int, k: int, row: list[str], shapes: dict[int, SectionShape]
+) -> VectorSection:
+    """Vector section ``k`` of node ``index``: its 16 values of TrVectorSections."""
+    try:
+        shape_index = int(row[0])
+        numbers = [float(v) for v in row[8:16]]
+        world = (int(row[2]), int(row[3]), int(row[4]))
+        if not all(math.isfinite(v) for v in numbers):
+            raise ValueError("not finite")
+    except ValueError:
+        raise sections_block.error(
+            f"vector section {k} of node {index} has a value that is not a number",
+            "write 16 numbers per vector section",
+        ) from None
+    shape = shapes.get(shape_index)
+    if shape is None:
+        raise sections_block.error(
+            f"vector section {k} of node {index} uses track section {shape_index}, "
+            "which no tsection.dat of the route defines",
+            "export the route again, or add the section to tsection.dat",
+        )
+    return VectorSection(
+        shape,
+        int(numbers[0]),
+        int(numbers[1]),
+        numbers[2],
+        numbers[3],
+        numbers[4],
+        numbers[5],
+        numbers[6],
+        (world[0], world[1]),
+        world[2],
+    )
+
+
 def _track_node(block: Block, shapes: dict[int, SectionShape]) -> TrackNode:
     index = block.integer(0, "the node index")
     pins_block = block.block("TrPins")
@@ -298,40 +334,10 @@ def _track_node(block: Block, shapes: dict[int, SectionShape]) -> TrackNode:
                 f"{len(values)} values",
                 "write 16 values per vector section",
             )
-        for k in range(count):
-            row = values[16 * k : 16 * k + 16]
-            try:
-                shape_index = int(row[0])
-                numbers = [float(v) for v in row[8:16]]
-                world = (int(row[2]), int(row[3]), int(row[4]))
-                if not all(math.isfinite(v) for v in numbers):
-                    raise ValueError("not finite")
-            except ValueError:
-                raise sections_block.error(
-                    f"vector section {k} of node {index} has a value that is not a number",
-                    "write 16 numbers per vector section",
-                ) from None
-            shape = shapes.get(shape_index)
-            if shape is None:
-                raise sections_block.error(
-                    f"vector section {k} of node {index} uses track section {shape_index}, "
-                    "which no tsection.dat of the route defines",
-                    "export the route again, or add the section to tsection.dat",
-                )
-            node.sections.append(
-                VectorSection(
-                    shape,
-                    int(numbers[0]),
-                    int(numbers[1]),
-                    numbers[2],
-                    numbers[3],
-                    numbers[4],
-                    numbers[5],
-                    numbers[6],
-                    (world[0], world[1]),
-                    world[2],
-                )
-            )
+        node.sections.extend(
+            _vector_section(sections_block, index, k, values[16 * k : 16 * k + 16], shapes)
+            for k in range(count)
+        )
         if not node.sections:
             raise sections_block.error(f"vector node {index} has no sections", "give it some")
         refs = vector.optional("TrItemRefs")

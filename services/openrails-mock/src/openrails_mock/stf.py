@@ -115,9 +115,8 @@ def _decode(path: Path, data: bytes) -> str:
     return data.decode("utf-8")
 
 
-def read_stf(path: str | os.PathLike[str]) -> Block:
-    """Parse an STF text file into a root :class:`Block` (name ``""``) of its items."""
-    file = Path(path)
+def _stf_text(file: Path) -> tuple[str, int]:
+    """The file's text after its SIMISA header, and the line number that text starts on."""
     try:
         data = file.read_bytes()
     except OSError as exc:
@@ -134,18 +133,50 @@ def read_stf(path: str | os.PathLike[str]) -> Block:
             "write it as MSTS does: UTF-16 with a byte order mark",
         ) from None
     if text.startswith("SIMISA@@@@@@@@@@JINX0"):
-        text = text.split("\n", 1)[1] if "\n" in text else ""
-        first_line = 2
-    elif text.lstrip().startswith("SIMISA"):
+        return (text.split("\n", 1)[1] if "\n" in text else ""), 2
+    if text.lstrip().startswith("SIMISA"):
         raise RouteError(
             file, 1, "is a binary or compressed MSTS file", "save it as unicode text (ffeditc)"
         )
-    else:
-        first_line = 1
+    return text, 1
+
+
+def _quoted(file: Path, text: str, i: int, line: int) -> tuple[str, int, int]:
+    """The quoted string whose opening ``"`` is at ``i``: its text, the index after its
+    closing ``"`` and the line that closing quote is on."""
+    start_line = line
+    n = len(text)
+    j = i + 1
+    chars = []
+    while j < n and text[j] != '"':
+        if text[j] == "\\" and j + 1 < n:
+            j += 1
+            chars.append({"n": "\n", "t": "\t"}.get(text[j], text[j]))
+        else:
+            if text[j] == "\n":
+                line += 1
+            chars.append(text[j])
+        j += 1
+    if j >= n:
+        raise RouteError(file, start_line, "a quoted string is not closed", 'add the "')
+    return "".join(chars), j + 1, line
+
+
+def _word_end(text: str, i: int) -> int:
+    """The index after the unquoted word that starts at ``i``."""
+    n = len(text)
+    while i < n and not text[i].isspace() and text[i] not in '()"':
+        i += 1
+    return i
+
+
+def read_stf(path: str | os.PathLike[str]) -> Block:
+    """Parse an STF text file into a root :class:`Block` (name ``""``) of its items."""
+    file = Path(path)
+    text, line = _stf_text(file)
     root = Block("", 0, file=str(file))
     stack = [root]
     pending: tuple[str, int] | None = None  # a word that may name the next block
-    line = first_line
     i, n = 0, len(text)
 
     def flush() -> None:
@@ -182,29 +213,12 @@ def read_stf(path: str | os.PathLike[str]) -> Block:
             i += 1
         elif c == '"':
             flush()
-            start_line = line
-            j = i + 1
-            chars = []
-            while j < n and text[j] != '"':
-                if text[j] == "\\" and j + 1 < n:
-                    j += 1
-                    chars.append({"n": "\n", "t": "\t"}.get(text[j], text[j]))
-                else:
-                    if text[j] == "\n":
-                        line += 1
-                    chars.append(text[j])
-                j += 1
-            if j >= n:
-                raise RouteError(file, start_line, "a quoted string is not closed", 'add the "')
-            i = j + 1
             # "a" + "b" joins strings, as in MSTS files
-            word = "".join(chars)
+            word, i, line = _quoted(file, text, i, line)
             stack[-1].items.append(word)
         else:
             flush()
-            j = i
-            while j < n and not text[j].isspace() and text[j] not in '()"':
-                j += 1
+            j = _word_end(text, i)
             pending = (text[i:j], line)
             i = j
     flush()
