@@ -31,7 +31,7 @@ import structlog
 from grpc_health.v1 import health, health_pb2, health_pb2_grpc
 from grpc_reflection.v1alpha import reflection
 
-from coupler import wire
+from coupler import ports, wire
 from coupler.channels import Description
 from coupler.errors import ChannelValueError, ParticipantUnavailable, ScenarioError
 from coupler.participant import HEALTH_REASON, EndRun, Participant
@@ -345,7 +345,9 @@ class ParticipantServer:
         if warning:
             log.warning("insecure_interface", host=self.host, detail=warning)
         credentials = self.security.credentials()
-        server = grpc.aio.server(interceptors=self.security.interceptors())
+        server = grpc.aio.server(
+            interceptors=self.security.interceptors(), options=ports.GRPC_SERVER_OPTIONS
+        )
         self._server = server
         await self._set_health(health_pb2.HealthCheckResponse.NOT_SERVING)
         self._servicer = _Servicer(self.participant)
@@ -355,13 +357,16 @@ class ParticipantServer:
             reflection.enable_server_reflection(
                 (SERVICE_NAME, health.SERVICE_NAME, reflection.SERVICE_NAME), server
             )
-        bind = (
-            f"unix:{self.unix_socket}" if self.unix_socket else f"{self.host}:{self.requested_port}"
-        )
-        if credentials is None:
-            self.port = server.add_insecure_port(bind)
+        if self.unix_socket is not None:
+            bind = f"unix:{self.unix_socket}"
+            if credentials is None:
+                self.port = server.add_insecure_port(bind)
+            else:
+                self.port = server.add_secure_port(bind, credentials)
         else:
-            self.port = server.add_secure_port(bind, credentials)
+            self.port = ports.add_grpc_port(
+                server, self.host, self.requested_port, credentials, "the participant"
+            )
         await server.start()
         if self.security.health_port is not None:
             await self._start_health_server(self.security.health_port)
@@ -412,9 +417,11 @@ class ParticipantServer:
     async def _start_health_server(self, port: int) -> None:
         """The health service alone, plaintext: it tells whether this participant serves and
         nothing else, so probes that cannot do TLS (Kubernetes, Docker) need no secrets."""
-        self._health_server = grpc.aio.server()
+        self._health_server = grpc.aio.server(options=ports.GRPC_SERVER_OPTIONS)
         health_pb2_grpc.add_HealthServicer_to_server(self.health, self._health_server)
-        self.health_port = self._health_server.add_insecure_port(f"{self.host}:{port}")
+        self.health_port = ports.add_grpc_port(
+            self._health_server, self.host, port, None, "the health service (--health-port)"
+        )
         await self._health_server.start()
         log.info("health_serving", address=f"grpc://{self.host}:{self.health_port}")
 

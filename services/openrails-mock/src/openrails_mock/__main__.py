@@ -13,6 +13,9 @@ from typing import Any
 import structlog
 from aiohttp import web
 
+from coupler.errors import CouplerError
+from coupler.ports import listening
+
 from .api import SERVER, create_app
 from .config import MockConfig
 
@@ -48,7 +51,12 @@ async def _serve(config: MockConfig) -> None:
     runner = web.AppRunner(app, access_log=None)
     await runner.setup()
     site = web.TCPSite(runner, config.host, config.port)
-    await site.start()
+    try:
+        with listening(config.host, config.port, "the OpenRails mock"):
+            await site.start()
+    except CouplerError:
+        await runner.cleanup()
+        raise
     port = runner.addresses[0][1]
     consist = app[SERVER].simulation.consist
     log.info(
@@ -75,8 +83,11 @@ async def _serve(config: MockConfig) -> None:
 def main(argv: list[str] | None = None) -> None:
     logging.basicConfig(level=logging.INFO, format="%(message)s")
     config = _parse(argv)
-    with contextlib.suppress(KeyboardInterrupt):
-        asyncio.run(_serve(config))
+    try:
+        with contextlib.suppress(KeyboardInterrupt):
+            asyncio.run(_serve(config))
+    except CouplerError as exc:
+        raise SystemExit(f"openrails-mock: {exc}") from None
 
 
 if __name__ == "__main__":
