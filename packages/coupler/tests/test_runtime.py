@@ -339,3 +339,49 @@ async def test_a_participant_may_end_the_run(streaming: bool) -> None:
             await remote.terminate("participant asked")
     finally:
         await server.stop(grace=0.1)
+
+
+@pytest.mark.parametrize(
+    ("lease", "shown"),
+    [(float("inf"), "inf"), (float("nan"), "nan"), (-1.0, "-1.0"), (86_400.5, "86400.5")],
+)
+async def test_a_lease_without_a_ceiling_is_refused(
+    gain_server: ParticipantServer, lease: float, shown: str
+) -> None:
+    """Initialize(lease_seconds=inf) once locked a participant for good: a lease is a finite
+    number of seconds up to 24 h, else INVALID_ARGUMENT naming the value and the bound, and
+    the participant stays free."""
+    channel, stub = await raw_stub(gain_server.address)
+    async with channel:
+        with pytest.raises(grpc.aio.AioRpcError) as info:
+            await stub.Initialize(
+                pb.InitializeRequest(run_id="x", step_size=0.5, lease_seconds=lease)
+            )
+        assert info.value.code() is grpc.StatusCode.INVALID_ARGUMENT
+        assert (
+            f"lease_seconds must be a number of seconds > 0 and <= 86400 (24 h), got {shown}"
+            in (info.value.details() or "")
+        )
+    async with RemoteParticipant(gain_server.address) as next_one:
+        await next_one.initialize(
+            setup("next", lease=86_400)
+        )  # free, and the ceiling itself is fine
+        await next_one.terminate()
+
+
+@pytest.mark.parametrize(
+    ("request_fields", "message"),
+    [
+        ({"current_time": 0.0, "step_size": float("inf")}, "step_size=inf"),
+        ({"current_time": float("nan"), "step_size": 0.5}, "current_time=nan"),
+    ],
+)
+async def test_a_step_of_infinite_or_nan_time_is_refused(
+    gain_server: ParticipantServer, request_fields: dict[str, float], message: str
+) -> None:
+    async with RemoteParticipant(gain_server.address, streaming=False) as owner:
+        await owner.initialize(setup("A"))
+        with pytest.raises(ParticipantError, match=f"must be finite.*{message}") as info:
+            await owner.do_step(request_fields["current_time"], request_fields["step_size"], {})
+        assert info.value.status == "INVALID_ARGUMENT"
+        await owner.terminate()

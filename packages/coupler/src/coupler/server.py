@@ -10,7 +10,8 @@ Rules every participant gets for free (docs/protocol.md has the table):
   active run's id); DoStep before Initialize is FAILED_PRECONDITION;
 - runs are leases: DoStep, StepStream and Terminate must carry the active run's id (another id
   is FAILED_PRECONDITION); the run ends on Terminate, when its StepStream ends without
-  Terminate, or after ``lease`` seconds without a call -- then the next run may start;
+  Terminate, or after ``lease`` seconds without a call -- then the next run may start; a lease
+  is at most ``durations.MAX_LEASE`` (24 h), a NaN, infinite or negative one is INVALID_ARGUMENT;
 - an unknown channel or a wrong type is INVALID_ARGUMENT naming the channel and the expected
   type; an exception inside the participant is INTERNAL with its message while the server
   keeps serving; a participant that raises ``EndRun`` answers with ``terminate`` set.
@@ -19,6 +20,7 @@ Rules every participant gets for free (docs/protocol.md has the table):
 from __future__ import annotations
 
 import asyncio
+import math
 import signal
 import time
 from collections.abc import AsyncIterator, Awaitable, Callable, Coroutine
@@ -31,7 +33,7 @@ import structlog
 from grpc_health.v1 import health, health_pb2, health_pb2_grpc
 from grpc_reflection.v1alpha import reflection
 
-from coupler import ports, wire
+from coupler import durations, ports, wire
 from coupler.channels import Description
 from coupler.errors import ChannelValueError, ParticipantUnavailable, ScenarioError
 from coupler.participant import HEALTH_REASON, EndRun, Participant
@@ -109,11 +111,20 @@ class _Servicer(pb_grpc.GRPCComponentServiceServicer):
                     f"participant serves one run at a time: Terminate that run or wait",
                 )
             setup = await _guard(context, lambda: wire.initialize_from_pb(request, self.codec))
-            if setup.lease < 0:
+            if setup.lease and (why := durations.problem(setup.lease, durations.MAX_LEASE)):
                 await _abort(
                     context,
                     grpc.StatusCode.INVALID_ARGUMENT,
-                    f"lease_seconds must be >= 0, got {setup.lease:g}",
+                    f"lease_seconds {why} (or 0: the participant's default, {DEFAULT_LEASE:g} s)",
+                )
+            times = {"start_time": setup.start_time, "step_size": setup.step_size}
+            if setup.stop_time is not None:
+                times["stop_time"] = setup.stop_time
+            if wrong := {name: t for name, t in times.items() if not math.isfinite(t)}:
+                await _abort(
+                    context,
+                    grpc.StatusCode.INVALID_ARGUMENT,
+                    ", ".join(f"{name} must be finite, got {t!r}" for name, t in wrong.items()),
                 )
             outputs = await _guard(context, lambda: self.participant.initialize(setup))
             self.run = run = _Run(id=setup.run_id, lease=setup.lease or DEFAULT_LEASE)
@@ -171,11 +182,12 @@ class _Servicer(pb_grpc.GRPCComponentServiceServicer):
                 f"active run; only the orchestrator that initialized the run may step it",
             )
         step = await _guard(context, lambda: wire.step_from_pb(request, self.codec))
-        if not step.step > 0:
+        if not (0 < step.step < math.inf and math.isfinite(step.time)):
             await _abort(
                 context,
                 grpc.StatusCode.INVALID_ARGUMENT,
-                f"step_size must be positive, got {step.step}",
+                f"step_size must be finite and positive and current_time finite, got "
+                f"step_size={step.step!r}, current_time={step.time!r}",
             )
         run.busy += 1
         try:

@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import contextlib
+import math
 import os
 import re
 import signal
@@ -22,6 +23,7 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any, TextIO
 
+from coupler import durations
 from coupler.channels import Description
 from coupler.client import RemoteParticipant
 from coupler.errors import CouplerError
@@ -42,7 +44,7 @@ from coupler_orchestrator.export import export_fmu
 from coupler_orchestrator.fleet import Fleet, FleetSpec
 from coupler_orchestrator.monitor import MonitorServer
 from coupler_orchestrator.observer import Observer, RunEnd, RunInfo
-from coupler_orchestrator.options import Algorithm, RunOptions
+from coupler_orchestrator.options import MIN_REALTIME_FACTOR, Algorithm, RunOptions
 from coupler_orchestrator.plot import plot
 from coupler_orchestrator.progress import ProgressBar, ProgressLines
 from coupler_orchestrator.replay import ReplayParticipant
@@ -50,6 +52,7 @@ from coupler_orchestrator.runner import run_scenario, validate_scenario
 from coupler_orchestrator.watchdog import active as active_watchdog
 
 EXIT_OK, EXIT_ERROR, EXIT_INTERRUPTED = 0, 1, 130
+MAX_LEASE, MAX_TIMEOUT = durations.MAX_LEASE, durations.MAX_TIMEOUT
 
 
 def parser() -> argparse.ArgumentParser:
@@ -96,7 +99,12 @@ def parser() -> argparse.ArgumentParser:
         help="results directory (default: the SSD's OpenMCx outputDirectory, else ./results)",
     )
     _record_options(run)
-    run.add_argument("--realtime-factor", type=float, help="pace at X times real time")
+    run.add_argument(
+        "--realtime-factor",
+        type=realtime_factor,
+        help="pace at X times real time (0: as fast as possible; at least "
+        f"{MIN_REALTIME_FACTOR:g})",
+    )
     run.add_argument(
         "--no-progress",
         action="store_true",
@@ -110,7 +118,7 @@ def parser() -> argparse.ArgumentParser:
     )
     run.add_argument(
         "--monitor-linger",
-        type=float,
+        type=seconds(MAX_TIMEOUT, zero=True),
         default=0.0,
         metavar="S",
         help="keep the monitor page up S seconds after the run ends (default 0)",
@@ -132,9 +140,13 @@ def parser() -> argparse.ArgumentParser:
     fleet.add_argument("--exit", action="store_true", help="stop the services when the run ends")
     fleet.add_argument("--out", type=Path, help="results directory (default from the fleet file)")
     fleet.add_argument(
-        "--realtime-factor", type=float, help="override the fleet file's pacing; 0 = unpaced"
+        "--realtime-factor",
+        type=realtime_factor,
+        help="override the fleet file's pacing; 0 = unpaced",
     )
-    fleet.add_argument("--health-timeout", type=float, default=60.0, help="[s] per service")
+    fleet.add_argument(
+        "--health-timeout", type=seconds(MAX_TIMEOUT), default=60.0, help="[s] per service"
+    )
     _record_options(fleet)
 
     campaign = commands.add_parser(
@@ -187,24 +199,28 @@ def parser() -> argparse.ArgumentParser:
     )
     export.add_argument(
         "--call-timeout",
-        type=float,
+        type=seconds(MAX_TIMEOUT),
         default=30.0,
         help="[s] deadline of every call the FMU makes to the participant (default 30)",
     )
-    export.add_argument("--timeout", type=float, default=10.0, help="connect timeout [s]")
+    export.add_argument(
+        "--timeout", type=seconds(MAX_TIMEOUT), default=10.0, help="connect timeout [s]"
+    )
     _security_options(export)
 
     describe = commands.add_parser("describe", help="print a participant's channels")
     describe.add_argument("target", help="grpc://HOST:PORT, grpcs://HOST:PORT or an .fmu file")
-    describe.add_argument("--timeout", type=float, default=10.0, help="connect timeout [s]")
+    describe.add_argument(
+        "--timeout", type=seconds(MAX_TIMEOUT), default=10.0, help="connect timeout [s]"
+    )
     _security_options(describe)
     return top
 
 
 def _run_options(command: argparse.ArgumentParser) -> None:
-    command.add_argument("--start-time", type=float, help="start time [s]")
-    command.add_argument("--stop-time", type=float, help="stop time [s]")
-    command.add_argument("--step", type=float, help="base communication step [s]")
+    command.add_argument("--start-time", type=finite, help="start time [s]")
+    command.add_argument("--stop-time", type=finite, help="stop time [s]")
+    command.add_argument("--step", type=finite, help="base communication step [s]")
     command.add_argument(
         "--algorithm",
         choices=[a.value for a in Algorithm],
@@ -222,21 +238,21 @@ def _run_options(command: argparse.ArgumentParser) -> None:
     command.add_argument("--run-id", help="run id sent to participants (default: a random UUID)")
     command.add_argument(
         "--lease",
-        type=float,
+        type=seconds(MAX_LEASE),
         help="[s] a participant ends the run after this long without a call (default: the "
-        "larger of 60 s and 4 call deadlines)",
+        "larger of 60 s and 4 call deadlines; at most 86400 = 24 h)",
     )
     command.add_argument(
         "--connect-timeout",
-        type=float,
+        type=seconds(MAX_TIMEOUT),
         default=10.0,
         help="[s] how long a participant may take to report SERVING (default 10)",
     )
     command.add_argument(
         "--call-timeout",
-        type=float,
+        type=seconds(MAX_TIMEOUT),
         default=30.0,
-        help="[s] deadline of every call to a participant (default 30)",
+        help="[s] deadline of every call to a participant (default 30; at most 86400 = 24 h)",
     )
     command.add_argument(
         "--unpack-limit",
@@ -262,6 +278,45 @@ def _run_options(command: argparse.ArgumentParser) -> None:
         "same results either way (also COUPLER_NATIVE_STEPS=0)",
     )
     _security_options(command)
+
+
+def finite(text: str) -> float:
+    """A finite number (argparse type): NaN and infinities are refused."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"must be a finite number, got {text!r}")
+    return value
+
+
+def seconds(maximum: float, *, zero: bool = False) -> Callable[[str], float]:
+    """An argparse type: a number of seconds in (0, maximum] (0 too, with ``zero``)."""
+
+    def parse(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"not a number of seconds: {text!r}") from None
+        if zero and value == 0:
+            return value
+        if why := durations.problem(value, maximum):
+            raise argparse.ArgumentTypeError(why)
+        return value
+
+    return parse
+
+
+def realtime_factor(text: str) -> float:
+    """An argparse type: 0 (as fast as possible) or at least MIN_REALTIME_FACTOR."""
+    value = finite(text)
+    if value != 0 and not value >= MIN_REALTIME_FACTOR:
+        raise argparse.ArgumentTypeError(
+            f"must be 0 (as fast as possible) or at least {MIN_REALTIME_FACTOR:g} (one "
+            f"simulated second per {1 / MIN_REALTIME_FACTOR:g} s), got {text}"
+        )
+    return value
 
 
 def _record_options(command: argparse.ArgumentParser) -> None:

@@ -39,7 +39,7 @@ from xml.etree import ElementTree
 import structlog
 from google.protobuf import descriptor_pb2
 
-from coupler import wire
+from coupler import durations, wire
 from coupler.channels import Causality, Channel, Description, ValueType
 from coupler.client import RemoteParticipant, parse_address
 from coupler.errors import CouplerError
@@ -543,6 +543,8 @@ def write_fmu(
     """Write the FMU for ``description`` (the participant at ``address``) to ``out``."""
     if fmi_version not in _PLATFORM:
         raise ExportError(f"--fmi {fmi_version}: write 2 or 3")
+    if why := durations.problem(call_timeout, durations.MAX_TIMEOUT):
+        raise ExportError(f"--call-timeout {why}")
     warnings = []
     exported: list[tuple[int, Channel]] = []
     for channel in description.channels:

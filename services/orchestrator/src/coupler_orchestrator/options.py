@@ -14,6 +14,10 @@ from pathlib import Path
 from coupler.archives import DEFAULT_BUDGET_BYTES
 from coupler.security import ClientSecurity
 
+MIN_REALTIME_FACTOR = 1e-3
+"""The slowest pacing: one simulated second per 1000 s of wall time (slower would wait for
+days between steps; 1e-300 never ended)."""
+
 
 class Algorithm(StrEnum):
     """Master algorithms."""
@@ -35,7 +39,7 @@ class RunOptions:
     algorithm: Algorithm | None = None
     """Master algorithm; default from the OpenMCx task stepType, else Jacobi."""
     realtime_factor: float | None = None
-    """Pace the run; None runs as fast as possible."""
+    """Pace the run (at least ``MIN_REALTIME_FACTOR``); None runs as fast as possible."""
     parameters: Mapping[str, str] = field(default_factory=dict)
     """``Component.name`` -> value text, overriding the SSD's parameter bindings."""
     run_id: str = field(default_factory=lambda: uuid.uuid4().hex)

@@ -5,6 +5,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from coupler.durations import MAX_LEASE
+from coupler.errors import ScenarioError
 from coupler_orchestrator.checks import Checked, Member, TimeGrid
 from coupler_orchestrator.options import Algorithm, RunOptions
 from coupler_orchestrator.ordering import execution_order
@@ -59,11 +61,19 @@ def build_plan(checked: Checked, links: tuple[Link, ...], options: RunOptions) -
 
 def lease_of(options: RunOptions, checked: Checked) -> float:
     """The lease: given, else the larger of 60 s and four call deadlines, and at least three
-    paced steps of the slowest member (so pacing never looks like silence)."""
+    paced steps of the slowest member (so pacing never looks like silence); never above the
+    ceiling participants grant (``durations.MAX_LEASE``, 24 h)."""
     if options.lease is not None:
         return options.lease
-    lease = max(60.0, 4 * options.call_timeout)
+    lease = min(max(60.0, 4 * options.call_timeout), MAX_LEASE)
     if options.realtime_factor:
         slowest = max((m.multiple for m in checked.members), default=1)
-        lease = max(lease, 3 * checked.grid.step * slowest / options.realtime_factor)
+        paced = checked.grid.step * slowest / options.realtime_factor
+        if paced > MAX_LEASE / 3:
+            raise ScenarioError(
+                f"--realtime-factor {options.realtime_factor:g} waits {paced:g} s between two "
+                f"steps of a participant, longer than a third of the longest lease ("
+                f"{MAX_LEASE:g} s): the participant would end the run; pace faster"
+            )
+        lease = max(lease, 3 * paced)
     return lease

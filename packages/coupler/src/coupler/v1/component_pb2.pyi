@@ -263,7 +263,9 @@ class InitializeRequest(_message.Message):
     lease_seconds: _builtins.float
     """The run's lease [s]: when no call of this run arrives for this long, the participant ends
     the run itself (logging why) and serves the next one. 0: the participant's default (60 s).
-    The orchestrator sets it well above its per-call deadline and its pacing.
+    At most 86400 (24 h); a negative, NaN, infinite or longer lease is INVALID_ARGUMENT, so no
+    client can lock a participant for good. The orchestrator sets it well above its per-call
+    deadline and its pacing. start_time, step_size and stop_time must be finite.
     """
     @_builtins.property
     def parameters(self) -> _containers.RepeatedCompositeFieldContainer[Global___VariableBinding]: ...
@@ -328,7 +330,8 @@ class DoStepRequest(_message.Message):
     """
     step_size: _builtins.float
     """Exactly the configured communication step of this participant (h * multiple), not the
-    difference of two communication points [s].
+    difference of two communication points [s]. Finite and positive (current_time finite),
+    else INVALID_ARGUMENT.
     """
     run_id: _builtins.str
     """The run this step belongs to (InitializeRequest.run_id)."""

@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <cctype>
 #include <chrono>
+#include <cmath>
 #include <cstdint>
 #include <cstdio>
 #include <cstdlib>
@@ -19,6 +20,10 @@ namespace pb = coupler::v1;
 namespace coupler_proxy {
 
 namespace {
+
+// The ceilings of coupler.durations: participants refuse a longer lease.
+constexpr double kMaxLease = 86400.0;
+constexpr double kMaxTimeout = 86400.0;
 
 std::string unescape(const std::string& text) {
   std::string out;
@@ -230,6 +235,13 @@ bool Proxy::load(const std::string& resources) {
       channels_.push_back(c);
     }
   }
+  if (!std::isfinite(timeout_) || timeout_ <= 0 || timeout_ > kMaxTimeout) {
+    std::ostringstream message;
+    message << base << "coupler-proxy.txt: timeout " << timeout_
+            << " must be a number of seconds > 0 and <= " << kMaxTimeout
+            << " (24 h); export the FMU again with a valid --call-timeout";
+    return error(message.str());
+  }
   return true;
 }
 
@@ -326,7 +338,7 @@ bool Proxy::initialize(double start_time, std::optional<double> stop_time) {
   request.set_start_time(start_time);
   request.set_step_size(step_size_);
   if (stop_time) request.set_stop_time(*stop_time);
-  request.set_lease_seconds(std::max(60.0, 4 * timeout_));
+  request.set_lease_seconds(std::min(std::max(60.0, 4 * timeout_), kMaxLease));
   for (const auto& c : channels_) {
     if (c.kind == Kind::HIDDEN) continue;
     if (c.causality == pb::CAUSALITY_PARAMETER) bind(request.add_parameters(), c);
