@@ -12,6 +12,11 @@ Rules every participant gets for free (docs/protocol.md has the table):
   is FAILED_PRECONDITION); the run ends on Terminate, when its StepStream ends without
   Terminate, or after ``lease`` seconds without a call -- then the next run may start; a lease
   is at most ``durations.MAX_LEASE`` (24 h), a NaN, infinite or negative one is INVALID_ARGUMENT;
+- runs are secret: Initialize brings the run's secret (16 to 256 bytes, else INVALID_ARGUMENT),
+  every later call of the run carries it (compared in constant time). A call with the run's id
+  and without its secret is PERMISSION_DENIED and remembered as an intrusion (peer, call, time);
+  the owner's next call of the run is then ABORTED naming it, so the run fails (Terminate
+  still ends the run). The secret is never logged and never shown to the participant;
 - an unknown channel or a wrong type is INVALID_ARGUMENT naming the channel and the expected
   type; an exception inside the participant is INTERNAL with its message while the server
   keeps serving; a participant that raises ``EndRun`` answers with ``terminate`` set.
@@ -20,6 +25,7 @@ Rules every participant gets for free (docs/protocol.md has the table):
 from __future__ import annotations
 
 import asyncio
+import hmac
 import math
 import signal
 import time
@@ -49,10 +55,16 @@ T = TypeVar("T")
 
 @dataclass(eq=False)
 class _Run:
-    """The active run: its id, lease and when it was last heard of."""
+    """The active run: its id, secret, lease and when it was last heard of."""
 
     id: str
+    secret: bytes = field(repr=False)
     lease: float
+    reached: float
+    """Simulated time the run has reached [s] (after its last step)."""
+    intrusion: str | None = None
+    """Why the run is no longer trusted: the first call of it without its secret."""
+    intrusions: int = 0
     started: float = field(default_factory=time.monotonic)
     last_call: float = field(default_factory=time.monotonic)
     busy: int = 0
@@ -110,6 +122,14 @@ class _Servicer(pb_grpc.GRPCComponentServiceServicer):
                     f"ago; its lease ends it after {self.run.lease:g} s without calls); a "
                     f"participant serves one run at a time: Terminate that run or wait",
                 )
+            secret = request.run_secret
+            if not wire.MIN_SECRET <= len(secret) <= wire.MAX_SECRET:
+                await _abort(
+                    context,
+                    grpc.StatusCode.INVALID_ARGUMENT,
+                    f"run_secret must be {wire.MIN_SECRET} to {wire.MAX_SECRET} random bytes, got "
+                    f"{len(secret)}: every later call of the run must carry it (docs/protocol.md)",
+                )
             setup = await _guard(context, lambda: wire.initialize_from_pb(request, self.codec))
             if setup.lease and (why := durations.problem(setup.lease, durations.MAX_LEASE)):
                 await _abort(
@@ -127,7 +147,12 @@ class _Servicer(pb_grpc.GRPCComponentServiceServicer):
                     ", ".join(f"{name} must be finite, got {t!r}" for name, t in wrong.items()),
                 )
             outputs = await _guard(context, lambda: self.participant.initialize(setup))
-            self.run = run = _Run(id=setup.run_id, lease=setup.lease or DEFAULT_LEASE)
+            self.run = run = _Run(
+                id=setup.run_id,
+                secret=secret,
+                lease=setup.lease or DEFAULT_LEASE,
+                reached=setup.start_time,
+            )
             self._watchdog = asyncio.create_task(self._watch(run), name=f"lease-{run.id}")
             log.info("run_initialized", run_id=run.id, participant=self.name, lease_s=run.lease)
             return await _guard(context, lambda: wire.initialize_response(outputs, self.codec))
@@ -147,8 +172,14 @@ class _Servicer(pb_grpc.GRPCComponentServiceServicer):
         try:
             async for request in request_iterator:
                 async with self._lock:
-                    if self.run is not None and request.run_id == self.run.id:
-                        carried = self.run
+                    run = self.run
+                    if (
+                        carried is not run
+                        and run is not None
+                        and request.run_id == run.id
+                        and hmac.compare_digest(request.run_secret, run.secret)
+                    ):
+                        carried = run  # this stream belongs to the run's owner
                     response = await self._step(request, context)
                 yield response
         finally:
@@ -181,6 +212,8 @@ class _Servicer(pb_grpc.GRPCComponentServiceServicer):
                 f"DoStep for run '{request.run_id}', which is not participant '{self.name}'s "
                 f"active run; only the orchestrator that initialized the run may step it",
             )
+        if run.intrusion is not None or not hmac.compare_digest(request.run_secret, run.secret):
+            await self._untrusted(run, request.run_secret, "DoStep", context)
         step = await _guard(context, lambda: wire.step_from_pb(request, self.codec))
         if not (0 < step.step < math.inf and math.isfinite(step.time)):
             await _abort(
@@ -203,6 +236,7 @@ class _Servicer(pb_grpc.GRPCComponentServiceServicer):
         finally:
             run.busy -= 1
             run.last_call = time.monotonic()
+        run.reached = step.time + step.step
         return await _guard(context, lambda: wire.step_response(outputs, self.codec))
 
     async def Terminate(
@@ -217,8 +251,41 @@ class _Servicer(pb_grpc.GRPCComponentServiceServicer):
                     f"Terminate for run '{request.run_id}', which is not participant "
                     f"'{self.name}'s active run; nothing was ended",
                 )
+            if run is not None and not hmac.compare_digest(request.run_secret, run.secret):
+                await self._untrusted(run, request.run_secret, "Terminate", context)
             await self.end_run(request.reason)
+            if run is not None and run.intrusion is not None:
+                await _abort(context, grpc.StatusCode.ABORTED, self._refusal(run))
         return wire.TerminateResponse()
+
+    async def _untrusted(
+        self, run: _Run, secret: bytes, call: str, context: grpc.aio.ServicerContext
+    ) -> NoReturn:
+        """Refuses a call of ``run``: without the run's secret it is an intrusion
+        (PERMISSION_DENIED, remembered); from the owner of a run that saw one, ABORTED."""
+        if hmac.compare_digest(secret, run.secret):
+            await _abort(context, grpc.StatusCode.ABORTED, self._refusal(run))
+        peer = context.peer() or "an unknown address"
+        run.intrusions += 1
+        if run.intrusion is None:
+            how = "without this run's secret" if not secret else "with a wrong secret"
+            run.intrusion = (
+                f"{self.name} refused the run: a call {how} arrived from {peer} ({call} at "
+                f"t={run.reached:g} s); the run is no longer trusted"
+            )
+        log.warning("run_intrusion", run_id=run.id, participant=self.name, peer=peer, call=call)
+        await _abort(
+            context,
+            grpc.StatusCode.PERMISSION_DENIED,
+            f"{call} refused: it names participant '{self.name}'s active run but does not carry "
+            f"that run's secret (run_secret, docs/protocol.md); the run's owner will be told",
+        )
+
+    @staticmethod
+    def _refusal(run: _Run) -> str:
+        """What the owner of a run that saw an intrusion is told."""
+        more = run.intrusions - 1
+        return f"{run.intrusion}" + (f" ({more} more such calls since)" if more > 0 else "")
 
     async def end_run(self, reason: str) -> None:
         """Terminate the active run, if any; idempotent. The caller holds the lock."""

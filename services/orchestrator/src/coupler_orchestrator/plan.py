@@ -3,7 +3,7 @@ once, the time grid and the run's settings. Nothing here knows SSP."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from coupler.durations import MAX_LEASE
 from coupler.errors import ScenarioError
@@ -30,6 +30,8 @@ class Plan:
     """Master algorithm."""
     run_id: str
     """Identifies the run in logs, participants and results; unique per run."""
+    run_secret: bytes = field(repr=False)
+    """Authenticates the run's calls at its participants (``RunOptions.run_secret``)."""
     lease: float
     """Lease granted with Initialize [s]: a participant ends the run after this long without a
     call."""
@@ -52,6 +54,7 @@ def build_plan(checked: Checked, links: tuple[Link, ...], options: RunOptions) -
         grid=checked.grid,
         algorithm=checked.algorithm,
         run_id=options.run_id,
+        run_secret=options.run_secret,
         lease=lease_of(options, checked),
         realtime_factor=options.realtime_factor or None,
         exit_when_stuck=options.exit_when_stuck,

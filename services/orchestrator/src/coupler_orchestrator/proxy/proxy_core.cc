@@ -99,6 +99,14 @@ std::string new_run_id() {
   return id;
 }
 
+// A new run's secret (docs/protocol.md): 32 bytes from the kernel's CSPRNG, never logged.
+bool new_run_secret(std::string* secret) {
+  secret->assign(32, '\0');
+  std::ifstream random("/dev/urandom", std::ios::binary);
+  return static_cast<bool>(
+      random.read(&(*secret)[0], static_cast<std::streamsize>(secret->size())));
+}
+
 void bind(pb::VariableBinding* binding, const Channel& c) {
   binding->set_channel(c.name);
   switch (c.kind) {
@@ -332,9 +340,12 @@ bool Proxy::set_address(const std::string& address) {
 bool Proxy::initialize(double start_time, std::optional<double> stop_time) {
   if (!stub_) return error("not connected to a participant");
   run_id_ = new_run_id();
+  if (!new_run_secret(&run_secret_))
+    return error("cannot read /dev/urandom for the run's secret");
   time_ = start_time;
   pb::InitializeRequest request;
   request.set_run_id(run_id_);
+  request.set_run_secret(run_secret_);
   request.set_start_time(start_time);
   request.set_step_size(step_size_);
   if (stop_time) request.set_stop_time(*stop_time);
@@ -363,6 +374,7 @@ StepResult Proxy::step(double time, double step_size) {
   }
   pb::DoStepRequest request;
   request.set_run_id(run_id_);
+  request.set_run_secret(run_secret_);
   request.set_current_time(time);
   request.set_step_size(step_size);
   for (const auto& c : channels_)
@@ -428,6 +440,7 @@ void Proxy::terminate(const char* reason) {
   pb::TerminateRequest request;
   request.set_reason(reason);
   request.set_run_id(run_id_);
+  request.set_run_secret(run_secret_);
   pb::TerminateResponse response;
   grpc::ClientContext context;
   prepare(&context);
