@@ -6,13 +6,13 @@ FMU_DIR := build/fmus
 RAILML := scenarios/railway/data/annaberg-schwarzenberg.railml
 
 .PHONY: setup sync proto proto-check lint test demo demo-example fmus faulty-fmus track-fmu \
-        assets browser grpc-dev bench compose-check swarm-check k8s-check export-fmu-check clean
+        assets node-participant browser grpc-dev bench compose-check swarm-check k8s-check export-fmu-check clean
 
 $(UV):
 	python3 -m venv .venv-uv && .venv-uv/bin/pip install --quiet uv
 
 # Everything a fresh machine needs: the workspace, the FMUs, the map's browser assets.
-setup: sync fmus faulty-fmus track-fmu assets
+setup: sync fmus faulty-fmus track-fmu assets node-participant
 
 sync: $(UV)
 	$(UV) sync --frozen --quiet
@@ -45,6 +45,10 @@ track-fmu: sync $(FMU_DIR)/TrackBalises.fmu
 
 $(FMU_DIR)/TrackBalises.fmu: $(TRACK_FMU_INPUTS)
 	$(UV) run --frozen python -m balise_fmu.build --railml $(RAILML) --out $@
+
+# The participant written in Node.js from the .proto alone (its test skips without it).
+node-participant:
+	cd examples/participant-node && npm ci --no-audit --no-fund --loglevel=error
 
 # Leaflet (the map) and uPlot (`coupler plot -o FILE.html`) from npm into static files (no CDN
 # at run time).
