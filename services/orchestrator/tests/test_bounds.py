@@ -68,8 +68,6 @@ def test_the_attacks_are_refused_before_anything_runs(
         ("run", "--realtime-factor", "inf", "must be a finite number, got 'inf'"),
         ("run", "--realtime-factor", "-2", "must be 0 (as fast as possible) or at least 0.001"),
         ("run", "--monitor-linger", "inf", f"{SECONDS}, got inf"),
-        ("run", "--stop-time", "inf", "must be a finite number, got 'inf'"),
-        ("run", "--step", "nan", "must be a finite number, got 'nan'"),
         ("fleet", "--realtime-factor", "1e-9", "must be 0 (as fast as possible) or at least 0.001"),
         ("fleet", "--health-timeout", "inf", f"{SECONDS}, got inf"),
         ("describe", "--timeout", "nan", f"{SECONDS}, got nan"),

@@ -218,9 +218,9 @@ def parser() -> argparse.ArgumentParser:
 
 
 def _run_options(command: argparse.ArgumentParser) -> None:
-    command.add_argument("--start-time", type=finite, help="start time [s]")
-    command.add_argument("--stop-time", type=finite, help="stop time [s]")
-    command.add_argument("--step", type=finite, help="base communication step [s]")
+    command.add_argument("--start-time", type=float, help="start time [s]")
+    command.add_argument("--stop-time", type=float, help="stop time [s]")
+    command.add_argument("--step", type=float, help="base communication step [s]")
     command.add_argument(
         "--algorithm",
         choices=[a.value for a in Algorithm],
