@@ -9,7 +9,9 @@ the same bounds (docs/protocol.md, "Rules every participant follows").
 
 from __future__ import annotations
 
+import argparse
 import math
+from collections.abc import Callable
 
 MAX_LEASE = 86_400.0
 """The longest lease a participant grants [s]: 24 h."""
@@ -25,4 +27,22 @@ def problem(value: float, maximum: float) -> str | None:
     return f"must be a number of seconds > 0 and <= {bound}, got {value!r}"
 
 
-__all__ = ["MAX_LEASE", "MAX_TIMEOUT", "problem"]
+def argument(maximum: float, *, zero: bool = False) -> Callable[[str], float]:
+    """An argparse type: a number of seconds in (0, ``maximum``] (and 0, with ``zero``); the
+    error names the bound (argparse adds the option)."""
+
+    def seconds(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"not a number of seconds: {text!r}") from None
+        if zero and value == 0:
+            return value
+        if why := problem(value, maximum):
+            raise argparse.ArgumentTypeError(why)
+        return value
+
+    return seconds
+
+
+__all__ = ["MAX_LEASE", "MAX_TIMEOUT", "argument", "problem"]

@@ -53,6 +53,7 @@ from coupler_orchestrator.watchdog import active as active_watchdog
 
 EXIT_OK, EXIT_ERROR, EXIT_INTERRUPTED = 0, 1, 130
 MAX_LEASE, MAX_TIMEOUT = durations.MAX_LEASE, durations.MAX_TIMEOUT
+seconds = durations.argument
 
 
 def parser() -> argparse.ArgumentParser:
@@ -280,37 +281,14 @@ def _run_options(command: argparse.ArgumentParser) -> None:
     _security_options(command)
 
 
-def finite(text: str) -> float:
-    """A finite number (argparse type): NaN and infinities are refused."""
+def realtime_factor(text: str) -> float:
+    """An argparse type: 0 (as fast as possible) or at least MIN_REALTIME_FACTOR, finite."""
     try:
         value = float(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
     if not math.isfinite(value):
         raise argparse.ArgumentTypeError(f"must be a finite number, got {text!r}")
-    return value
-
-
-def seconds(maximum: float, *, zero: bool = False) -> Callable[[str], float]:
-    """An argparse type: a number of seconds in (0, maximum] (0 too, with ``zero``)."""
-
-    def parse(text: str) -> float:
-        try:
-            value = float(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"not a number of seconds: {text!r}") from None
-        if zero and value == 0:
-            return value
-        if why := durations.problem(value, maximum):
-            raise argparse.ArgumentTypeError(why)
-        return value
-
-    return parse
-
-
-def realtime_factor(text: str) -> float:
-    """An argparse type: 0 (as fast as possible) or at least MIN_REALTIME_FACTOR."""
-    value = finite(text)
     if value != 0 and not value >= MIN_REALTIME_FACTOR:
         raise argparse.ArgumentTypeError(
             f"must be 0 (as fast as possible) or at least {MIN_REALTIME_FACTOR:g} (one "
