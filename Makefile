@@ -7,15 +7,15 @@ RAILML := scenarios/railway/data/annaberg-schwarzenberg.railml
 ROUTE := build/routes/annaberg-schwarzenberg
 
 .PHONY: setup sync proto proto-check lint test demo demo-example fmus faulty-fmus track-fmu \
-        route assets browser grpc-dev wheels bench compose-check swarm-check k8s-check \
-        export-fmu-check native-check clean
+        route assets node-participant browser grpc-dev wheels bench compose-check swarm-check \
+        k8s-check export-fmu-check native-check clean
 
 $(UV):
 	python3 -m venv .venv-uv && .venv-uv/bin/pip install --quiet uv
 
 # Everything a fresh machine needs: the workspace, the FMUs, the railway's OpenRails route,
-# the map's browser assets.
-setup: sync fmus faulty-fmus track-fmu route assets
+# the map's browser assets, the Node.js example participant's packages.
+setup: sync fmus faulty-fmus track-fmu route assets node-participant
 
 # The workspace. Its coupler-native member is compiled by its build backend (CMake, with
 # Debian's C++ gRPC: grpc-dev) into a wheel that uv installs; uv rebuilds it only when its
@@ -75,6 +75,10 @@ route: sync $(ROUTE)/annaberg-schwarzenberg.trk
 
 $(ROUTE)/annaberg-schwarzenberg.trk: $(ROUTE_INPUTS)
 	$(UV) run --frozen coupler-railway export-openrails $(RAILML) --out $(ROUTE)
+
+# The participant written in Node.js from the .proto alone (its test skips without it).
+node-participant:
+	cd examples/participant-node && npm ci --no-audit --no-fund --loglevel=error
 
 # Leaflet (the map) and uPlot (`coupler plot -o FILE.html`) from npm into static files (no CDN
 # at run time).

@@ -406,7 +406,9 @@ def _raw_messages() -> tuple[Any, Any]:
     """A request and a response of the sizes the gain participant exchanges."""
     from coupler.v1 import component_pb2 as pb
 
-    request = pb.DoStepRequest(current_time=0.0, step_size=STEP, run_id="bench")
+    request = pb.DoStepRequest(
+        current_time=0.0, step_size=STEP, run_id="bench", run_secret=bytes(32)
+    )
     request.inputs.add(channel="u", real=1.0)
     response = pb.DoStepResponse()
     for name, kind, value in [

@@ -6,6 +6,8 @@ RemoteParticipant --gRPC--> ParticipantServer(GainParticipant)
 from __future__ import annotations
 
 import asyncio
+import re
+import secrets
 from collections.abc import Awaitable, Callable, Mapping
 from typing import TypeVar
 
@@ -23,6 +25,8 @@ from coupler.v1 import component_pb2 as pb
 from coupler.v1 import component_pb2_grpc as pb_grpc
 
 T = TypeVar("T")
+KEY = secrets.token_bytes(32)
+"""The run secret of raw requests."""
 
 
 def setup(run_id: str = "t", lease: float = 0.0, **parameters: Value) -> RunSetup:
@@ -111,14 +115,16 @@ async def test_wrong_channel_or_type_is_invalid_argument(
     # the raw stub: the client would refuse these before sending
     async with grpc.aio.insecure_channel(parse_address(gain_server.address)) as channel:
         stub = pb_grpc.GRPCComponentServiceStub(channel)
-        await stub.Initialize(pb.InitializeRequest(run_id="raw", step_size=0.5))
+        await stub.Initialize(pb.InitializeRequest(run_id="raw", run_secret=KEY, step_size=0.5))
         with pytest.raises(grpc.aio.AioRpcError) as info:
             await stub.DoStep(
-                pb.DoStepRequest(run_id="raw", current_time=0, step_size=0.5, inputs=[binding])
+                pb.DoStepRequest(
+                    run_id="raw", run_secret=KEY, current_time=0, step_size=0.5, inputs=[binding]
+                )
             )
         assert info.value.code() is grpc.StatusCode.INVALID_ARGUMENT
         assert message in (info.value.details() or "")
-        await stub.Terminate(pb.TerminateRequest(run_id="raw"))
+        await stub.Terminate(pb.TerminateRequest(run_id="raw", run_secret=KEY))
 
 
 class Faulty(GainParticipant):
@@ -339,3 +345,115 @@ async def test_a_participant_may_end_the_run(streaming: bool) -> None:
             await remote.terminate("participant asked")
     finally:
         await server.stop(grace=0.1)
+
+
+@pytest.mark.parametrize(
+    ("lease", "shown"),
+    [(float("inf"), "inf"), (float("nan"), "nan"), (-1.0, "-1.0"), (86_400.5, "86400.5")],
+)
+async def test_a_lease_without_a_ceiling_is_refused(
+    gain_server: ParticipantServer, lease: float, shown: str
+) -> None:
+    """Initialize(lease_seconds=inf) once locked a participant for good: a lease is a finite
+    number of seconds up to 24 h, else INVALID_ARGUMENT naming the value and the bound, and
+    the participant stays free."""
+    channel, stub = await raw_stub(gain_server.address)
+    async with channel:
+        with pytest.raises(grpc.aio.AioRpcError) as info:
+            await stub.Initialize(
+                pb.InitializeRequest(run_id="x", run_secret=KEY, step_size=0.5, lease_seconds=lease)
+            )
+        assert info.value.code() is grpc.StatusCode.INVALID_ARGUMENT
+        assert (
+            f"lease_seconds must be a number of seconds > 0 and <= 86400 (24 h), got {shown}"
+            in (info.value.details() or "")
+        )
+    async with RemoteParticipant(gain_server.address) as next_one:
+        await next_one.initialize(
+            setup("next", lease=86_400)
+        )  # free, and the ceiling itself is fine
+        await next_one.terminate()
+
+
+@pytest.mark.parametrize(
+    ("request_fields", "message"),
+    [
+        ({"current_time": 0.0, "step_size": float("inf")}, "step_size=inf"),
+        ({"current_time": float("nan"), "step_size": 0.5}, "current_time=nan"),
+    ],
+)
+async def test_a_step_of_infinite_or_nan_time_is_refused(
+    gain_server: ParticipantServer, request_fields: dict[str, float], message: str
+) -> None:
+    async with RemoteParticipant(gain_server.address, streaming=False) as owner:
+        await owner.initialize(setup("A"))
+        with pytest.raises(ParticipantError, match=f"must be finite.*{message}") as info:
+            await owner.do_step(request_fields["current_time"], request_fields["step_size"], {})
+        assert info.value.status == "INVALID_ARGUMENT"
+        await owner.terminate()
+
+
+async def test_initialize_without_a_run_secret_is_refused(gain_server: ParticipantServer) -> None:
+    channel, stub = await raw_stub(gain_server.address)
+    async with channel:
+        for secret in (b"", b"short", bytes(257)):
+            with pytest.raises(grpc.aio.AioRpcError) as info:
+                await stub.Initialize(
+                    pb.InitializeRequest(run_id="x", run_secret=secret, step_size=0.5)
+                )
+            assert info.value.code() is grpc.StatusCode.INVALID_ARGUMENT
+            assert f"run_secret must be 16 to 256 random bytes, got {len(secret)}" in (
+                info.value.details() or ""
+            )
+
+
+@pytest.mark.parametrize("streaming", [False, True])
+async def test_calls_of_the_run_without_its_secret_are_refused_and_fail_the_run(
+    gain_server: ParticipantServer, streaming: bool
+) -> None:
+    """Whoever knows the run id but not the run's secret changes nothing, ends nothing, and
+    the run's owner is told at its next call (ABORTED), which names the intrusion.
+
+    owner --Initialize(A, secret), DoStep--> Gain <--DoStep/StepStream/Terminate(A)-- stranger
+    """
+    async with RemoteParticipant(gain_server.address, streaming=streaming) as owner:
+        await owner.initialize(setup("A", gain=2.0))
+        assert (await owner.do_step(0.0, 0.5, {"u": 1.0}))["y"] == 2.0
+        channel, stranger = await raw_stub(gain_server.address)
+        async with channel:
+            huge = [pb.VariableBinding(channel="u", real=1e300)]
+            stream = stranger.StepStream()
+            await stream.write(pb.DoStepRequest(run_id="A", step_size=0.5, inputs=huge))
+            await stream.done_writing()
+            for call in (
+                stranger.DoStep(pb.DoStepRequest(run_id="A", step_size=0.5, inputs=huge)),
+                stranger.DoStep(
+                    pb.DoStepRequest(run_id="A", run_secret=KEY, step_size=0.5, inputs=huge)
+                ),
+                stranger.Terminate(pb.TerminateRequest(run_id="A")),
+            ):
+                with pytest.raises(grpc.aio.AioRpcError) as info:
+                    await call
+                assert info.value.code() is grpc.StatusCode.PERMISSION_DENIED
+                assert "names participant 'Gain's active run but does not carry that run's " in (
+                    info.value.details() or ""
+                )
+            assert await stream.code() is grpc.StatusCode.PERMISSION_DENIED
+        with pytest.raises(ParticipantError) as refused:
+            await owner.do_step(0.5, 0.5, {"u": 1.0})
+        assert refused.value.status == "ABORTED"
+        assert re.fullmatch(
+            r"Gain refused the run: a call without this run's secret arrived from "
+            r"ipv4:127\.0\.0\.1:\d+ \(DoStep at t=0\.5 s\); the run is no "
+            r"longer trusted \(3 more such calls since\)",
+            refused.value.detail,
+        ), refused.value.detail
+        if not streaming:  # (a refused stream ends the run with it, as every broken stream)
+            with pytest.raises(ParticipantError, match="Gain refused the run") as told:
+                await owner.terminate()
+            assert told.value.status == "ABORTED"
+        else:
+            await owner.terminate()
+    async with RemoteParticipant(gain_server.address) as next_one:  # the participant is free
+        await eventually(lambda: next_one.initialize(setup("next")))
+        await next_one.terminate()

@@ -424,6 +424,39 @@ def test_export_errors_are_sentences(
     assert not (tmp_path / "x.fmu").exists()
 
 
+def test_a_deadline_without_a_ceiling_is_refused_by_the_fmu(
+    gain_description: Description,
+    gain: ParticipantServer,
+    proxy_binaries: Path,
+    tmp_path: Path,
+) -> None:
+    """The longest deadline (24 h) runs: the binary caps its lease (four deadlines) at the
+    participants' ceiling. A hand-edited coupler-proxy.txt whose timeout has no ceiling (its
+    lease would lock the participant for good) is refused at instantiation, naming the value
+    and the bound."""
+    fmu = write_fmu(
+        gain_description,
+        address=address(gain),
+        out=tmp_path / "Gain.fmu",
+        call_timeout=86_400.0,
+        binaries=proxy_binaries,
+    ).path
+    answer, printed = drive(tmp_path, [gain_run(fmu)])
+    assert "results" in answer, printed
+    edited = tmp_path / "Edited.fmu"
+    with zipfile.ZipFile(fmu) as original, zipfile.ZipFile(edited, "w") as copy:
+        for item in original.infolist():
+            data = original.read(item)
+            if item.filename == "resources/coupler-proxy.txt":
+                data = data.replace(b"timeout\t86400.0", b"timeout\t1e300")
+            copy.writestr(item, data)
+    answer, printed = drive(tmp_path, [gain_run(edited)])
+    assert "instantiate" in answer.get("error", ""), printed
+    assert "coupler-proxy.txt: timeout 1e+300 must be a number of seconds > 0 and <= 86400" in (
+        printed
+    )
+
+
 def test_libcosim_runs_the_exported_fmu(
     exported: dict[int, Path], gain: ParticipantServer, tmp_path: Path
 ) -> None:

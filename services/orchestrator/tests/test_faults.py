@@ -9,15 +9,19 @@ what summary.json and results.csv say afterwards.
 
 from __future__ import annotations
 
+import asyncio
+import contextlib
 import csv
 import json
 import os
+import re
+import secrets
 import signal
 import subprocess
 import sys
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Iterator, Mapping
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
@@ -25,12 +29,15 @@ from typing import Any
 import grpc
 import pytest
 
+from coupler.channels import RunSetup, Value
 from coupler.client import parse_address
+from coupler.examples.gain import GainParticipant
+from coupler.participant import Values
 from coupler.testing import end_group, free_port, wait_until
 from coupler.v1 import component_pb2 as pb
 from coupler.v1 import component_pb2_grpc as pb_grpc
 
-from .conftest import Coupler
+from .conftest import Coupler, serving
 
 pytestmark = pytest.mark.usefixtures("fmus")
 HERE = Path(__file__).parent
@@ -342,6 +349,126 @@ def test_calls_from_a_second_client_change_nothing(
     assert (tmp_path / "meddled" / "results.csv").read_bytes() == (
         tmp_path / "clean" / "results.csv"
     ).read_bytes()
+
+
+def what_a_local_user_reads(out: Path, *logs: Path) -> list[str]:
+    """Everything another local user can read about a run: its results folder (summary.json
+    names the run id), the participant's log and every command line (`ps`)."""
+    texts = [path.read_text(errors="replace") for path in out.rglob("*") if path.is_file()]
+    texts += [log.read_text(errors="replace") for log in logs]
+    for cmdline in Path("/proc").glob("[0-9]*/cmdline"):
+        with contextlib.suppress(OSError):
+            texts.append(cmdline.read_bytes().replace(b"\0", b" ").decode(errors="replace"))
+    return texts
+
+
+def intrude(port: int, run_id: str, guesses: list[bytes]) -> list[tuple[grpc.StatusCode, str]]:
+    """DoStep(u=1e300) of run ``run_id``: without a secret, then with each guess."""
+    answers = []
+    with grpc.insecure_channel(parse_address(f"grpc://127.0.0.1:{port}")) as channel:
+        stub = pb_grpc.GRPCComponentServiceStub(channel)
+        huge = [pb.VariableBinding(channel="u", real=1e300)]
+        for guess in [b"", *guesses]:
+            request = pb.DoStepRequest(run_id=run_id, run_secret=guess, step_size=0.1, inputs=huge)
+            try:
+                stub.DoStep(request, timeout=5)
+                answers.append((grpc.StatusCode.OK, ""))
+            except grpc.RpcError as exc:
+                answers.append((exc.code(), exc.details() or ""))
+    return answers
+
+
+@pytest.mark.usefixtures("step_path")
+def test_a_stranger_with_the_run_id_cannot_change_the_run_and_the_run_fails_naming_it(
+    ssd: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """With everything a local user can read (summary.json, results, logs, `ps` lines, hence
+    the run id), a stranger's DoStep(u=1e300) changes nothing: the participant refuses it
+    (PERMISSION_DENIED), and the orchestrator's next call of the run is told, so the run fails
+    naming the intrusion (exit 1). The secret (here chosen through COUPLER_RUN_SECRET, as a
+    parent process would hand it over) is in none of what the stranger could read.
+
+        stranger --DoStep(run id, no secret)--> Gain <--DoStep(run id, secret)-- coupler run
+    """
+    secret = secrets.token_hex(16)
+    with gain(monkeypatch) as process:
+        monkeypatch.setenv("COUPLER_RUN_SECRET", secret)
+        out = tmp_path / "o"
+        run = orchestrator(ssd, out, *RUN, *PACED)
+        wait_for_rows(out, 4, within=90)  # start-up takes long on a busy machine
+        seen = what_a_local_user_reads(out, process.log)
+        run_id = summary(out)["run_id"]
+        guesses = [run_id.encode(), secret[:16].encode(), secrets.token_bytes(32)]
+        guesses += [word.encode() for text in seen for word in text.split() if len(word) >= 16]
+        answers = intrude(process.port, run_id, guesses)
+        printed, err = run.communicate(timeout=60)
+        seen += [*what_a_local_user_reads(out, process.log), printed, err]
+    assert all(secret not in text for text in seen)
+    code, details = answers[0]
+    assert code is grpc.StatusCode.PERMISSION_DENIED, answers[0]
+    assert "names participant 'Gain's active run but does not carry that run's secret" in details
+    assert all(code is not grpc.StatusCode.OK for code, _ in answers)  # none was stepped
+    assert run.returncode == 1, err
+    result = summary(out)
+    assert result["status"] == "failed"
+    assert re.search(
+        r"^Gain\.DoStep \[ABORTED\]: Gain refused the run: a call without this run's secret "
+        r"arrived from ipv4:127\.0\.0\.1:\d+ \(DoStep at t=[0-9.]+ s\); the run is no longer "
+        r"trusted.* \(the run had reached t=",
+        result["reason"],
+    ), result["reason"]
+    recorded = assert_rows_kept(out)
+    assert 4 <= len(recorded) < 201
+    assert max(abs(float(row["Gain.y"])) for row in recorded) < 100  # nothing injected
+
+
+class Betrayed(GainParticipant):
+    """During its last step a stranger calls DoStep with the run's id and no secret; the call
+    waits for the step and reaches the participant before the orchestrator's Terminate."""
+
+    def __init__(self, last: float) -> None:
+        super().__init__("Gain")
+        self.last, self.run_id, self.port = last, "", 0
+        self.answers: list[tuple[grpc.StatusCode, str]] = []
+
+    async def initialize(self, setup: RunSetup) -> Values:
+        self.run_id = setup.run_id
+        return await super().initialize(setup)
+
+    async def do_step(self, time_s: float, step: float, inputs: Mapping[str, Value]) -> Values:
+        if time_s >= self.last:
+            meddler = threading.Thread(
+                target=lambda: self.answers.extend(intrude(self.port, self.run_id, []))
+            )
+            meddler.start()
+            await asyncio.sleep(0.5)  # the stranger's call is queued behind this step
+        return await super().do_step(time_s, step, inputs)
+
+
+@pytest.mark.usefixtures("step_path")
+def test_a_stranger_after_the_last_step_still_fails_the_run(
+    coupler: Coupler, ssd: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """An intrusion between the run's last step and its Terminate changes nothing either, and
+    the run does not pass for completed: Terminate is answered ABORTED naming it."""
+    participant = Betrayed(last=0.5)
+    with serving(participant) as server:
+        participant.port = server.port
+        monkeypatch.setenv("GAIN_PORT", str(server.port))
+        outcome = coupler("run", ssd, "--out", tmp_path, "--step", "0.5", "--stop-time", "1")
+    assert [code for code, _ in participant.answers] == [grpc.StatusCode.PERMISSION_DENIED]
+    assert outcome.code == 1, outcome.err
+    result = summary(tmp_path)
+    assert result["status"] == "failed"
+    assert result["reason"].startswith(
+        "Gain.Terminate [ABORTED]: Gain refused the run: a call without this run's secret "
+        "arrived from ipv4:127.0.0.1:"
+    ), result["reason"]
+    assert (
+        "(DoStep at t=1 s); the run is no longer trusted (after the run's last step)"
+        in (result["reason"])
+    )
+    assert len(assert_rows_kept(tmp_path)) == 3
 
 
 def test_with_a_token_a_stranger_cannot_even_start_a_run(

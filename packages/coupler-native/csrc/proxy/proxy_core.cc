@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <cctype>
 #include <chrono>
+#include <cmath>
 #include <cstdint>
 #include <cstdio>
 #include <cstdlib>
@@ -19,6 +20,10 @@ namespace pb = coupler::v1;
 namespace coupler_proxy {
 
 namespace {
+
+// The ceilings of coupler.durations: participants refuse a longer lease.
+constexpr double kMaxLease = 86400.0;
+constexpr double kMaxTimeout = 86400.0;
 
 std::string unescape(const std::string& text) {
   std::string out;
@@ -92,6 +97,14 @@ std::string new_run_id() {
   std::snprintf(id, sizeof id, "fmu-%016llx%016llx", static_cast<unsigned long long>(random()),
                 static_cast<unsigned long long>(random()));
   return id;
+}
+
+// A new run's secret (docs/protocol.md): 32 bytes from the kernel's CSPRNG, never logged.
+bool new_run_secret(std::string* secret) {
+  secret->assign(32, '\0');
+  std::ifstream random("/dev/urandom", std::ios::binary);
+  return static_cast<bool>(
+      random.read(&(*secret)[0], static_cast<std::streamsize>(secret->size())));
 }
 
 void bind(pb::VariableBinding* binding, const Channel& c) {
@@ -230,6 +243,13 @@ bool Proxy::load(const std::string& resources) {
       channels_.push_back(c);
     }
   }
+  if (!std::isfinite(timeout_) || timeout_ <= 0 || timeout_ > kMaxTimeout) {
+    std::ostringstream message;
+    message << base << "coupler-proxy.txt: timeout " << timeout_
+            << " must be a number of seconds > 0 and <= " << kMaxTimeout
+            << " (24 h); export the FMU again with a valid --call-timeout";
+    return error(message.str());
+  }
   return true;
 }
 
@@ -320,13 +340,16 @@ bool Proxy::set_address(const std::string& address) {
 bool Proxy::initialize(double start_time, std::optional<double> stop_time) {
   if (!stub_) return error("not connected to a participant");
   run_id_ = new_run_id();
+  if (!new_run_secret(&run_secret_))
+    return error("cannot read /dev/urandom for the run's secret");
   time_ = start_time;
   pb::InitializeRequest request;
   request.set_run_id(run_id_);
+  request.set_run_secret(run_secret_);
   request.set_start_time(start_time);
   request.set_step_size(step_size_);
   if (stop_time) request.set_stop_time(*stop_time);
-  request.set_lease_seconds(std::max(60.0, 4 * timeout_));
+  request.set_lease_seconds(std::min(std::max(60.0, 4 * timeout_), kMaxLease));
   for (const auto& c : channels_) {
     if (c.kind == Kind::HIDDEN) continue;
     if (c.causality == pb::CAUSALITY_PARAMETER) bind(request.add_parameters(), c);
@@ -351,6 +374,7 @@ StepResult Proxy::step(double time, double step_size) {
   }
   pb::DoStepRequest request;
   request.set_run_id(run_id_);
+  request.set_run_secret(run_secret_);
   request.set_current_time(time);
   request.set_step_size(step_size);
   for (const auto& c : channels_)
@@ -416,6 +440,7 @@ void Proxy::terminate(const char* reason) {
   pb::TerminateRequest request;
   request.set_reason(reason);
   request.set_run_id(run_id_);
+  request.set_run_secret(run_secret_);
   pb::TerminateResponse response;
   grpc::ClientContext context;
   prepare(&context);

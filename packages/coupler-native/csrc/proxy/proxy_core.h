@@ -128,6 +128,7 @@ class Proxy {
                                            coupler::v1::DoStepResponse>> stream_;
   std::unique_ptr<Watchdog> watchdog_;
   std::string run_id_;
+  std::string run_secret_;  // the run's secret: every call of the run carries it
   bool initialized_ = false;
   bool terminated_ = false;
   bool ended_ = false;

@@ -105,6 +105,9 @@ class RunSetup:
     lease: float = 0.0
     """The run's lease [s]: silence this long ends the run at the participant; 0 = its
     default. Applied by the participant runtime (``coupler.server``), not by participants."""
+    run_secret: bytes = field(default=b"", repr=False, compare=False)
+    """The run's secret, which every call of the run carries (``coupler.client`` makes one when
+    empty). Checked by the participant runtime, never shown to participants, never logged."""
 
 
 #: Relative tolerance of "a whole multiple of fixed_step_size" (protocol: component.proto).

@@ -9,8 +9,10 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import secrets
 import time
 from collections.abc import Callable, Mapping
+from dataclasses import replace
 from types import TracebackType
 from typing import Any, TypeVar
 from urllib.parse import urlsplit
@@ -97,7 +99,8 @@ class RemoteParticipant(Participant):
         self._stub: pb_grpc.GRPCComponentServiceStub | None = None
         self._codec: wire.Codec | None = None
         self._stream: grpc.aio.StreamStreamCall | None = None
-        self._run_id = ""
+        self._run = wire.RunKey()
+        """The run's id and secret, carried by every call after Initialize."""
 
     async def __aenter__(self) -> RemoteParticipant:
         await self.open()
@@ -210,8 +213,11 @@ class RemoteParticipant(Participant):
         return self.codec.description
 
     async def initialize(self, setup: RunSetup) -> Values:
+        if not setup.run_secret:  # a caller that brings none (not the orchestrator) gets one
+            setup = replace(setup, run_secret=secrets.token_bytes(wire.SECRET_BYTES))
         request = self._request("Initialize", lambda: wire.initialize_to_pb(setup, self.codec))
-        self._run_id = setup.run_id  # Terminate names it even when Initialize's answer is bad
+        # Terminate names the run even when Initialize's answer is bad
+        self._run = wire.RunKey(setup.run_id, setup.run_secret)
         response = await self._call(
             "Initialize",
             self._stubbed().Initialize(request, timeout=self.call_timeout, metadata=self._metadata),
@@ -220,10 +226,16 @@ class RemoteParticipant(Participant):
             self._stream = self._stubbed().StepStream(metadata=self._metadata)
         return self._response("Initialize", lambda: wire.outputs_from_pb(response, self.codec))
 
-    async def do_step(self, time: float, step: float, inputs: Mapping[str, Value]) -> Values:
-        request = self._request(
-            "DoStep", lambda: wire.step_to_pb(self._run_id, time, step, inputs, self.codec)
+    def step_request(
+        self, time: float, step: float, inputs: Mapping[str, Value]
+    ) -> wire.DoStepRequest:
+        """The DoStep request of the run (its id and secret), inputs checked."""
+        return self._request(
+            "DoStep", lambda: wire.step_to_pb(self._run, time, step, inputs, self.codec)
         )
+
+    async def do_step(self, time: float, step: float, inputs: Mapping[str, Value]) -> Values:
+        request = self.step_request(time, step, inputs)
         if self._stream is not None:
             response = await self._call("DoStep", self._stream_step(self._stream, request))
         else:
@@ -261,7 +273,7 @@ class RemoteParticipant(Participant):
             await self._call(
                 "Terminate",
                 self._stubbed().Terminate(
-                    wire.terminate_to_pb(self._run_id, reason),
+                    wire.terminate_to_pb(self._run, reason),
                     timeout=self.call_timeout,
                     metadata=self._metadata,
                 ),

@@ -2,7 +2,8 @@
 
     CouplerError
     ├── ScenarioError          bad SSP, wiring or configuration; raised before anything runs
-    │   └── ValidationError    several problems found together (``.problems``)
+    │   ├── ValidationError    several problems found together (``.problems``)
+    │   └── PortInUse          a server's port is taken (``.port``, ``.holders``: pid + command)
     ├── ChannelValueError      a value does not fit its channel (``channel``, ``expected``)
     └── ParticipantError       a participant failed at run time (participant, call, status)
         ├── ParticipantUnavailable   cannot be reached, or the wrapped simulator is down
@@ -14,7 +15,7 @@ are caught -- ``coupler.client`` for gRPC, ``coupler.fmu`` for FMI -- as ``raise
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 
 
 class CouplerError(Exception):
@@ -33,6 +34,16 @@ class ValidationError(ScenarioError):
         self.subject = subject
         lines = "\n".join(f"  - {p}" for p in self.problems)
         super().__init__(f"{subject}: {len(self.problems)} problem(s)\n{lines}")
+
+
+class PortInUse(ScenarioError):
+    """A server cannot listen: another process holds its port (``coupler.ports``)."""
+
+    def __init__(self, message: str, *, port: int, holders: Sequence[object] = ()) -> None:
+        self.port = port
+        self.holders = list(holders)
+        """``coupler.ports.PortHolder`` of each process seen listening there."""
+        super().__init__(message)
 
 
 class ChannelValueError(CouplerError):

@@ -10,7 +10,13 @@ Rules every participant gets for free (docs/protocol.md has the table):
   active run's id); DoStep before Initialize is FAILED_PRECONDITION;
 - runs are leases: DoStep, StepStream and Terminate must carry the active run's id (another id
   is FAILED_PRECONDITION); the run ends on Terminate, when its StepStream ends without
-  Terminate, or after ``lease`` seconds without a call -- then the next run may start;
+  Terminate, or after ``lease`` seconds without a call -- then the next run may start; a lease
+  is at most ``durations.MAX_LEASE`` (24 h), a NaN, infinite or negative one is INVALID_ARGUMENT;
+- runs are secret: Initialize brings the run's secret (16 to 256 bytes, else INVALID_ARGUMENT),
+  every later call of the run carries it (compared in constant time). A call with the run's id
+  and without its secret is PERMISSION_DENIED and remembered as an intrusion (peer, call, time);
+  the owner's next call of the run is then ABORTED naming it, so the run fails (Terminate
+  still ends the run). The secret is never logged and never shown to the participant;
 - an unknown channel or a wrong type is INVALID_ARGUMENT naming the channel and the expected
   type; an exception inside the participant is INTERNAL with its message while the server
   keeps serving; a participant that raises ``EndRun`` answers with ``terminate`` set.
@@ -19,6 +25,8 @@ Rules every participant gets for free (docs/protocol.md has the table):
 from __future__ import annotations
 
 import asyncio
+import hmac
+import math
 import signal
 import time
 from collections.abc import AsyncIterator, Awaitable, Callable, Coroutine
@@ -31,7 +39,7 @@ import structlog
 from grpc_health.v1 import health, health_pb2, health_pb2_grpc
 from grpc_reflection.v1alpha import reflection
 
-from coupler import wire
+from coupler import durations, ports, wire
 from coupler.channels import Description
 from coupler.errors import ChannelValueError, ParticipantUnavailable, ScenarioError
 from coupler.participant import HEALTH_REASON, EndRun, Participant
@@ -47,10 +55,16 @@ T = TypeVar("T")
 
 @dataclass(eq=False)
 class _Run:
-    """The active run: its id, lease and when it was last heard of."""
+    """The active run: its id, secret, lease and when it was last heard of."""
 
     id: str
+    secret: bytes = field(repr=False)
     lease: float
+    reached: float
+    """Simulated time the run has reached [s] (after its last step)."""
+    intrusion: str | None = None
+    """Why the run is no longer trusted: the first call of it without its secret."""
+    intrusions: int = 0
     started: float = field(default_factory=time.monotonic)
     last_call: float = field(default_factory=time.monotonic)
     busy: int = 0
@@ -108,15 +122,37 @@ class _Servicer(pb_grpc.GRPCComponentServiceServicer):
                     f"ago; its lease ends it after {self.run.lease:g} s without calls); a "
                     f"participant serves one run at a time: Terminate that run or wait",
                 )
-            setup = await _guard(context, lambda: wire.initialize_from_pb(request, self.codec))
-            if setup.lease < 0:
+            secret = request.run_secret
+            if not wire.MIN_SECRET <= len(secret) <= wire.MAX_SECRET:
                 await _abort(
                     context,
                     grpc.StatusCode.INVALID_ARGUMENT,
-                    f"lease_seconds must be >= 0, got {setup.lease:g}",
+                    f"run_secret must be {wire.MIN_SECRET} to {wire.MAX_SECRET} random bytes, got "
+                    f"{len(secret)}: every later call of the run must carry it (docs/protocol.md)",
+                )
+            setup = await _guard(context, lambda: wire.initialize_from_pb(request, self.codec))
+            if setup.lease and (why := durations.problem(setup.lease, durations.MAX_LEASE)):
+                await _abort(
+                    context,
+                    grpc.StatusCode.INVALID_ARGUMENT,
+                    f"lease_seconds {why} (or 0: the participant's default, {DEFAULT_LEASE:g} s)",
+                )
+            times = {"start_time": setup.start_time, "step_size": setup.step_size}
+            if setup.stop_time is not None:
+                times["stop_time"] = setup.stop_time
+            if wrong := {name: t for name, t in times.items() if not math.isfinite(t)}:
+                await _abort(
+                    context,
+                    grpc.StatusCode.INVALID_ARGUMENT,
+                    ", ".join(f"{name} must be finite, got {t!r}" for name, t in wrong.items()),
                 )
             outputs = await _guard(context, lambda: self.participant.initialize(setup))
-            self.run = run = _Run(id=setup.run_id, lease=setup.lease or DEFAULT_LEASE)
+            self.run = run = _Run(
+                id=setup.run_id,
+                secret=secret,
+                lease=setup.lease or DEFAULT_LEASE,
+                reached=setup.start_time,
+            )
             self._watchdog = asyncio.create_task(self._watch(run), name=f"lease-{run.id}")
             log.info("run_initialized", run_id=run.id, participant=self.name, lease_s=run.lease)
             return await _guard(context, lambda: wire.initialize_response(outputs, self.codec))
@@ -136,8 +172,14 @@ class _Servicer(pb_grpc.GRPCComponentServiceServicer):
         try:
             async for request in request_iterator:
                 async with self._lock:
-                    if self.run is not None and request.run_id == self.run.id:
-                        carried = self.run
+                    run = self.run
+                    if (
+                        carried is not run
+                        and run is not None
+                        and request.run_id == run.id
+                        and hmac.compare_digest(request.run_secret, run.secret)
+                    ):
+                        carried = run  # this stream belongs to the run's owner
                     response = await self._step(request, context)
                 yield response
         finally:
@@ -170,12 +212,15 @@ class _Servicer(pb_grpc.GRPCComponentServiceServicer):
                 f"DoStep for run '{request.run_id}', which is not participant '{self.name}'s "
                 f"active run; only the orchestrator that initialized the run may step it",
             )
+        if run.intrusion is not None or not hmac.compare_digest(request.run_secret, run.secret):
+            await self._untrusted(run, request.run_secret, "DoStep", context)
         step = await _guard(context, lambda: wire.step_from_pb(request, self.codec))
-        if not step.step > 0:
+        if not (0 < step.step < math.inf and math.isfinite(step.time)):
             await _abort(
                 context,
                 grpc.StatusCode.INVALID_ARGUMENT,
-                f"step_size must be positive, got {step.step}",
+                f"step_size must be finite and positive and current_time finite, got "
+                f"step_size={step.step!r}, current_time={step.time!r}",
             )
         run.busy += 1
         try:
@@ -191,6 +236,7 @@ class _Servicer(pb_grpc.GRPCComponentServiceServicer):
         finally:
             run.busy -= 1
             run.last_call = time.monotonic()
+        run.reached = step.time + step.step
         return await _guard(context, lambda: wire.step_response(outputs, self.codec))
 
     async def Terminate(
@@ -205,8 +251,41 @@ class _Servicer(pb_grpc.GRPCComponentServiceServicer):
                     f"Terminate for run '{request.run_id}', which is not participant "
                     f"'{self.name}'s active run; nothing was ended",
                 )
+            if run is not None and not hmac.compare_digest(request.run_secret, run.secret):
+                await self._untrusted(run, request.run_secret, "Terminate", context)
             await self.end_run(request.reason)
+            if run is not None and run.intrusion is not None:
+                await _abort(context, grpc.StatusCode.ABORTED, self._refusal(run))
         return wire.TerminateResponse()
+
+    async def _untrusted(
+        self, run: _Run, secret: bytes, call: str, context: grpc.aio.ServicerContext
+    ) -> NoReturn:
+        """Refuses a call of ``run``: without the run's secret it is an intrusion
+        (PERMISSION_DENIED, remembered); from the owner of a run that saw one, ABORTED."""
+        if hmac.compare_digest(secret, run.secret):
+            await _abort(context, grpc.StatusCode.ABORTED, self._refusal(run))
+        peer = context.peer() or "an unknown address"
+        run.intrusions += 1
+        if run.intrusion is None:
+            how = "without this run's secret" if not secret else "with a wrong secret"
+            run.intrusion = (
+                f"{self.name} refused the run: a call {how} arrived from {peer} ({call} at "
+                f"t={run.reached:g} s); the run is no longer trusted"
+            )
+        log.warning("run_intrusion", run_id=run.id, participant=self.name, peer=peer, call=call)
+        await _abort(
+            context,
+            grpc.StatusCode.PERMISSION_DENIED,
+            f"{call} refused: it names participant '{self.name}'s active run but does not carry "
+            f"that run's secret (run_secret, docs/protocol.md); the run's owner will be told",
+        )
+
+    @staticmethod
+    def _refusal(run: _Run) -> str:
+        """What the owner of a run that saw an intrusion is told."""
+        more = run.intrusions - 1
+        return f"{run.intrusion}" + (f" ({more} more such calls since)" if more > 0 else "")
 
     async def end_run(self, reason: str) -> None:
         """Terminate the active run, if any; idempotent. The caller holds the lock."""
@@ -345,7 +424,9 @@ class ParticipantServer:
         if warning:
             log.warning("insecure_interface", host=self.host, detail=warning)
         credentials = self.security.credentials()
-        server = grpc.aio.server(interceptors=self.security.interceptors())
+        server = grpc.aio.server(
+            interceptors=self.security.interceptors(), options=ports.GRPC_SERVER_OPTIONS
+        )
         self._server = server
         await self._set_health(health_pb2.HealthCheckResponse.NOT_SERVING)
         self._servicer = _Servicer(self.participant)
@@ -355,13 +436,16 @@ class ParticipantServer:
             reflection.enable_server_reflection(
                 (SERVICE_NAME, health.SERVICE_NAME, reflection.SERVICE_NAME), server
             )
-        bind = (
-            f"unix:{self.unix_socket}" if self.unix_socket else f"{self.host}:{self.requested_port}"
-        )
-        if credentials is None:
-            self.port = server.add_insecure_port(bind)
+        if self.unix_socket is not None:
+            bind = f"unix:{self.unix_socket}"
+            if credentials is None:
+                self.port = server.add_insecure_port(bind)
+            else:
+                self.port = server.add_secure_port(bind, credentials)
         else:
-            self.port = server.add_secure_port(bind, credentials)
+            self.port = ports.add_grpc_port(
+                server, self.host, self.requested_port, credentials, "the participant"
+            )
         await server.start()
         if self.security.health_port is not None:
             await self._start_health_server(self.security.health_port)
@@ -412,9 +496,11 @@ class ParticipantServer:
     async def _start_health_server(self, port: int) -> None:
         """The health service alone, plaintext: it tells whether this participant serves and
         nothing else, so probes that cannot do TLS (Kubernetes, Docker) need no secrets."""
-        self._health_server = grpc.aio.server()
+        self._health_server = grpc.aio.server(options=ports.GRPC_SERVER_OPTIONS)
         health_pb2_grpc.add_HealthServicer_to_server(self.health, self._health_server)
-        self.health_port = self._health_server.add_insecure_port(f"{self.host}:{port}")
+        self.health_port = ports.add_grpc_port(
+            self._health_server, self.host, port, None, "the health service (--health-port)"
+        )
         await self._health_server.start()
         log.info("health_serving", address=f"grpc://{self.host}:{self.health_port}")
 

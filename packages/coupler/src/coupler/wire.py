@@ -9,7 +9,7 @@ the rest of Coupler speaks Python values.
 from __future__ import annotations
 
 from collections.abc import Iterable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from coupler.channels import (
     Capabilities,
@@ -218,6 +218,7 @@ def initialize_to_pb(setup: RunSetup, codec: Codec) -> pb.InitializeRequest:
     """The Initialize request for ``setup``, values checked against the participant's channels."""
     return pb.InitializeRequest(
         run_id=setup.run_id,
+        run_secret=setup.run_secret,
         start_time=setup.start_time,
         step_size=setup.step_size,
         stop_time=setup.stop_time,
@@ -228,7 +229,8 @@ def initialize_to_pb(setup: RunSetup, codec: Codec) -> pb.InitializeRequest:
 
 
 def initialize_from_pb(request: pb.InitializeRequest, codec: Codec) -> RunSetup:
-    """The run set-up an Initialize request carries."""
+    """The run set-up an Initialize request carries, without its secret (the runtime reads
+    ``request.run_secret`` itself; participants never see it)."""
     return RunSetup(
         run_id=request.run_id,
         start_time=request.start_time,
@@ -247,6 +249,20 @@ def initialize_response(outputs: Mapping[str, object], codec: Codec) -> pb.Initi
 # --- DoStep ----------------------------------------------------------------------------------
 
 
+MIN_SECRET, MAX_SECRET = 16, 256
+"""Bounds of a run secret's length [bytes] (InitializeRequest.run_secret)."""
+SECRET_BYTES = 32
+"""Length of the run secrets Coupler makes (``secrets.token_bytes``)."""
+
+
+@dataclass(frozen=True, slots=True)
+class RunKey:
+    """What every call of a run carries after Initialize: its public id and its secret."""
+
+    id: str = ""
+    secret: bytes = field(default=b"", repr=False)
+
+
 @dataclass(frozen=True, slots=True)
 class Step:
     """What a DoStep request carries."""
@@ -258,10 +274,11 @@ class Step:
 
 
 def step_to_pb(
-    run_id: str, time: float, step: float, inputs: Mapping[str, object], codec: Codec
+    run: RunKey, time: float, step: float, inputs: Mapping[str, object], codec: Codec
 ) -> pb.DoStepRequest:
     return pb.DoStepRequest(
-        run_id=run_id,
+        run_id=run.id,
+        run_secret=run.secret,
         current_time=time,
         step_size=step,
         inputs=codec.encode(inputs, (Causality.INPUT,)),
@@ -301,5 +318,5 @@ def termination_requested(response: pb.DoStepResponse) -> str | None:
 # --- Terminate -------------------------------------------------------------------------------
 
 
-def terminate_to_pb(run_id: str, reason: str) -> pb.TerminateRequest:
-    return pb.TerminateRequest(run_id=run_id, reason=reason)
+def terminate_to_pb(run: RunKey, reason: str) -> pb.TerminateRequest:
+    return pb.TerminateRequest(run_id=run.id, run_secret=run.secret, reason=reason)

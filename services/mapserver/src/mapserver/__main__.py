@@ -15,6 +15,7 @@ import structlog
 
 from coupler.errors import CouplerError
 from coupler.logs import configure_logging
+from coupler.ports import listening
 from coupler.server import ParticipantServer
 from coupler.server import run as run_participant
 from coupler.settings import add_security_arguments
@@ -74,9 +75,10 @@ async def run(settings: MapServerSettings) -> None:
     runner = None
     try:
         await server.start()
-        runner, http_port = await start_site(
-            create_app(feed, infrastructure, settings), settings.http_host, settings.http_port
-        )
+        with listening(settings.http_host, settings.http_port, "the map (--http-port)"):
+            runner, http_port = await start_site(
+                create_app(feed, infrastructure, settings), settings.http_host, settings.http_port
+            )
         url = f"http://{settings.http_host}:{http_port}/"
         log.info(
             "mapserver_started",

@@ -14,7 +14,8 @@ from typing import Any
 import structlog
 from aiohttp import web
 
-from coupler.errors import ScenarioError
+from coupler.errors import CouplerError
+from coupler.ports import listening
 
 from .api import SERVER, create_app
 from .config import MockConfig
@@ -54,7 +55,12 @@ async def _serve(config: MockConfig) -> None:
     runner = web.AppRunner(app, access_log=None)
     await runner.setup()
     site = web.TCPSite(runner, config.host, config.port)
-    await site.start()
+    try:
+        with listening(config.host, config.port, "the OpenRails mock"):
+            await site.start()
+    except CouplerError:
+        await runner.cleanup()
+        raise
     port = runner.addresses[0][1]
     consist = app[SERVER].simulation.consist
     log.info(
@@ -86,7 +92,7 @@ def main(argv: list[str] | None = None) -> None:
     try:
         with contextlib.suppress(KeyboardInterrupt):
             asyncio.run(_serve(config))
-    except ScenarioError as exc:  # a route, path or railML file the mock cannot use
+    except CouplerError as exc:  # a route, path or railML file the mock cannot use; a taken port
         print(f"openrails-mock: error: {exc}", file=sys.stderr)
         sys.exit(1)
 

@@ -178,6 +178,8 @@ class Plan:
     """Master algorithm."""
     run_id: str
     """Identifies the run in logs, participants and results; unique per run."""
+    run_secret: bytes = field(repr=False)
+    """Authenticates the run's calls at its participants (``RunOptions.run_secret``)."""
     lease: float
     """Lease granted with Initialize [s]: a participant ends the run after this long without a
     call."""

@@ -5,15 +5,37 @@ Every stage of the pipeline reads the part it needs; none of them changes it.
 
 from __future__ import annotations
 
+import os
+import secrets
 import uuid
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from coupler.archives import DEFAULT_BUDGET_BYTES
+from coupler.errors import ScenarioError
 from coupler.security import ClientSecurity
+from coupler.wire import MAX_SECRET, MIN_SECRET, SECRET_BYTES
 from coupler_orchestrator.model import Algorithm
 from coupler_orchestrator.observer import RunEnd
+
+SECRET_VARIABLE = "COUPLER_RUN_SECRET"
+"""A run secret chosen from outside (UTF-8, at least 16 bytes); unset: a random one."""
+
+
+def run_secret() -> bytes:
+    """A new run's secret: ``COUPLER_RUN_SECRET`` when set, else 32 bytes from the system's
+    CSPRNG (``secrets``)."""
+    chosen = os.environ.get(SECRET_VARIABLE)
+    if chosen is None:
+        return secrets.token_bytes(SECRET_BYTES)
+    secret = chosen.encode()
+    if not MIN_SECRET <= len(secret) <= MAX_SECRET:
+        raise ScenarioError(
+            f"{SECRET_VARIABLE} must be {MIN_SECRET} to {MAX_SECRET} bytes, it has "
+            f"{len(secret)}; unset it to get a random secret per run"
+        )
+    return secret
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -29,11 +51,17 @@ class RunOptions:
     algorithm: Algorithm | None = None
     """Master algorithm; default from the OpenMCx task stepType, else Jacobi."""
     realtime_factor: float | None = None
-    """Pace the run; None runs as fast as possible."""
+    """Pace the run (the command line takes at least ``cli.parser.MIN_REALTIME_FACTOR``); None
+    runs as fast as possible."""
     parameters: Mapping[str, str] = field(default_factory=dict)
     """``Component.name`` -> value text, overriding the SSD's parameter bindings."""
     run_id: str = field(default_factory=lambda: uuid.uuid4().hex)
-    """Identifies the run; a random UUID unless given."""
+    """Identifies the run; a random UUID unless given. Public: files, logs and the monitor
+    show it."""
+    run_secret: bytes = field(default_factory=lambda: run_secret(), repr=False)
+    """Authenticates every call of the run at its participants: 32 random bytes, or the
+    ``COUPLER_RUN_SECRET`` environment variable's (never a flag: command lines are public).
+    Never written to a file or a log."""
     lease: float | None = None
     """Lease of the run at each participant [s]; default: well above the call deadline and the
     pacing (``plan.lease_of``)."""

@@ -14,6 +14,17 @@ StepStream that carried it ends without Terminate, or when no call arrives for `
 -- whichever comes first. The participant then serves the next Initialize: an orchestrator
 that dies never locks a participant.
 
+The run id is public (it names the run in files, logs and monitors); the run SECRET proves a
+call comes from whoever started the run. Initialize carries a random `run_secret` (16 to 256
+bytes, unguessable, never written to a file, a log or a command line), and every later call of
+the run carries the same bytes, compared in constant time. A call with the active run's id but
+without its secret (or with a wrong one) is refused with PERMISSION_DENIED and changes nothing;
+the participant remembers the intrusion (caller's address, call, time) and answers the run's
+next call from its owner -- DoStep, a StepStream request or Terminate (which still ends the
+run) -- with ABORTED "<participant> refused the run: a call without this run's secret arrived
+from <peer> (<call> at t=<time> s); the run is no longer trusted", so the run fails naming the
+intrusion.
+
 Security is the transport's and the metadata's: a participant may serve TLS (grpcs://
 addresses), require client certificates (mutual TLS) and require a bearer token in the call
 metadata (`authorization: Bearer <token>`) on every call of this service; a missing or wrong
@@ -247,6 +258,7 @@ class InitializeRequest(_message.Message):
     DESCRIPTOR: _descriptor.Descriptor
 
     RUN_ID_FIELD_NUMBER: _builtins.int
+    RUN_SECRET_FIELD_NUMBER: _builtins.int
     START_TIME_FIELD_NUMBER: _builtins.int
     STEP_SIZE_FIELD_NUMBER: _builtins.int
     STOP_TIME_FIELD_NUMBER: _builtins.int
@@ -257,13 +269,19 @@ class InitializeRequest(_message.Message):
     """Identifies the run; unique per run (the orchestrator uses a random UUID unless told
     otherwise). Every later call of the run repeats it.
     """
+    run_secret: _builtins.bytes
+    """The run's secret: 16 to 256 random bytes (the orchestrator sends 32 from a CSPRNG), else
+    INVALID_ARGUMENT. Every later call of the run repeats them (see the rules above).
+    """
     start_time: _builtins.float
     step_size: _builtins.float
     stop_time: _builtins.float
     lease_seconds: _builtins.float
     """The run's lease [s]: when no call of this run arrives for this long, the participant ends
     the run itself (logging why) and serves the next one. 0: the participant's default (60 s).
-    The orchestrator sets it well above its per-call deadline and its pacing.
+    At most 86400 (24 h); a negative, NaN, infinite or longer lease is INVALID_ARGUMENT, so no
+    client can lock a participant for good. The orchestrator sets it well above its per-call
+    deadline and its pacing. start_time, step_size and stop_time must be finite.
     """
     @_builtins.property
     def parameters(self) -> _containers.RepeatedCompositeFieldContainer[Global___VariableBinding]: ...
@@ -275,6 +293,7 @@ class InitializeRequest(_message.Message):
         self,
         *,
         run_id: _builtins.str = ...,
+        run_secret: _builtins.bytes = ...,
         start_time: _builtins.float = ...,
         step_size: _builtins.float = ...,
         stop_time: _builtins.float | None = ...,
@@ -284,7 +303,7 @@ class InitializeRequest(_message.Message):
     ) -> None: ...
     _HasFieldArgType: _TypeAlias = _typing.Literal["_stop_time", b"_stop_time", "stop_time", b"stop_time"]  # noqa: Y015
     def HasField(self, field_name: _HasFieldArgType) -> _builtins.bool: ...
-    _ClearFieldArgType: _TypeAlias = _typing.Literal["_stop_time", b"_stop_time", "inputs", b"inputs", "lease_seconds", b"lease_seconds", "parameters", b"parameters", "run_id", b"run_id", "start_time", b"start_time", "step_size", b"step_size", "stop_time", b"stop_time"]  # noqa: Y015
+    _ClearFieldArgType: _TypeAlias = _typing.Literal["_stop_time", b"_stop_time", "inputs", b"inputs", "lease_seconds", b"lease_seconds", "parameters", b"parameters", "run_id", b"run_id", "run_secret", b"run_secret", "start_time", b"start_time", "step_size", b"step_size", "stop_time", b"stop_time"]  # noqa: Y015
     def ClearField(self, field_name: _ClearFieldArgType) -> None: ...
     _WhichOneofReturnType__stop_time: _TypeAlias = _typing.Literal["stop_time"]  # noqa: Y015
     _WhichOneofArgType__stop_time: _TypeAlias = _typing.Literal["_stop_time", b"_stop_time"]  # noqa: Y015
@@ -322,16 +341,20 @@ class DoStepRequest(_message.Message):
     STEP_SIZE_FIELD_NUMBER: _builtins.int
     INPUTS_FIELD_NUMBER: _builtins.int
     RUN_ID_FIELD_NUMBER: _builtins.int
+    RUN_SECRET_FIELD_NUMBER: _builtins.int
     current_time: _builtins.float
     """Communication point at which the step starts [s]: t_k = t_0 + k * h, computed by
     multiplication by the orchestrator (never a running sum).
     """
     step_size: _builtins.float
     """Exactly the configured communication step of this participant (h * multiple), not the
-    difference of two communication points [s].
+    difference of two communication points [s]. Finite and positive (current_time finite),
+    else INVALID_ARGUMENT.
     """
     run_id: _builtins.str
     """The run this step belongs to (InitializeRequest.run_id)."""
+    run_secret: _builtins.bytes
+    """The run's secret (InitializeRequest.run_secret), in every DoStep and StepStream request."""
     @_builtins.property
     def inputs(self) -> _containers.RepeatedCompositeFieldContainer[Global___VariableBinding]:
         """Inputs valid from current_time."""
@@ -343,10 +366,11 @@ class DoStepRequest(_message.Message):
         step_size: _builtins.float = ...,
         inputs: _abc.Iterable[Global___VariableBinding] | None = ...,
         run_id: _builtins.str = ...,
+        run_secret: _builtins.bytes = ...,
     ) -> None: ...
     _HasFieldArgType: _TypeAlias = _Never  # noqa: Y015
     def HasField(self, field_name: _HasFieldArgType) -> _builtins.bool: ...
-    _ClearFieldArgType: _TypeAlias = _typing.Literal["current_time", b"current_time", "inputs", b"inputs", "run_id", b"run_id", "step_size", b"step_size"]  # noqa: Y015
+    _ClearFieldArgType: _TypeAlias = _typing.Literal["current_time", b"current_time", "inputs", b"inputs", "run_id", b"run_id", "run_secret", b"run_secret", "step_size", b"step_size"]  # noqa: Y015
     def ClearField(self, field_name: _ClearFieldArgType) -> None: ...
     def WhichOneof(self, oneof_group: _Never) -> None: ...
 
@@ -392,20 +416,24 @@ class TerminateRequest(_message.Message):
 
     REASON_FIELD_NUMBER: _builtins.int
     RUN_ID_FIELD_NUMBER: _builtins.int
+    RUN_SECRET_FIELD_NUMBER: _builtins.int
     reason: _builtins.str
     run_id: _builtins.str
     """The run to end (InitializeRequest.run_id). Terminate for a run that has already ended is
     answered OK; for another run than the active one, FAILED_PRECONDITION.
     """
+    run_secret: _builtins.bytes
+    """The run's secret (InitializeRequest.run_secret)."""
     def __init__(
         self,
         *,
         reason: _builtins.str = ...,
         run_id: _builtins.str = ...,
+        run_secret: _builtins.bytes = ...,
     ) -> None: ...
     _HasFieldArgType: _TypeAlias = _Never  # noqa: Y015
     def HasField(self, field_name: _HasFieldArgType) -> _builtins.bool: ...
-    _ClearFieldArgType: _TypeAlias = _typing.Literal["reason", b"reason", "run_id", b"run_id"]  # noqa: Y015
+    _ClearFieldArgType: _TypeAlias = _typing.Literal["reason", b"reason", "run_id", b"run_id", "run_secret", b"run_secret"]  # noqa: Y015
     def ClearField(self, field_name: _ClearFieldArgType) -> None: ...
     def WhichOneof(self, oneof_group: _Never) -> None: ...
 

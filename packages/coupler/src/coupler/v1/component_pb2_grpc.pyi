@@ -14,6 +14,17 @@ StepStream that carried it ends without Terminate, or when no call arrives for `
 -- whichever comes first. The participant then serves the next Initialize: an orchestrator
 that dies never locks a participant.
 
+The run id is public (it names the run in files, logs and monitors); the run SECRET proves a
+call comes from whoever started the run. Initialize carries a random `run_secret` (16 to 256
+bytes, unguessable, never written to a file, a log or a command line), and every later call of
+the run carries the same bytes, compared in constant time. A call with the active run's id but
+without its secret (or with a wrong one) is refused with PERMISSION_DENIED and changes nothing;
+the participant remembers the intrusion (caller's address, call, time) and answers the run's
+next call from its owner -- DoStep, a StepStream request or Terminate (which still ends the
+run) -- with ABORTED "<participant> refused the run: a call without this run's secret arrived
+from <peer> (<call> at t=<time> s); the run is no longer trusted", so the run fails naming the
+intrusion.
+
 Security is the transport's and the metadata's: a participant may serve TLS (grpcs://
 addresses), require client certificates (mutual TLS) and require a bearer token in the call
 metadata (`authorization: Bearer <token>`) on every call of this service; a missing or wrong

@@ -6,6 +6,7 @@ import argparse
 from pathlib import Path
 from typing import TYPE_CHECKING, TextIO
 
+from coupler import durations
 from coupler_orchestrator.cli.exits import EXIT_OK
 from coupler_orchestrator.cli.parser import security_of, security_options
 from coupler_orchestrator.cli.session import Session
@@ -18,7 +19,12 @@ HELP = "print a participant's channels"
 
 def arguments(describe: argparse.ArgumentParser) -> None:
     describe.add_argument("target", help="grpc://HOST:PORT, grpcs://HOST:PORT or an .fmu file")
-    describe.add_argument("--timeout", type=float, default=10.0, help="connect timeout [s]")
+    describe.add_argument(
+        "--timeout",
+        type=durations.argument(durations.MAX_TIMEOUT),
+        default=10.0,
+        help="connect timeout [s]",
+    )
     security_options(describe)
 
 

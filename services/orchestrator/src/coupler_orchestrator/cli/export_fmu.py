@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 from typing import TextIO
 
+from coupler import durations
 from coupler_orchestrator.cli.exits import EXIT_OK
 from coupler_orchestrator.cli.parser import security_of, security_options
 from coupler_orchestrator.cli.session import Session, shown
@@ -26,11 +27,16 @@ def arguments(export: argparse.ArgumentParser) -> None:
     )
     export.add_argument(
         "--call-timeout",
-        type=float,
+        type=durations.argument(durations.MAX_TIMEOUT),
         default=30.0,
         help="[s] deadline of every call the FMU makes to the participant (default 30)",
     )
-    export.add_argument("--timeout", type=float, default=10.0, help="connect timeout [s]")
+    export.add_argument(
+        "--timeout",
+        type=durations.argument(durations.MAX_TIMEOUT),
+        default=10.0,
+        help="connect timeout [s]",
+    )
     security_options(export)
 
 

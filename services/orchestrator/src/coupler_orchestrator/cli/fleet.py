@@ -8,8 +8,9 @@ from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING, TextIO
 
+from coupler import durations
 from coupler_orchestrator.cli.exits import EXIT_OK
-from coupler_orchestrator.cli.parser import options_of, parser, record_options
+from coupler_orchestrator.cli.parser import options_of, parser, realtime_factor, record_options
 from coupler_orchestrator.cli.session import Session, shown
 
 if TYPE_CHECKING:
@@ -25,9 +26,16 @@ def arguments(fleet: argparse.ArgumentParser) -> None:
     fleet.add_argument("--exit", action="store_true", help="stop the services when the run ends")
     fleet.add_argument("--out", type=Path, help="results directory (default from the fleet file)")
     fleet.add_argument(
-        "--realtime-factor", type=float, help="override the fleet file's pacing; 0 = unpaced"
+        "--realtime-factor",
+        type=realtime_factor,
+        help="override the fleet file's pacing; 0 = unpaced",
     )
-    fleet.add_argument("--health-timeout", type=float, default=60.0, help="[s] per service")
+    fleet.add_argument(
+        "--health-timeout",
+        type=durations.argument(durations.MAX_TIMEOUT),
+        default=60.0,
+        help="[s] per service",
+    )
     record_options(fleet)
 
 

@@ -9,16 +9,22 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import math
 from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from coupler import durations
 from coupler.errors import CouplerError
 from coupler_orchestrator.model import Algorithm
 
 if TYPE_CHECKING:
     from coupler.security import ClientSecurity
     from coupler_orchestrator.options import RunOptions
+
+MIN_REALTIME_FACTOR = 1e-3
+"""The slowest pacing: one simulated second per 1000 s of wall time (slower would wait for
+days between steps; 1e-300 never ended)."""
 
 COMMANDS = {
     "run": "run",
@@ -59,6 +65,22 @@ def parser() -> argparse.ArgumentParser:
     return top
 
 
+def realtime_factor(text: str) -> float:
+    """An argparse type: 0 (as fast as possible) or at least MIN_REALTIME_FACTOR, finite."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"must be a finite number, got {text!r}")
+    if value != 0 and not value >= MIN_REALTIME_FACTOR:
+        raise argparse.ArgumentTypeError(
+            f"must be 0 (as fast as possible) or at least {MIN_REALTIME_FACTOR:g} (one "
+            f"simulated second per {1 / MIN_REALTIME_FACTOR:g} s), got {text}"
+        )
+    return value
+
+
 def scenario_argument(command: argparse.ArgumentParser) -> None:
     command.add_argument(
         "ssp", type=Path, help=".ssp archive, unpacked SSP folder, .ssd file or a single .fmu"
@@ -86,21 +108,21 @@ def run_options(command: argparse.ArgumentParser) -> None:
     command.add_argument("--run-id", help="run id sent to participants (default: a random UUID)")
     command.add_argument(
         "--lease",
-        type=float,
+        type=durations.argument(durations.MAX_LEASE),
         help="[s] a participant ends the run after this long without a call (default: the "
-        "larger of 60 s and 4 call deadlines)",
+        "larger of 60 s and 4 call deadlines; at most 86400 = 24 h)",
     )
     command.add_argument(
         "--connect-timeout",
-        type=float,
+        type=durations.argument(durations.MAX_TIMEOUT),
         default=10.0,
         help="[s] how long a participant may take to report SERVING (default 10)",
     )
     command.add_argument(
         "--call-timeout",
-        type=float,
+        type=durations.argument(durations.MAX_TIMEOUT),
         default=30.0,
-        help="[s] deadline of every call to a participant (default 30)",
+        help="[s] deadline of every call to a participant (default 30; at most 86400 = 24 h)",
     )
     command.add_argument(
         "--unpack-limit",

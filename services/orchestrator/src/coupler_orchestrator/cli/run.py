@@ -9,9 +9,12 @@ from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING, TextIO
 
+from coupler import durations
 from coupler_orchestrator.cli.exits import EXIT_ERROR, EXIT_OK
 from coupler_orchestrator.cli.parser import (
+    MIN_REALTIME_FACTOR,
     options_of,
+    realtime_factor,
     record_options,
     run_options,
     scenario_argument,
@@ -60,7 +63,12 @@ def arguments(run: argparse.ArgumentParser) -> None:
         help="results directory (default: the SSD's OpenMCx outputDirectory, else ./results)",
     )
     record_options(run)
-    run.add_argument("--realtime-factor", type=float, help="pace at X times real time")
+    run.add_argument(
+        "--realtime-factor",
+        type=realtime_factor,
+        help="pace at X times real time (0: as fast as possible; at least "
+        f"{MIN_REALTIME_FACTOR:g})",
+    )
     run.add_argument(
         "--no-progress",
         action="store_true",
@@ -74,7 +82,7 @@ def arguments(run: argparse.ArgumentParser) -> None:
     )
     run.add_argument(
         "--monitor-linger",
-        type=float,
+        type=durations.argument(durations.MAX_TIMEOUT, zero=True),
         default=0.0,
         metavar="S",
         help="keep the monitor page up S seconds after the run ends (default 0)",

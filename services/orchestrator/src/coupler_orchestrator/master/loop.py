@@ -194,9 +194,12 @@ class Master:
         finally:
             if self._watchdog is not None:
                 self._watchdog.stop()
-            await self._terminate(
+            refused = await self._terminate(
                 initialized, reason or "run completed", aborted=status != "completed"
             )
+            if refused is not None and status in ("completed", "terminated"):
+                status, reason = "failed", f"{refused} (after the run's last step)"
+                log.error("run_failed", run_id=plan.run_id, reason=reason)
             end = RunEnd(
                 status=status,
                 reason=reason,
@@ -240,6 +243,7 @@ class Master:
         async def init(m: Member) -> Values:
             setup = RunSetup(
                 run_id=self.plan.run_id,
+                run_secret=self.plan.run_secret,
                 start_time=grid.start,
                 step_size=m.step,
                 stop_time=grid.stop,
@@ -505,15 +509,18 @@ class Master:
 
     async def _terminate(
         self, members: Sequence[Member], reason: str, *, aborted: bool = False
-    ) -> None:
+    ) -> ParticipantError | None:
         """Terminate every member; after a failure or an interrupt each gets a short deadline,
-        so that ending never takes longer than a few seconds."""
+        so that ending never takes longer than a few seconds. Returns the first member's
+        refusal of the run (ABORTED: a stranger called it without the run's secret), which
+        fails a run that had seemed to end well."""
         deadline = 3.0 if aborted else None
 
         async def terminate(m: Member) -> None:
             await asyncio.wait_for(m.participant.terminate(reason), deadline or m.deadline)
 
         results = await asyncio.gather(*(terminate(m) for m in members), return_exceptions=True)
+        refused = None
         for m, result in zip(members, results, strict=True):
             if isinstance(result, Exception):
                 log.warning(
@@ -521,3 +528,6 @@ class Master:
                     participant=m.name,
                     error=str(result) or type(result).__name__,
                 )
+                if isinstance(result, ParticipantError) and result.status == "ABORTED":
+                    refused = refused or result
+        return refused

@@ -122,10 +122,7 @@ class NativeRemote(RemoteParticipant):
     def send(self, time: float, step: float, inputs: Mapping[str, Value]) -> None:
         """Put a step's request on its way; ``receive()`` takes the answer."""
         assert self._lib is not None and self._native is not None
-        request = self._request(
-            "DoStep", lambda: wire.step_to_pb(self._run_id, time, step, inputs, self.codec)
-        )
-        data = request.SerializeToString()
+        data = self.step_request(time, step, inputs).SerializeToString()
         if self._lib.cs_send(self._native, data, len(data)) != self._lib.CS_OK:
             self.receive()  # the stream has ended: its status says why
             raise ParticipantError(

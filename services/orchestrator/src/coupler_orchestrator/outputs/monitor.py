@@ -32,7 +32,8 @@ import structlog
 from aiohttp import web
 
 from coupler.channels import Value
-from coupler.errors import CouplerError
+from coupler.errors import CouplerError, ScenarioError
+from coupler.ports import listening
 from coupler_orchestrator.observer import Observer, RunEnd, RunInfo
 
 log = structlog.get_logger("coupler.monitor")
@@ -303,14 +304,11 @@ class MonitorServer:
         runner = web.AppRunner(self._app, access_log=None, shutdown_timeout=1.0)
         await runner.setup()
         try:
-            site = web.TCPSite(runner, self.host, self.port)
-            await site.start()
-        except OSError as exc:
+            with listening(self.host, self.port, "the monitor"):
+                await web.TCPSite(runner, self.host, self.port).start()
+        except ScenarioError as exc:
             await runner.cleanup()
-            raise MonitorError(
-                f"--monitor {self.host}:{self.port}: cannot serve there ({exc.strerror or exc}); "
-                "pick a free port (--monitor 0 takes any)"
-            ) from None
+            raise MonitorError(f"--monitor: {exc} (--monitor 0 takes any free port)") from None
         bound: Any = runner.addresses[0]
         self.port = int(bound[1])
         self._runner = runner

@@ -20,10 +20,10 @@ Every other annotation is reported as a warning by :func:`unsupported`.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
+from coupler import durations
 from coupler.errors import ScenarioError
 
 from .documents import Element, boolean, child, children, elements, integer, local, number, where
@@ -163,11 +163,8 @@ def component_settings(
             f"{', '.join(repr(u) for u in unknown)} (settings: {', '.join(sorted(known))})"
         )
     timeout = number(settings, "callTimeout", display, None)
-    if timeout is not None and not (math.isfinite(timeout) and timeout > 0):
-        raise ScenarioError(
-            f'{where(display, settings)}: callTimeout="{timeout}" must be a positive number '
-            "of seconds"
-        )
+    if timeout is not None and (why := durations.problem(timeout, durations.MAX_TIMEOUT)):
+        raise ScenarioError(f"{where(display, settings)}: callTimeout {why}")
     paths = {
         field: resolve(text, attribute)
         for attribute, field in _SETTING_PATHS.items()

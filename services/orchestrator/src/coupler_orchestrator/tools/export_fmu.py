@@ -26,7 +26,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from xml.etree import ElementTree
 
-from coupler import wire
+from coupler import durations, wire
 from coupler.channels import Causality, Channel, Description, ValueType
 from coupler.client import RemoteParticipant, parse_address
 from coupler.errors import CouplerError
@@ -324,6 +324,8 @@ def write_fmu(
     """Write the FMU for ``description`` (the participant at ``address``) to ``out``."""
     if fmi_version not in _PLATFORM:
         raise ExportError(f"--fmi {fmi_version}: write 2 or 3")
+    if why := durations.problem(call_timeout, durations.MAX_TIMEOUT):
+        raise ExportError(f"--call-timeout {why}")
     warnings = []
     exported: list[tuple[int, Channel]] = []
     for channel in description.channels:

@@ -38,7 +38,7 @@ import sys
 import tempfile
 import time
 import tomllib
-from collections.abc import Iterator, Mapping
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
@@ -51,6 +51,7 @@ import structlog
 
 from coupler.errors import CouplerError, ScenarioError
 from coupler.health import probe
+from coupler.ports import holders_of, port_is_free
 from coupler_orchestrator.ssp.expansion import expand
 
 log = structlog.get_logger("coupler.fleet")
@@ -168,14 +169,6 @@ def _service(path: Path, raw: Mapping[str, Any], env: Mapping[str, str]) -> Serv
     )
 
 
-@dataclass(frozen=True, kw_only=True)
-class PortHolder:
-    """A process listening on a TCP port."""
-
-    pid: int
-    command: str
-
-
 def port_variables(path: Path) -> tuple[str, ...]:
     """The ``${NAME_PORT}`` variables a fleet file uses, in order of appearance: setting each
     to a free port moves the whole fleet (and an SSD reading the same variables)."""
@@ -201,55 +194,6 @@ def free_port() -> int:
         if port not in _handed_out and port_is_free(port):
             _handed_out.add(port)
             return port
-
-
-def port_is_free(port: int) -> bool:
-    """Whether a server could listen on ``port`` on every address (TIME_WAIT does not count,
-    as servers set SO_REUSEADDR)."""
-    if _listeners(port):
-        return False
-    with socket.socket() as probe_socket:
-        probe_socket.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-        try:
-            probe_socket.bind(("", port))
-        except OSError:
-            return False
-    return True
-
-
-def holders_of(port: int) -> list[PortHolder]:
-    """The processes listening on ``port`` (from /proc; empty when they cannot be seen)."""
-    inodes = _listeners(port)
-    found = []
-    for pid in _pids():
-        try:
-            links = {os.readlink(f"/proc/{pid}/fd/{fd}") for fd in os.listdir(f"/proc/{pid}/fd")}
-            if not any(f"socket:[{inode}]" in links for inode in inodes):
-                continue
-            raw = Path(f"/proc/{pid}/cmdline").read_bytes()
-        except OSError:
-            continue
-        found.append(PortHolder(pid=pid, command=raw.replace(b"\0", b" ").decode().strip()))
-    return found
-
-
-def _listeners(port: int) -> set[str]:
-    """Socket inodes listening on ``port`` (IPv4 and IPv6), from /proc/net/tcp*."""
-    inodes = set()
-    for table in ("/proc/net/tcp", "/proc/net/tcp6"):
-        with contextlib.suppress(OSError):
-            for line in Path(table).read_text().splitlines()[1:]:
-                fields = line.split()
-                if fields[3] == "0A" and int(fields[1].rsplit(":", 1)[1], 16) == port:
-                    inodes.add(fields[9])
-    return inodes
-
-
-def _pids() -> Iterator[int]:
-    with contextlib.suppress(OSError):
-        for entry in os.listdir("/proc"):
-            if entry.isdigit():
-                yield int(entry)
 
 
 class Fleet:
