@@ -11,6 +11,7 @@ the simulation build's (README: "Endpoints"). Every request the mock cannot take
 
 from __future__ import annotations
 
+import asyncio
 import itertools
 import json
 import math
@@ -20,8 +21,13 @@ from typing import Any
 
 from aiohttp import web
 
+from coupler.errors import ScenarioError
+
 from .config import MAX_STEP_MS, MockConfig
-from .route import Route, StraightRoute, load_route
+from .renderer import Mount, Renderer
+from .route import Route, StraightRoute, load_infrastructure_file
+from .scene import Scene
+from .sensors import Cameras, load_sensors, sensor_names
 from .simulation import (
     CONTROL_SPECS,
     ControlError,
@@ -48,10 +54,18 @@ class BadRequest(Exception):
 class MockServer:
     """The state behind the handlers: the simulation, the mode and the clocks."""
 
-    def __init__(self, config: MockConfig, simulation: Simulation, clock: Clock) -> None:
+    def __init__(
+        self,
+        config: MockConfig,
+        simulation: Simulation,
+        clock: Clock,
+        cameras: Cameras | None = None,
+    ) -> None:
         self.config = config
         self.simulation = simulation
         self.clock = clock
+        self.cameras = cameras
+        """The configured camera and depth sensors (None: none)."""
         self.ready_at = math.inf
         self.last_wall_s = 0.0
 
@@ -85,12 +99,13 @@ def create_app(
     ``route`` replaces the one ``config.railml`` names (tests use small routes); ``clock``
     (monotonic seconds) drives the loading delay and stock mode's wall-clock pacing.
     """
+    infrastructure = None
     if route is None:
-        route = (
-            load_route(config.railml)
-            if config.railml is not None
-            else StraightRoute(length_m=DEFAULT_ROUTE_LENGTH_M)
-        )
+        if config.railml is not None:
+            infrastructure = load_infrastructure_file(config.railml)
+            route = infrastructure.model
+        else:
+            route = StraightRoute(length_m=DEFAULT_ROUTE_LENGTH_M)
     simulation = Simulation(
         consist=config.build_consist(),
         route=route,
@@ -100,7 +115,7 @@ def create_app(
         origin_tile=(config.origin_tile_x, config.origin_tile_z),
         track_nodes_reversed=config.track_nodes_reversed,
     )
-    server = MockServer(config, simulation, clock)
+    server = MockServer(config, simulation, clock, _cameras(config, route, infrastructure))
     app = web.Application(middlewares=[_errors, _pacing])
     app[SERVER] = server
 
@@ -121,7 +136,23 @@ def create_app(
     app.router.add_get("/API/MAP/INIT", get_map_init)
     app.router.add_get("/API/TRAININFO", get_traininfo)
     app.router.add_get("/API/TRAINDRIVINGDISPLAY", get_traindrivingdisplay)
+    app.router.add_get("/API/CAMERASENSOR/{name}", get_camerasensor)
     return app
+
+
+def _cameras(config: MockConfig, route: Route, infrastructure: Any) -> Cameras | None:
+    """The configured sensors, rendering the railML scene (or the bare route)."""
+    if config.sensors is None:
+        return None
+    specs = load_sensors(config.sensors, train_name=config.train_name)
+    if specs and config.mode != "lockstep":
+        raise ScenarioError(
+            f"{config.sensors}: camera sensors are a feature of OpenRails' build for "
+            f"simulation: run the mock with --mode lockstep, or without --sensors"
+        )
+    scene = Scene.of_infrastructure(infrastructure) if infrastructure else Scene(route)
+    mount = Mount(height_m=config.camera_height_m, pitch_deg=config.camera_pitch_deg)
+    return Cameras(specs, Renderer(scene, mount))
 
 
 def _error(status: int, message: str) -> web.Response:
@@ -181,7 +212,7 @@ async def post_cabcontrols_lockstep(request: web.Request) -> web.Response:
     simulation = server.simulation
     simulation.apply(posts)
     simulation.advance(float(step_ms) / 1000.0)
-    return web.json_response(_state(simulation))
+    return web.json_response(_state(server))
 
 
 async def post_reset(request: web.Request) -> web.Response:
@@ -195,7 +226,7 @@ async def post_reset(request: web.Request) -> web.Response:
         raise BadRequest("POST /API/RESET takes no options: send no body or {}")
     server.simulation.reset()
     server.last_wall_s = server.clock()
-    return web.json_response(_state(server.simulation))
+    return web.json_response(_state(server))
 
 
 async def post_cabcontrols_stock(request: web.Request) -> web.Response:
@@ -274,6 +305,24 @@ async def get_map_init(request: web.Request) -> web.Response:
             "LonMax": max(ll["Lon"] for ll in latlons),
         }
     )
+
+
+async def get_camerasensor(request: web.Request) -> web.Response:
+    """The current frame of a sensor, raw: RGB bytes, or (class/id, distance, intensity) as
+    little-endian uint16 per pixel; rows top to bottom."""
+    server = request.app[SERVER]
+    name = request.match_info["name"]
+    cameras = server.cameras
+    if cameras is None or name not in cameras.specs:
+        configured = sensor_names(list(cameras.specs.values())) if cameras else "none"
+        return _error(
+            404,
+            f"No camera sensor named {name} found (configured: {configured}; "
+            f"OPENRAILS_MOCK_SENSORS / --sensors)",
+        )
+    distance = server.simulation.front_distance_m
+    data = await asyncio.to_thread(cameras.frame, name, distance)
+    return web.Response(body=data, content_type="application/octet-stream")
 
 
 async def get_traininfo(request: web.Request) -> web.Response:
@@ -382,9 +431,13 @@ def _world(position: WorldPosition) -> dict[str, float | int]:
     }
 
 
-def _state(simulation: Simulation) -> dict[str, Any]:
-    """The lockstep reply: every train (the mock has one) and the camera sensors (none)."""
-    return {"trains": {simulation.train_name: _train(simulation.snapshot())}, "CameraSensors": {}}
+def _state(server: MockServer) -> dict[str, Any]:
+    """The lockstep reply: every train (the mock has one) and the camera sensors."""
+    simulation = server.simulation
+    return {
+        "trains": {simulation.train_name: _train(simulation.snapshot())},
+        "CameraSensors": server.cameras.descriptions() if server.cameras else {},
+    }
 
 
 def _train(snap: Snapshot) -> dict[str, Any]:

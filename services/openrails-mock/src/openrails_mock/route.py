@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import Protocol
 
 from coupler.errors import ScenarioError
-from coupler_railway import RailMLError, load_infrastructure
+from coupler_railway import Infrastructure, RailMLError, load_infrastructure
 
 EARTH_RADIUS_M = 6_371_008.8
 """Mean Earth radius, for the straight route's lat/lon."""
@@ -153,13 +153,18 @@ class StraightRoute:
         return self._gradient
 
 
-def load_route(path: Path) -> Route:
-    """The track model of a railML infrastructure file, read by ``coupler_railway``."""
+def load_infrastructure_file(path: Path) -> Infrastructure:
+    """A railML infrastructure file read by ``coupler_railway``: the route is its ``model``,
+    the cameras' scene its balises, signals and platform edges."""
     try:
-        infrastructure = load_infrastructure(path)
+        return load_infrastructure(path)
     except (OSError, RailMLError) as exc:
         raise ScenarioError(
             f"cannot use {path} as the route (OPENRAILS_MOCK_RAILML): {exc}"
         ) from exc
-    route: Route = infrastructure.model
+
+
+def load_route(path: Path) -> Route:
+    """The track model of a railML infrastructure file, read by ``coupler_railway``."""
+    route: Route = load_infrastructure_file(path).model
     return route
