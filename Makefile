@@ -5,7 +5,8 @@ PROTO_OUT := packages/coupler/src
 FMU_DIR := build/fmus
 RAILML := scenarios/railway/data/annaberg-schwarzenberg.railml
 
-.PHONY: setup sync proto proto-check lint test demo demo-example fmus faulty-fmus track-fmu \
+.PHONY: setup sync proto proto-check lint test demo demo-perception demo-example fmus \
+        faulty-fmus track-fmu \
         assets browser grpc-dev bench compose-check swarm-check k8s-check export-fmu-check clean
 
 $(UV):
@@ -75,6 +76,15 @@ test: setup browser grpc-dev
 # Ctrl-C (exit 130) is the way to stop it, not an error of make's.
 demo: setup
 	$(UV) run --frozen coupler fleet scenarios/railway/fleet.toml $(ARGS) || [ $$? -eq 130 ]
+
+# The railway scenario's perception variant: the mock's front camera -> bridge -> perception
+# participant -> map; then its detections scored against TrackBalises (docs/railway-perception.md).
+# ARGS=--exit to not wait; the report is written when the fleet ends (Ctrl-C included).
+PERCEPTION_OUT ?= results/railway-perception
+demo-perception: setup
+	$(UV) run --frozen coupler fleet scenarios/railway/perception-fleet.toml --out $(PERCEPTION_OUT) \
+	  $(ARGS) || [ $$? -eq 130 ]
+	$(UV) run --frozen python -m coupler_railway.scoring $(PERCEPTION_OUT)
 
 # The smallest scenario: two FMUs and the example gRPC participant.
 demo-example: setup
