@@ -27,7 +27,7 @@ import numpy as np
 import pytest
 
 from coupler.errors import ScenarioError
-from coupler_railway import load_infrastructure
+from coupler_railway import LocalFrame, load_infrastructure
 from openrails_mock.config import MockConfig
 from openrails_mock.sensors import load_sensors, parse_sensors
 
@@ -334,3 +334,62 @@ async def test_balises_on_the_curve_are_where_the_railml_file_puts_them(
         assert mine.sum() >= 2, balise.code
         assert np.abs(distances - expected).max() < 0.5, (balise.code, distances, expected)
     assert found == 3
+
+
+def straight_railml(tmp_path: Path) -> Path:
+    """1000 m straight east with a balise at 70 m, a signal at 80 m (facing up: on the right)
+    and a 0.55 m platform edge on the right from 40 to 100 m."""
+    frame = LocalFrame(50.0, 12.0)
+
+    def coord(x: float) -> str:
+        lat, lon = frame.to_geographic(x, 0.0)
+        return f'<geoCoord coord="{float(lat)!r} {float(lon)!r}"/>'
+
+    path = tmp_path / "straight.railml"
+    path.write_text(f"""<?xml version="1.0" encoding="UTF-8"?>
+<railml xmlns="http://www.railml.org/schemas/2013" version="2.2">
+  <infrastructure id="is"><tracks><track id="t1">
+    <trackTopology>
+      <trackBegin id="tb" pos="0">{coord(0.0)}</trackBegin>
+      <trackEnd id="te" pos="1000">{coord(1000.0)}</trackEnd>
+    </trackTopology>
+    <trackElements><platformEdges>
+      <platformEdge id="p1" pos="40" length="60" side="right" height="0.55"/>
+    </platformEdges></trackElements>
+    <ocsElements>
+      <signals><signal id="s1" pos="80" dir="up"/></signals>
+      <balises>
+        <balise id="b1" code="7" pos="70"/>
+        <baliseGroup id="g1" code="1"><baliseRef ref="b1"/></baliseGroup>
+      </balises>
+    </ocsElements>
+  </track></tracks></infrastructure>
+</railml>
+""")
+    return path
+
+
+async def test_signals_and_platform_edges_are_in_the_point_cloud(
+    serve: Serve, tmp_path: Path
+) -> None:
+    SIGNAL, UNKNOWN = 5, 0
+    front = 50.0
+    railml = straight_railml(tmp_path)
+    async with serve(config(tmp_path, railml=railml, start_distance_m=front)) as session:
+        entry = (await lockstep(session))["CameraSensors"]["lidar"]
+        raw = await frame(session, "lidar")
+    cloud = lidar_points(raw, entry)
+    cls, ident = cloud[:, 3].astype(int) >> 13, cloud[:, 3].astype(int) & 0x1FFF
+    lateral, ahead, height = in_track_frame(cloud[:, :3])
+    signal = (cls == SIGNAL) & (ident == 1)
+    assert signal.sum() >= 10
+    assert np.median(ahead[signal]) == pytest.approx(80.0 - front, abs=0.5)
+    assert np.median(lateral[signal]) == pytest.approx(3.2, abs=0.3)  # right of the track
+    assert height[signal].max() > 4.5  # the head, 4 to 5.4 m up
+    platform = (cls == UNKNOWN) & (ident == 1)
+    assert platform.sum() >= 100
+    # right, from its edge 1.7 m off the centre on (up to a pixel's smear)
+    assert (lateral[platform] > 1.6 - np.radians(0.6) * ahead[platform]).all()
+    assert np.abs(height[platform] - 0.55).min() < 0.05  # its top, 0.55 m up
+    assert ahead[platform].max() < 100.0 - front + 1.0  # it ends at 100 m
+    assert ((cls == BALISE) & (ident == 7)).any()

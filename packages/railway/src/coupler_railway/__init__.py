@@ -14,7 +14,15 @@ if TYPE_CHECKING:
     from coupler_railway.errors import RailMLError
     from coupler_railway.frame import LocalFrame
     from coupler_railway.geojson import to_geojson
-    from coupler_railway.infrastructure import Balise, BaliseGroup, Infrastructure, Station, Track
+    from coupler_railway.infrastructure import (
+        Balise,
+        BaliseGroup,
+        Infrastructure,
+        PlatformEdge,
+        Signal,
+        Station,
+        Track,
+    )
     from coupler_railway.railml import load_infrastructure
     from coupler_railway.resources import BALISES_FILE, TRACK_FILE, write_fmu_resources
     from coupler_railway.track import (
@@ -32,6 +40,8 @@ _MODULE_OF = {
     "Balise": "infrastructure",
     "BaliseGroup": "infrastructure",
     "Infrastructure": "infrastructure",
+    "PlatformEdge": "infrastructure",
+    "Signal": "infrastructure",
     "Station": "infrastructure",
     "Track": "infrastructure",
     "load_infrastructure": "railml",
@@ -61,8 +71,10 @@ __all__ = [
     "GradientChange",
     "Infrastructure",
     "LocalFrame",
+    "PlatformEdge",
     "RailMLError",
     "SectionGeometry",
+    "Signal",
     "Station",
     "Track",
     "TrackModel",

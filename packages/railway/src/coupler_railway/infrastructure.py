@@ -76,6 +76,38 @@ class Station:
     line: int
 
 
+@dataclass(frozen=True)
+class Signal:
+    """A railML ``<signal>`` placed on the line."""
+
+    id: str
+    name: str
+    distance_m: float
+    """Distance along the line from its start [m]."""
+    direction: str
+    """railML ``dir``: the direction it faces (up: towards increasing distance)."""
+    side: str
+    """Where it stands, seen towards increasing distance: ``right`` for ``dir="up"`` (and
+    ``both``/``none``/``unknown``), ``left`` for ``dir="down"`` (right-hand running)."""
+    line: int
+
+
+@dataclass(frozen=True)
+class PlatformEdge:
+    """A railML ``<platformEdge>``: the edge of a platform along the line."""
+
+    id: str
+    name: str
+    start_m: float
+    """Distance along the line where it begins [m]."""
+    end_m: float
+    side: str
+    """``left`` or ``right`` of the track, seen towards increasing distance."""
+    height_m: float
+    """Height of the edge above the top of the rails [m]."""
+    line: int
+
+
 @dataclass(frozen=True, eq=False)
 class Infrastructure:
     """Everything :func:`~coupler_railway.railml.load_infrastructure` reads from one file."""
@@ -92,3 +124,7 @@ class Infrastructure:
     """Sorted by distance along the line."""
     warnings: tuple[str, ...]
     """Content that was read but not interpreted, one message per kind."""
+    signals: tuple[Signal, ...] = ()
+    """Sorted by distance along the line."""
+    platform_edges: tuple[PlatformEdge, ...] = ()
+    """Sorted by where they begin along the line."""

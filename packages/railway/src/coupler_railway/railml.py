@@ -1,4 +1,5 @@
-"""railML 2.x infrastructure reader: tracks with geo coordinates, gradients, balises, ocps.
+"""railML 2.x infrastructure reader: tracks with geo coordinates, gradients, balises, signals,
+platform edges, ocps.
 
 The subset read and the representation choices are described in the package README. Every
 element outside that subset is reported in ``Infrastructure.warnings``; every inconsistency
@@ -17,7 +18,15 @@ from pathlib import Path
 from lxml import etree
 
 from coupler_railway.errors import RailMLError
-from coupler_railway.infrastructure import Balise, BaliseGroup, Infrastructure, Station, Track
+from coupler_railway.infrastructure import (
+    Balise,
+    BaliseGroup,
+    Infrastructure,
+    PlatformEdge,
+    Signal,
+    Station,
+    Track,
+)
 from coupler_railway.track import GradientChange, SectionGeometry, TrackModel
 
 _INTERPRETED = frozenset(
@@ -26,10 +35,13 @@ _INTERPRETED = frozenset(
         "trackEnd", "connection", "bufferStop", "openEnd", "geoCoord", "trackElements",
         "geoMappings", "geoMapping", "gradientChanges", "gradientChange", "ocsElements",
         "balises", "balise", "baliseGroup", "baliseRef", "operationControlPoints", "ocp",
-        "metadata",
+        "metadata", "signals", "signal", "platformEdges", "platformEdge",
     }
 )  # fmt: skip
 _DIRECTIONS = frozenset({"up", "down", "both", "none", "unknown"})
+_SIDES = frozenset({"left", "right"})
+PLATFORM_HEIGHT_M = 0.76
+"""A platform edge's height when railML gives none (the European standard height)."""
 _WGS84 = frozenset({"4326", "EPSG:4326", "urn:ogc:def:crs:EPSG::4326"})
 
 
@@ -180,6 +192,16 @@ class _Reader:
         }
         balises, groups = self.group_balises(raw, placed, model)
         stations = self.read_stations(infra, model)
+        signals = [
+            self.read_signal(s, r, model.sections[i].start_distance)
+            for i, r in enumerate(raw)
+            for s in _children(r.element, "ocsElements", "signals", "signal")
+        ]
+        edges = [
+            self.read_platform_edge(e, r, model.sections[i].start_distance, model.length)
+            for i, r in enumerate(raw)
+            for e in _children(r.element, "trackElements", "platformEdges", "platformEdge")
+        ]
         return Infrastructure(
             source=self.path,
             tracks=tuple(r.track for r in raw),
@@ -188,6 +210,8 @@ class _Reader:
             groups=groups,
             stations=stations,
             warnings=tuple(self.warnings),
+            signals=tuple(sorted(signals, key=lambda s: s.distance_m)),
+            platform_edges=tuple(sorted(edges, key=lambda e: e.start_m)),
         )
 
     def check_ids(self, root: etree._Element) -> None:
@@ -538,6 +562,72 @@ class _Reader:
         balises.sort(key=lambda b: (b.distance_m, b.group, b.position_in_group))
         groups.sort(key=lambda g: (g.distance_m, g.code))
         return tuple(balises), tuple(groups)
+
+    def on_track(self, element: etree._Element, raw: _RawTrack) -> float:
+        """Its pos/absPos offset from the trackBegin, required and within the track."""
+        track = raw.track
+        offset = self.offset(element, track, required=True)
+        assert offset is not None
+        if not 0.0 <= offset <= track.end_pos - track.begin_pos:
+            raise self.error(
+                element,
+                f"lies off the track: offset {offset} m from trackBegin",
+                f"place it on track {track.id!r} (pos 0..{track.end_pos - track.begin_pos})",
+            )
+        return offset
+
+    def read_signal(self, element: etree._Element, raw: _RawTrack, start: float) -> Signal:
+        """A signal by pos/absPos; it stands right of the track it faces (dir)."""
+        direction = element.get("dir", "unknown")
+        if direction not in _DIRECTIONS:
+            raise self.error(
+                element, f"dir {direction!r} is not one of {sorted(_DIRECTIONS)}", "fix dir"
+            )
+        return Signal(
+            id=element.get("id", ""),
+            name=element.get("name") or element.get("id", ""),
+            distance_m=start + self.on_track(element, raw),
+            direction=direction,
+            side="left" if direction == "down" else "right",
+            line=_line(element),
+        )
+
+    def read_platform_edge(
+        self, element: etree._Element, raw: _RawTrack, start: float, line_length: float
+    ) -> PlatformEdge:
+        """A platform edge from pos/absPos over ``length`` metres, on ``side``, ``height``
+        metres above the rails (default 0.76)."""
+        begin = start + self.on_track(element, raw)
+        length = self.number(element, "length")
+        if length is None or length <= 0.0:
+            raise self.error(element, "has no positive length", "give length in metres")
+        if begin + length > line_length + self.tolerance:
+            raise self.error(
+                element,
+                f"runs {begin + length - line_length:.1f} m past the end of the line",
+                "shorten it",
+            )
+        side = element.get("side")
+        if side not in _SIDES:
+            raise self.error(
+                element, f"side {side!r} is not 'left' or 'right'", 'give side="left"/"right"'
+            )
+        height = self.number(element, "height")
+        if height is None:
+            height = PLATFORM_HEIGHT_M
+        if not 0.0 < height <= 2.0:
+            raise self.error(
+                element, f"height {height} m is not in (0, 2]", "give height in metres"
+            )
+        return PlatformEdge(
+            id=element.get("id", ""),
+            name=element.get("name") or element.get("id", ""),
+            start_m=begin,
+            end_m=min(begin + length, line_length),
+            side=side,
+            height_m=height,
+            line=_line(element),
+        )
 
     def read_stations(self, infra: etree._Element, model: TrackModel) -> tuple[Station, ...]:
         stations: list[Station] = []

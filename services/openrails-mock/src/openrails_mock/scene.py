@@ -14,10 +14,11 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 import numpy.typing as npt
+
+from coupler_railway import Infrastructure
 
 from .route import Route
 
@@ -90,24 +91,20 @@ class Scene:
         self.platforms = tuple(sorted(platforms, key=lambda p: p.start_m))
 
     @classmethod
-    def of_infrastructure(cls, infrastructure: Any) -> Scene:
+    def of_infrastructure(cls, infrastructure: Infrastructure) -> Scene:
         """The scene of a railML file read by ``coupler_railway.load_infrastructure``."""
         return cls(
             infrastructure.model,
             balises=[SceneBalise(b.code, b.distance_m) for b in infrastructure.balises],
             signals=[
                 SceneSignal(i + 1, s.distance_m, 1.0 if s.side == "right" else -1.0)
-                for i, s in enumerate(getattr(infrastructure, "signals", ()))
+                for i, s in enumerate(infrastructure.signals)
             ],
             platforms=[
                 ScenePlatform(
-                    i + 1,
-                    p.start_m,
-                    p.end_m,
-                    1.0 if p.side == "right" else -1.0,
-                    p.height_m,
+                    i + 1, p.start_m, p.end_m, 1.0 if p.side == "right" else -1.0, p.height_m
                 )
-                for i, p in enumerate(getattr(infrastructure, "platform_edges", ()))
+                for i, p in enumerate(infrastructure.platform_edges)
             ],
         )
 
