@@ -20,7 +20,10 @@ Cases (steps/s, median of the repetitions; Coupler and its reference interleaved
   FMPy loop, against `coupler run` driving the same participant directly (its stream);
 - scale: 100 gain participants in one run: steps/s, RSS per participant process, time from the
   run's start to its first step for 1, 10 and 100 participants;
-- memory: the orchestrator's RSS after 1e4 and after 1e5 steps of remote x1 (its own process).
+- memory: the orchestrator's RSS after 1e4 and after 1e5 steps of remote x1 (its own process);
+- render: the OpenRails mock's camera frames on the Annaberg-Schwarzenberg line, an 800 x 600
+  RGB and a 200 x 150 depth frame per position (one core, in this process), against the 200 ms
+  of one OpenRails lockstep step.
 
 Prints one table with each ratio, its target and PASS/FAIL, and writes build/bench.json. Not a
 test: nothing here asserts; the figures go into docs/performance.md.
@@ -582,10 +585,19 @@ class Sizes:
     repeats: int
     scale_steps: int
     rss_steps: int
+    render_positions: int
 
 
-QUICK = Sizes(chain_steps=20000, remote_steps=3000, repeats=3, scale_steps=100, rss_steps=100_000)
-FULL = Sizes(chain_steps=60000, remote_steps=10000, repeats=5, scale_steps=1000, rss_steps=100_000)
+QUICK = Sizes(
+    chain_steps=20000,
+    remote_steps=3000,
+    repeats=3,
+    scale_steps=100,
+    rss_steps=100_000,
+    render_positions=20,
+)
+FULL = Sizes(chain_steps=60000, remote_steps=10000, repeats=5, scale_steps=1000,
+             rss_steps=100_000, render_positions=100)  # fmt: skip
 
 
 async def interleaved(
@@ -723,6 +735,15 @@ async def suite(sizes: Sizes, log: Callable[[str], None]) -> tuple[list[Row], di
                 )  # fmt: skip
     extra["time_to_first_step_s"] = first_step
 
+    log("render: the mock's 800 x 600 RGB + 200 x 150 depth frames vs the 200 ms step")
+    pairs, typical, worst = render_rate(sizes.render_positions)
+    extra["render_ms"] = {"median": round(typical, 1), "max": round(worst, 1)}
+    rows.append(
+        Row("render 800x600 rgb + 200x150 depth", pairs, "one OpenRails step (200 ms)",
+            1.0 / OPENRAILS_STEP_S, 1.0,
+            note=f"frame pairs/s; {typical:.0f} ms median, {worst:.0f} ms worst, one core")
+    )  # fmt: skip
+
     log(f"memory: orchestrator RSS at 1e4 and {sizes.rss_steps:.0e} steps (remote x1)")
     [port] = free_ports(1)
     with processes(gains([port])):
@@ -748,6 +769,33 @@ async def suite(sizes: Sizes, log: Callable[[str], None]) -> tuple[list[Row], di
         )
     )
     return rows, extra
+
+
+RAILML = ROOT / "scenarios" / "railway" / "data" / "annaberg-schwarzenberg.railml"
+OPENRAILS_STEP_S = 0.2
+"""OpenRails' lockstep step: the time a frame pair may take."""
+
+
+def render_rate(positions: int) -> tuple[float, float, float]:
+    """Frame pairs per second of one core (800 x 600 RGB + 200 x 150 depth, as the mock serves
+    them) over ``positions`` places 250 m apart, and the median and worst milliseconds of a
+    pair: this process's CPU time, so that other work on a busy machine does not count."""
+    from coupler_railway import load_infrastructure
+    from openrails_mock.renderer import CameraModel, Renderer
+    from openrails_mock.scene import Scene
+
+    renderer = Renderer(Scene.of_infrastructure(load_infrastructure(RAILML)))
+    rgb = CameraModel(width=800, height=600, fov_deg=45.0)
+    depth = CameraModel(width=200, height=150, fov_deg=45.0)
+    renderer.rgb(rgb, 100.0), renderer.depth(depth, 100.0, 200.0)  # warm the caches
+    took = []
+    for k in range(positions):
+        at = 60.0 + 250.0 * k
+        begun = time.process_time()
+        renderer.rgb(rgb, at).tobytes()
+        renderer.depth(depth, at, 200.0).astype("<u2").tobytes()
+        took.append(time.process_time() - begun)
+    return 1.0 / median_of(took), 1000 * median_of(took), 1000 * max(took)
 
 
 async def only(case: str, steps: int) -> float:
@@ -793,8 +841,8 @@ def main() -> int:
     parser.add_argument(
         "--only",
         metavar="CASE",
-        help="run one Coupler case alone and print its steps/s (for a profiler): chainN or "
-        "remoteN, e.g. py-spy record -o chain10.txt --format raw -- .venv/bin/python "
+        help="run one Coupler case alone and print its steps/s (for a profiler): chainN, "
+        "remoteN or render, e.g. py-spy record -o chain10.txt --format raw -- .venv/bin/python "
         "benchmarks/suite.py --only chain10",
     )
     parser.add_argument("--steps", type=int, default=20000, help="steps of --only")
@@ -810,6 +858,10 @@ def main() -> int:
     if args.rss_probe:
         port, steps = args.rss_probe
         print(json.dumps(asyncio.run(rss_probe(port, steps, 10_000))))
+        return 0
+    if args.only == "render":
+        pairs, typical, worst = render_rate(args.steps if args.steps != 20000 else 20)
+        print(f"render: {pairs:.1f} frame pairs/s, {typical:.0f} ms median, {worst:.0f} ms worst")
         return 0
     if args.only:
         print(f"{args.only}: {asyncio.run(only(args.only, args.steps)):,.0f} steps/s")
