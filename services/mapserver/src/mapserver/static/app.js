@@ -229,7 +229,7 @@
     boxes.setAttribute("viewBox", `0 0 ${camera.width} ${camera.height}`);
     const svg = "http://www.w3.org/2000/svg";
     const shapes = [];
-    for (const box of camera.detections) {
+    for (const [index, box] of camera.detections.entries()) {
       const rect = document.createElementNS(svg, "rect");
       const pad = 3; // around the blob, so the balise itself stays visible
       rect.setAttribute("x", box.left - pad);
@@ -237,9 +237,12 @@
       rect.setAttribute("width", box.right - box.left + 1 + 2 * pad);
       rect.setAttribute("height", box.bottom - box.top + 1 + 2 * pad);
       rect.classList.add("detection");
+      // labels of neighbours (a balise group) alternate sides so they do not overlap
       const label = document.createElementNS(svg, "text");
-      label.setAttribute("x", box.right + pad + 4);
+      const right = index % 2 === 0;
+      label.setAttribute("x", right ? box.right + pad + 4 : box.left - pad - 4);
       label.setAttribute("y", box.bottom + pad);
+      label.setAttribute("text-anchor", right ? "start" : "end");
       label.textContent = `${box.distance_ahead_m.toFixed(1)} m`;
       shapes.push(rect, label);
     }
