@@ -151,15 +151,19 @@ compare_runs() {
   fi
 }
 
-# The scenario's compose files merged for loopback (compose.yaml + compose.loopback.yaml), into
-# $1, without the map's published port: docker-compose 1.29 refuses `ports` under host
-# networking, and an override cannot remove a list before Compose v2.24 (`!reset`).
+# The scenario's compose files merged for loopback (compose.yaml + compose.loopback.yaml, then
+# any further files given), into $1, without the map's published port: docker-compose 1.29
+# refuses `ports` under host networking, and an override cannot remove a list before Compose
+# v2.24 (`!reset`).
 loopback_compose() {
-  docker-compose -f compose.yaml -f compose.loopback.yaml config | python3 -c '
+  local out=$1 extra=()
+  shift
+  for file in "$@"; do extra+=(-f "$file"); done
+  docker-compose -f compose.yaml -f compose.loopback.yaml "${extra[@]}" config | python3 -c '
 import sys, yaml
 config = yaml.safe_load(sys.stdin)
 for service in config["services"].values():
     if service.get("network_mode") == "host":
         service.pop("ports", None)
-yaml.safe_dump(config, sys.stdout, sort_keys=False)' >"$1"
+yaml.safe_dump(config, sys.stdout, sort_keys=False)' >"$out"
 }
