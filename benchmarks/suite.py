@@ -22,6 +22,13 @@ Cases (steps/s, median of the repetitions; Coupler and its reference interleaved
   run's start to its first step for 1, 10 and 100 participants;
 - memory: the orchestrator's RSS after 1e4 and after 1e5 steps of remote x1 (its own process);
 - the command line's start: `coupler --help`, median of five [s].
+- camera frames x1: an 800 x 600 RGB frame (1.44 MB) per 0.2 s step from the OpenRails mock
+  (a standing train) through the bridge (HTTP GET, its sensor channel) and the orchestrator
+  into the map server, `coupler run` at 5 Hz simulated, unpaced; against two bare grpc.aio
+  bidi streams moving the same bytes per step (one frame out of a server, one into another);
+- render: the OpenRails mock's camera frames on the Annaberg-Schwarzenberg line, an 800 x 600
+  RGB and a 200 x 150 depth frame per position (one core, in this process), against the 200 ms
+  of one OpenRails lockstep step.
 
 Prints one table with each ratio, its target and PASS/FAIL, and writes build/bench.json. Not a
 test: nothing here asserts; the figures go into docs/performance.md.
@@ -423,13 +430,30 @@ def _raw_messages() -> tuple[Any, Any]:
     return request, response
 
 
-async def raw_server(port: int) -> None:
-    """A trivial GRPCComponentService: every step answered with the same outputs."""
+def _frame_messages(direction: str) -> tuple[Any, Any]:
+    """A step of a camera's frame, FRAME_BYTES in a binary value: ``out`` of a participant
+    that sends it (the bridge: a small request, the frame in the response), ``in`` of one that
+    receives it (the map: the frame in the request, an empty response)."""
+    from coupler.v1 import component_pb2 as pb
+
+    frame = bytes(range(256)) * (FRAME_BYTES // 256)
+    request = pb.DoStepRequest(current_time=0.0, step_size=FRAME_STEP, run_id="bench")
+    response = pb.DoStepResponse()
+    if direction == "out":
+        response.outputs.add(channel="front", binary=frame)
+    else:
+        request.inputs.add(channel="camera", binary=frame)
+    return request, response
+
+
+async def raw_server(port: int, frames: str = "") -> None:
+    """A trivial GRPCComponentService: every step answered with the same outputs (``frames``
+    ``out``: a camera frame; ``in``: nothing, its requests carry one)."""
     import grpc
 
     from coupler.v1 import component_pb2_grpc as rpc
 
-    _, response = _raw_messages()
+    _, response = _frame_messages(frames) if frames else _raw_messages()
 
     class Trivial(rpc.GRPCComponentServiceServicer):  # type: ignore[misc]
         async def DoStep(self, request: Any, context: Any) -> Any:
@@ -439,7 +463,7 @@ async def raw_server(port: int) -> None:
             async for _ in requests:
                 yield response
 
-    server = grpc.aio.server()
+    server = grpc.aio.server(options=FRAME_GRPC_OPTIONS)
     rpc.add_GRPCComponentServiceServicer_to_server(Trivial(), server)
     server.add_insecure_port(f"127.0.0.1:{port}")
     await server.start()
@@ -491,6 +515,111 @@ async def raw_floor(ports: Sequence[int], steps: int, *, stream: bool) -> float:
     finally:
         for channel in channels:
             await channel.close()
+
+
+# ------------------------------------------------------------------- camera frames, 5 Hz
+
+FRAME_BYTES = 800 * 600 * 3
+"""An 800 x 600 RGB frame (the Image message adds a few bytes)."""
+FRAME_STEP = 0.2
+"""OpenRails' lockstep step: frames at 5 Hz of simulated time."""
+FRAME_GRPC_OPTIONS = [("grpc.max_receive_message_length", 8 * 1024 * 1024)]
+SENSORS = [{"sensorName": "front", "sensorType": "rgb", "trainName": "PLAYER",
+            "width": 800, "height": 600, "fov": 45.0}]  # fmt: skip
+
+
+async def raw_frames(out_port: int, in_port: int, steps: int) -> float:
+    """Steps/s of bare grpc.aio bidi streams moving a frame per step as the frames case does:
+    one from a sender (its response), one to a receiver (its request), both each step."""
+    import grpc
+
+    from coupler.v1 import component_pb2_grpc as rpc
+
+    pairs = [(out_port, _frame_messages("out")[0]), (in_port, _frame_messages("in")[0])]
+    channels = [
+        grpc.aio.insecure_channel(f"127.0.0.1:{port}", options=FRAME_GRPC_OPTIONS)
+        for port, _ in pairs
+    ]
+    try:
+        for channel in channels:
+            await asyncio.wait_for(channel.channel_ready(), 30)
+        calls = [rpc.GRPCComponentServiceStub(c).StepStream() for c in channels]
+        requests = [request for _, request in pairs]
+
+        async def trip(call: Any, request: Any) -> Any:
+            await call.write(request)
+            return await call.read()
+
+        async def once() -> None:
+            await asyncio.gather(*(trip(c, r) for c, r in zip(calls, requests, strict=True)))
+
+        for _ in range(10):
+            await once()
+        started = time.perf_counter()
+        for _ in range(steps):
+            await once()
+        rate = steps / (time.perf_counter() - started)
+        for call in calls:
+            await call.done_writing()
+        return rate
+    finally:
+        for channel in channels:
+            await channel.close()
+
+
+def frames_ssd(folder: Path, bridge: int, sink: int) -> Path:
+    """The OpenRails bridge's camera ``front`` into the map server's ``camera``."""
+    image = '<ssc:Binary mime-type="application/x-protobuf; messageType=coupler.v1.Image"/>'
+    return _ssd(
+        folder / "frames.ssd",
+        [
+            f'<ssd:Component name="OpenRails" type="application/x-coupler-grpc" '
+            f'source="grpc://127.0.0.1:{bridge}"><ssd:Connectors>'
+            f'<ssd:Connector name="distance" kind="output"><ssc:Real/></ssd:Connector>'
+            f'<ssd:Connector name="front" kind="output">{image}</ssd:Connector>'
+            f"</ssd:Connectors></ssd:Component>",
+            f'<ssd:Component name="Map" type="application/x-coupler-grpc" '
+            f'source="grpc://127.0.0.1:{sink}"><ssd:Connectors>'
+            f'<ssd:Connector name="camera" kind="input">{image}</ssd:Connector>'
+            f"</ssd:Connectors></ssd:Component>",
+        ],
+        [
+            '<ssd:Connection startElement="OpenRails" startConnector="front" '
+            'endElement="Map" endConnector="camera"/>'
+        ],
+    )
+
+
+async def coupler_frames(ssd: Path, steps: int, out: Path) -> float:
+    """Steps/s of `coupler run` moving the camera frames (recording the distance only)."""
+    from coupler_orchestrator.options import RunOptions
+    from coupler_orchestrator.runner import run_scenario
+
+    clock = _Clock(time.perf_counter())
+    options = RunOptions(
+        stop_time=steps * FRAME_STEP,
+        step_size=FRAME_STEP,
+        run_id=f"bench-{time.time_ns()}",
+        output_variables=("OpenRails.distance",),
+    )
+    outcome = await run_scenario(ssd, options, out_dir=out, observers=[clock.observer])
+    if outcome.end.status != "completed":
+        raise RuntimeError(f"{ssd.name}: {outcome.end.status}: {outcome.end.reason}")
+    return clock.rate
+
+
+def frame_services(work: Path, mock: int, bridge: int, sink: int) -> list[list[str]]:
+    """The mock with one 800 x 600 camera (a standing train: the frame is rendered once and
+    served from its cache, so the figure is the frames' transport), the bridge, the map."""
+    sensors = work / "sensors.json"
+    sensors.write_text(json.dumps(SENSORS))
+    return [
+        [sys.executable, "-m", "openrails_mock", "--port", str(mock), "--sensors", str(sensors),
+         "--loading-delay-s", "0"],
+        [sys.executable, "-m", "openrails_bridge", "--port", str(bridge), "--openrails-url",
+         f"http://127.0.0.1:{mock}", "--sensors", str(sensors)],
+        [sys.executable, "-m", "mapserver", "--grpc-port", str(sink), "--http-port", "0"],
+    ]  # fmt: skip
 
 
 # -------------------------------------------------------------------------------- mosaik
@@ -585,10 +714,21 @@ class Sizes:
     repeats: int
     scale_steps: int
     rss_steps: int
+    render_positions: int
+    frame_steps: int
 
 
-QUICK = Sizes(chain_steps=20000, remote_steps=3000, repeats=3, scale_steps=100, rss_steps=100_000)
-FULL = Sizes(chain_steps=60000, remote_steps=10000, repeats=5, scale_steps=1000, rss_steps=100_000)
+QUICK = Sizes(
+    chain_steps=20000,
+    remote_steps=3000,
+    repeats=3,
+    scale_steps=100,
+    rss_steps=100_000,
+    render_positions=20,
+    frame_steps=150,
+)
+FULL = Sizes(chain_steps=60000, remote_steps=10000, repeats=5, scale_steps=1000,
+             rss_steps=100_000, render_positions=100, frame_steps=500)  # fmt: skip
 
 
 async def interleaved(
@@ -608,7 +748,7 @@ async def suite(sizes: Sizes, log: Callable[[str], None]) -> tuple[list[Row], di
     rows: list[Row] = []
     extra: dict[str, Any] = {}
     work = Path(tempfile.mkdtemp(prefix="coupler-bench-"))
-    for section in (cli_start, chains, remotes, proxy_fmu, scale, memory):
+    for section in (cli_start, chains, remotes, proxy_fmu, scale, frames, memory):
         await section(sizes, log, work, rows, extra)
     return rows, extra
 
@@ -762,6 +902,47 @@ async def scale(
     extra["time_to_first_step_s"] = first_step
 
 
+async def frames(
+    sizes: Sizes, log: Callable[[str], None], work: Path, rows: list[Row], extra: dict[str, Any]
+) -> None:
+    log("camera frames through the bridge at 5 Hz simulated vs raw grpc.aio streams")
+    mock, bridge, sink, raw_out, raw_in = free_ports(5)
+    raw = [[sys.executable, __file__, "--raw-server", str(raw_out), "--frames", "out"],
+           [sys.executable, __file__, "--raw-server", str(raw_in), "--frames", "in"]]  # fmt: skip
+    with processes(frame_services(work, mock, bridge, sink) + raw):
+        await serving([bridge, sink])
+        ssd = frames_ssd(work, bridge, sink)
+
+        async def through_bridge() -> float:
+            return await coupler_frames(ssd, sizes.frame_steps, work / "out")
+
+        async def frames_floor() -> float:
+            return await raw_frames(raw_out, raw_in, sizes.frame_steps)
+
+        coupler_fps, floor_fps = await interleaved(sizes.repeats, through_bridge, frames_floor)
+    assert coupler_fps is not None and floor_fps is not None
+    megabytes = 2 * FRAME_BYTES / 1e6  # into the orchestrator and out again, each step
+    extra["frames_mb_per_s"] = {
+        "coupler": round(coupler_fps * megabytes, 1),
+        "raw_grpc": round(floor_fps * megabytes, 1),
+    }
+    rows.append(
+        Row("camera frames x1 (1.44 MB, 5 Hz)", coupler_fps, "raw grpc.aio streams, same bytes",
+            floor_fps, 0.8,
+            note=f"{coupler_fps * megabytes:.0f} vs {floor_fps * megabytes:.0f} MB/s; the "
+                 f"coupler figure includes the bridge's HTTP hops to OpenRails")
+    )  # fmt: skip
+
+    log("render: the mock's 800 x 600 RGB + 200 x 150 depth frames vs the 200 ms step")
+    pairs, typical, worst = render_rate(sizes.render_positions)
+    extra["render_ms"] = {"median": round(typical, 1), "max": round(worst, 1)}
+    rows.append(
+        Row("render 800x600 rgb + 200x150 depth", pairs, "one OpenRails step (200 ms)",
+            1.0 / OPENRAILS_STEP_S, 1.0,
+            note=f"frame pairs/s; {typical:.0f} ms median, {worst:.0f} ms worst, one core")
+    )  # fmt: skip
+
+
 async def memory(
     sizes: Sizes, log: Callable[[str], None], work: Path, rows: list[Row], extra: dict[str, Any]
 ) -> None:
@@ -789,6 +970,33 @@ async def memory(
             note="MB, not steps/s; target: within 5 %",
         )
     )
+
+
+RAILML = ROOT / "scenarios" / "railway" / "data" / "annaberg-schwarzenberg.railml"
+OPENRAILS_STEP_S = 0.2
+"""OpenRails' lockstep step: the time a frame pair may take."""
+
+
+def render_rate(positions: int) -> tuple[float, float, float]:
+    """Frame pairs per second of one core (800 x 600 RGB + 200 x 150 depth, as the mock serves
+    them) over ``positions`` places 250 m apart, and the median and worst milliseconds of a
+    pair: this process's CPU time, so that other work on a busy machine does not count."""
+    from coupler_railway import load_infrastructure
+    from openrails_mock.renderer import CameraModel, Renderer
+    from openrails_mock.scene import Scene
+
+    renderer = Renderer(Scene.of_infrastructure(load_infrastructure(RAILML)))
+    rgb = CameraModel(width=800, height=600, fov_deg=45.0)
+    depth = CameraModel(width=200, height=150, fov_deg=45.0)
+    renderer.rgb(rgb, 100.0), renderer.depth(depth, 100.0, 200.0)  # warm the caches
+    took = []
+    for k in range(positions):
+        at = 60.0 + 250.0 * k
+        begun = time.process_time()
+        renderer.rgb(rgb, at).tobytes()
+        renderer.depth(depth, at, 200.0).astype("<u2").tobytes()
+        took.append(time.process_time() - begun)
+    return 1.0 / median_of(took), 1000 * median_of(took), 1000 * max(took)
 
 
 async def only(case: str, steps: int) -> float:
@@ -835,23 +1043,28 @@ def main() -> int:
     parser.add_argument(
         "--only",
         metavar="CASE",
-        help="run one Coupler case alone and print its steps/s (for a profiler): chainN or "
-        "remoteN, e.g. py-spy record -o chain10.txt --format raw -- .venv/bin/python "
+        help="run one Coupler case alone and print its steps/s (for a profiler): chainN, "
+        "remoteN or render, e.g. py-spy record -o chain10.txt --format raw -- .venv/bin/python "
         "benchmarks/suite.py --only chain10",
     )
     parser.add_argument("--steps", type=int, default=20000, help="steps of --only")
     parser.add_argument("--raw-server", type=int, help=argparse.SUPPRESS)
+    parser.add_argument("--frames", choices=["in", "out"], default="", help=argparse.SUPPRESS)
     parser.add_argument("--rss-probe", nargs=2, type=int, help=argparse.SUPPRESS)
     args = parser.parse_args()
     from coupler.logs import configure_logging
 
     configure_logging("ERROR")
     if args.raw_server:
-        asyncio.run(raw_server(args.raw_server))
+        asyncio.run(raw_server(args.raw_server, args.frames))
         return 0
     if args.rss_probe:
         port, steps = args.rss_probe
         print(json.dumps(asyncio.run(rss_probe(port, steps, 10_000))))
+        return 0
+    if args.only == "render":
+        pairs, typical, worst = render_rate(args.steps if args.steps != 20000 else 20)
+        print(f"render: {pairs:.1f} frame pairs/s, {typical:.0f} ms median, {worst:.0f} ms worst")
         return 0
     if args.only:
         print(f"{args.only}: {asyncio.run(only(args.only, args.steps)):,.0f} steps/s")

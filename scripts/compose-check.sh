@@ -10,6 +10,8 @@
 #   6. the scenario from the containers (`up --exit-code-from orchestrator`), unpaced
 #   7. assertions: exit 0, results.csv and summary.json, status completed, and the
 #      TrackBalises.last_balise_id / balises_passed sequence equal to the local run's
+#   8. with COMPOSE_CHECK_PERCEPTION=1: the perception variant from the containers
+#      (+ compose.perception.yaml, its first 60 s), scored: every balise passed was detected
 #
 # When the engine cannot be installed or started it prints "compose-check: SKIPPED: <why>"
 # and exits 0 so the rest of CI runs; any failure after that exits 1 with the service logs.
@@ -82,5 +84,30 @@ fi
 # --- 7. the same balise sequence ------------------------------------------------------------
 stage compare
 compare_runs "$OUT/local" "$OUT/container"
+
+# --- 8. optional: the perception variant from the containers, scored ------------------------
+if [[ ${COMPOSE_CHECK_PERCEPTION:-} == 1 ]]; then
+  stage perception
+  compose down -v --remove-orphans >/dev/null 2>&1 || true
+  # RUN_ARGS is read when the files are merged (compose interpolates then)
+  RUN_ARGS="--stop-time 60" loopback_compose "$OUT/compose.perception.merged.yaml" \
+    compose.perception.yaml
+  mkdir -p "$OUT/perception"
+  timeout "$RUN_TIMEOUT" docker-compose -p "$PROJECT" \
+    -f "$OUT/compose.perception.merged.yaml" up --no-color --exit-code-from orchestrator \
+    >"$OUT/compose-perception.log" 2>&1 || { tail -n 30 "$OUT/compose-perception.log"; exit 1; }
+  orchestrator=$(docker ps -aq --filter "label=com.docker.compose.project=$PROJECT" \
+    --filter "label=com.docker.compose.service=orchestrator" | head -n1)
+  docker cp "$orchestrator:/results/." "$OUT/perception/"
+  "$UV" run --frozen python -m coupler_railway.scoring "$OUT/perception" | tail -n 3
+  python3 - "$OUT/perception/perception-report.json" <<'PY'
+import json, sys
+report = json.load(open(sys.argv[1]))
+if report["balises_passed"] == 0 or report["recall"] < 1.0:
+    sys.exit(f"compose-check: perception recall {report['recall']} over "
+             f"{report['balises_passed']} balises passed")
+PY
+  say "perception variant from the containers: recall 1.0"
+fi
 stage done
 say "PASSED"

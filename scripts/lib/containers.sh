@@ -3,11 +3,12 @@
 # The caller sets CHECK (its name in messages) and OUT (its output folder) and may define
 # `on_failure` (print its logs) and `on_exit` (stop what it started); the EXIT trap here calls
 # them, stops the dockerd this check started (by pid) and prints the stage timings.
-# Ports (MOCK_PORT, BRIDGE_PORT, BALISE_PORT, MAP_PORT, MAP_HTTP_PORT) default away from the
-# usual ones, so a developer's `make demo` does not collide.
+# Ports (MOCK_PORT, BRIDGE_PORT, BALISE_PORT, PERCEPTION_PORT, MAP_PORT, MAP_HTTP_PORT) default
+# away from the usual ones, so a developer's `make demo` does not collide.
 
 export MOCK_PORT=${MOCK_PORT:-12150} BRIDGE_PORT=${BRIDGE_PORT:-15061}
 export BALISE_PORT=${BALISE_PORT:-15062} MAP_PORT=${MAP_PORT:-15071}
+export PERCEPTION_PORT=${PERCEPTION_PORT:-15063}
 export MAP_HTTP_PORT=${MAP_HTTP_PORT:-18080}
 export OPENRAILS_URL=http://127.0.0.1:$MOCK_PORT
 export COUPLER_TAG=check RUN_ARGS=""
@@ -114,7 +115,8 @@ host_artifacts() {
     make setup
   fi
   make --no-print-directory wheels
-  python3 - "$CHECK" "$MOCK_PORT" "$BRIDGE_PORT" "$BALISE_PORT" "$MAP_PORT" "$MAP_HTTP_PORT" \
+  python3 - "$CHECK" "$MOCK_PORT" "$BRIDGE_PORT" "$BALISE_PORT" "$PERCEPTION_PORT" "$MAP_PORT" \
+      "$MAP_HTTP_PORT" \
       "$@" <<'PY'
 import socket, sys
 taken = []
@@ -127,7 +129,7 @@ for port in map(int, sys.argv[2:]):
             taken.append(port)
 if taken:
     sys.exit(f"{sys.argv[1]}: ports {taken} on 127.0.0.1 are in use; set MOCK_PORT, BRIDGE_PORT, "
-             "BALISE_PORT, MAP_PORT, MAP_HTTP_PORT to free ones")
+             "BALISE_PORT, PERCEPTION_PORT, MAP_PORT, MAP_HTTP_PORT to free ones")
 PY
 }
 
@@ -151,15 +153,19 @@ compare_runs() {
   fi
 }
 
-# The scenario's compose files merged for loopback (compose.yaml + compose.loopback.yaml), into
-# $1, without the map's published port: docker-compose 1.29 refuses `ports` under host
-# networking, and an override cannot remove a list before Compose v2.24 (`!reset`).
+# The scenario's compose files merged for loopback (compose.yaml + compose.loopback.yaml, then
+# any further files given), into $1, without the map's published port: docker-compose 1.29
+# refuses `ports` under host networking, and an override cannot remove a list before Compose
+# v2.24 (`!reset`).
 loopback_compose() {
-  docker-compose -f compose.yaml -f compose.loopback.yaml config | python3 -c '
+  local out=$1 extra=()
+  shift
+  for file in "$@"; do extra+=(-f "$file"); done
+  docker-compose -f compose.yaml -f compose.loopback.yaml "${extra[@]}" config | python3 -c '
 import sys, yaml
 config = yaml.safe_load(sys.stdin)
 for service in config["services"].values():
     if service.get("network_mode") == "host":
         service.pop("ports", None)
-yaml.safe_dump(config, sys.stdout, sort_keys=False)' >"$1"
+yaml.safe_dump(config, sys.stdout, sort_keys=False)' >"$out"
 }

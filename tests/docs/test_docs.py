@@ -14,8 +14,8 @@ How a block runs:
   and ``build/routes`` (the railway's OpenRails route), so what a block writes (results, logs, certificates, FMUs) stays out of the checkout;
 - with PATH as a new user has it after ``make setup``: no virtual environment, no uv on it, so
   every command must name ``.venv/bin/...`` or a make target;
-- with the well-known ports (2150, 8080, 50051, 50061, 50062, 50071, 50443) replaced by free
-  ones in the block's text and in the variables the SSDs and fleet files read (MOCK_PORT,
+- with the well-known ports (2150, 8080, 50051, 50061, 50062, 50063, 50071, 50443) replaced by
+  free ones in the block's text and in the variables the SSDs and fleet files read (MOCK_PORT,
   GAIN_PORT, ...): blocks may start servers without colliding with a demo, another test or
   another block, and the docs keep showing the ports a person uses;
 - with a deadline; the processes it started (found by a marker in their environment) must be
@@ -57,6 +57,7 @@ PORT_VARIABLES = {
     50051: "GAIN_PORT",
     50061: "BRIDGE_PORT",
     50062: "BALISE_PORT",
+    50063: "PERCEPTION_PORT",
     50071: "MAP_PORT",
     50443: "",
 }

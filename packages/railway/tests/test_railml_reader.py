@@ -219,6 +219,53 @@ def test_unsupported_elements_are_warnings(tmp_path: Path) -> None:
     assert f":{_line_of(text, '<speedChanges>')}:" in infra.warnings[0]
 
 
+SIGNALS = (
+    '<signals><signal id="s1" name="A" pos="500" dir="up"/>'
+    '<signal id="s2" pos="300" dir="down"/></signals>'
+)
+EDGES = (
+    "</ocsElements><trackElements><platformEdges>"
+    '<platformEdge id="p1" name="West 1" pos="20" length="120" side="right" height="0.55"/>'
+    '<platformEdge id="p2" pos="900" length="100" side="left"/>'
+    "</platformEdges></trackElements><ocsElements>"
+)
+
+
+def test_signals_and_platform_edges_are_placed(tmp_path: Path) -> None:
+    text = _railml('<balise id="b1" code="7" pos="10"/>' + GROUP, extra=SIGNALS + EDGES)
+    infra = load_infrastructure(_write(tmp_path, text))
+    assert infra.warnings == ()
+    assert [(s.id, s.name, s.distance_m, s.side) for s in infra.signals] == [
+        ("s2", "s2", 300.0, "left"),
+        ("s1", "A", 500.0, "right"),
+    ]
+    assert [(e.id, e.start_m, e.end_m, e.side, e.height_m) for e in infra.platform_edges] == [
+        ("p1", 20.0, 140.0, "right", 0.55),
+        ("p2", 900.0, 1000.0, "left", 0.76),  # the default height
+    ]
+
+
+@pytest.mark.parametrize(
+    ("extra", "message"),
+    [
+        ('<signals><signal id="s1" dir="up"/></signals>', "has neither pos/absPos nor geoCoord"),
+        ('<signals><signal id="s1" pos="1200"/></signals>', "lies off the track"),
+        (
+            '<signals><signal id="s1" pos="5" dir="sideways"/></signals>',
+            "dir 'sideways' is unknown",
+        ),
+        (EDGES.replace(' side="right"', ""), "side None is not 'left' or 'right'"),
+        (EDGES.replace('length="100"', 'length="0"'), "has no positive length"),
+        (EDGES.replace('length="100"', 'length="300"'), "runs 200.0 m past the end"),
+        (EDGES.replace('height="0.55"', 'height="550"'), "height 550.0 m is not in (0, 2]"),
+    ],
+)
+def test_bad_signals_and_platform_edges(tmp_path: Path, extra: str, message: str) -> None:
+    text = _railml('<balise id="b1" code="7" pos="10"/>' + GROUP, extra=extra)
+    error = _error(tmp_path, text)
+    assert message in str(error)
+
+
 def test_entities_are_not_expanded(tmp_path: Path) -> None:
     text = (
         _railml()

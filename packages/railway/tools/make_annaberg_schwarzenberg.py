@@ -109,13 +109,14 @@ def main() -> None:
             "(packages/railway/tools/make_annaberg_schwarzenberg.py): the line Annaberg-Buchholz "
             "unt Bf - Schwarzenberg (Erzgebirge) via Schlettau, Scheibenberg, Markersbach, "
             "Raschau, Grünstädtel. Station positions approximate public geography; the route "
-            "between them, the gradients, mileage and all balises are MADE UP. Not surveyed, "
-            "not for navigation or operation. "
+            "between them, the gradients, mileage, all balises, signals and platform edges "
+            "are MADE UP. Not surveyed, not for navigation or operation. "
         )
     )
     infra = sub(root, "infrastructure", id="is_erzgebirge")
     tracks = sub(infra, "tracks")
     group_code = 100
+    last = len(model.sections) - 1
     for index, (section, shape) in enumerate(zip(model.sections, geometry, strict=True)):
         a, b = STATIONS[index], STATIONS[index + 1]
         start, end = section.start_distance, section.start_distance + section.length
@@ -127,7 +128,6 @@ def main() -> None:
             sub(begin, "bufferStop", id=f"{section.track_id}_stop")
         else:
             sub(begin, "connection", id=f"{section.track_id}_cb", ref=f"{section.track_id}_ce0")
-        last = len(model.sections) - 1
         end_element = sub(
             topo, "trackEnd", id=f"{section.track_id}_e", pos=num(section.length), absPos=num(end)
         )
@@ -153,6 +153,22 @@ def main() -> None:
                 absPos=num(distance),
             )
             geo(mapping, lat, lon)
+        # Platform edges at the stations (heights as on the line: 0.55 m): at the stretch's
+        # start for its first station, at its end for the last one.
+        edges = sub(elements, "platformEdges")
+        platforms = [(20.0, a)] + ([(section.length - 150.0, b)] if index == last else [])
+        for k, (pos, station) in enumerate(platforms):
+            sub(
+                edges,
+                "platformEdge",
+                id=f"pe_{station[0]}_{k}",
+                name=f"{station[1]} Gleis 1",
+                pos=num(pos),
+                absPos=num(start + pos),
+                length="130",
+                side="right" if index % 2 == 0 else "left",
+                height="0.55",
+            )
         grade = (b[4] - a[4]) / section.length * 1000.0
         gradients = sub(elements, "gradientChanges")
         for k, (fraction, factor) in enumerate(((0.0, 1.25), (0.4, 0.6), (0.8, 1.25))):
@@ -173,7 +189,25 @@ def main() -> None:
             (-320.0, 3, "up", "signal"),
             (-120.0, 2, "down", "signal"),
         ]
-        balises = sub(sub(track, "ocsElements"), "balises")
+        ocs = sub(track, "ocsElements")
+        # Signals: the exit signal after the stretch's first station, the entry signal before
+        # the next one (both facing up, standing on the right), and the opposite entry signal.
+        signals = sub(ocs, "signals")
+        for name, pos, direction in (
+            (f"{a[0]} exit", 180.0, "up"),
+            (f"{b[0]} entry", section.length - 260.0, "up"),
+            (f"{a[0]} entry (down)", 260.0, "down"),
+        ):
+            sub(
+                signals,
+                "signal",
+                id=f"sig_{section.track_id}_{len(signals)}",
+                name=name,
+                pos=num(pos),
+                absPos=num(start + pos),
+                dir=direction,
+            )
+        balises = sub(ocs, "balises")
         groups = []
         for offset, count, direction, kind in layout:
             base = offset if offset >= 0.0 else section.length + offset

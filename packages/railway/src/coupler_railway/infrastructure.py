@@ -91,6 +91,25 @@ class Signal:
     """railML ``type`` (main, distant, repeater, ...), empty when not given."""
     function: str
     """railML ``function`` (entry, exit, block, ...), empty when not given."""
+    side: str
+    """Where it stands, seen towards increasing distance: ``right`` for ``dir="up"`` (and
+    ``both``/``none``/``unknown``), ``left`` for ``dir="down"`` (right-hand running)."""
+    line: int
+
+
+@dataclass(frozen=True)
+class PlatformEdge:
+    """A railML ``<platformEdge>``: the edge of a platform along the line."""
+
+    id: str
+    name: str
+    start_m: float
+    """Distance along the line where it begins [m]."""
+    end_m: float
+    side: str
+    """``left`` or ``right`` of the track, seen towards increasing distance."""
+    height_m: float
+    """Height of the edge above the top of the rails [m]."""
     line: int
 
 
@@ -132,6 +151,8 @@ class Infrastructure:
     """Sorted by distance along the line."""
     switches: tuple[Switch, ...] = ()
     """Switches on this line, sorted by distance (only in a :class:`Network`)."""
+    platform_edges: tuple[PlatformEdge, ...] = ()
+    """Sorted by where they begin along the line."""
 
 
 @dataclass(frozen=True, eq=False)

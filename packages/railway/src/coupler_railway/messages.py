@@ -1,16 +1,25 @@
-"""The railway's structured values (``railway.proto``), registered with Coupler's message registry.
+"""The railway's structured values, registered with Coupler's message registry.
 
-Importing this module makes ``coupler.v1.TrainState``, ``coupler.v1.BaliseReading`` and
-``coupler.v1.GeoPoint`` known to ``coupler.messages``: binary channels carrying them can be
-encoded, decoded and written as JSON in results. The message names live here and nowhere else.
+Importing this module makes the messages of ``railway.proto`` (``coupler.v1.TrainState``,
+``BaliseReading``, ``GeoPoint``, ``BaliseDetections``) and of ``sensors.proto``
+(``coupler.v1.Image``, a camera or depth frame) known to ``coupler.messages``: binary channels
+carrying them can be encoded, decoded and written as JSON in results. The message names live
+here and nowhere else.
 """
 
 from __future__ import annotations
 
 from coupler.messages import register
-from coupler.v1.railway_pb2 import BaliseReading, GeoPoint, TrainState
+from coupler.v1.railway_pb2 import (
+    BaliseDetection,
+    BaliseDetections,
+    BaliseReading,
+    GeoPoint,
+    TrainState,
+)
+from coupler.v1.sensors_pb2 import Image
 
-register(TrainState, BaliseReading, GeoPoint)
+register(TrainState, BaliseReading, GeoPoint, BaliseDetection, BaliseDetections, Image)
 
 TRAIN_STATE = TrainState.DESCRIPTOR.full_name
 """Full name of the train state message (``coupler.v1.TrainState``)."""
@@ -18,3 +27,15 @@ BALISE_READING = BaliseReading.DESCRIPTOR.full_name
 """Full name of the balise reading message."""
 GEO_POINT = GeoPoint.DESCRIPTOR.full_name
 """Full name of the WGS84 point message."""
+BALISE_DETECTIONS = BaliseDetections.DESCRIPTOR.full_name
+"""Full name of the message of every balise a perception participant saw in one frame."""
+IMAGE = Image.DESCRIPTOR.full_name
+"""Full name of a camera or depth frame (``coupler.v1.Image``, sensors.proto)."""
+
+RGB8 = "rgb8"
+"""``Image.encoding`` of 8-bit RGB pixels, rows top to bottom."""
+DEPTH16_CLASS_ID = "depth16-class-id"
+"""``Image.encoding`` of OpenRails' depth frames: (class << 13 | id, distance, intensity) as
+little-endian uint16 per pixel."""
+BYTES_PER_PIXEL = {RGB8: 3, DEPTH16_CLASS_ID: 6}
+"""Size of one pixel of each encoding."""

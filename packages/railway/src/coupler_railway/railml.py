@@ -1,4 +1,5 @@
-"""railML 2.x infrastructure reader: tracks with geo coordinates, gradients, balises, ocps.
+"""railML 2.x infrastructure reader: tracks with geo coordinates, gradients, balises, signals,
+platform edges, switches, ocps.
 
 The subset read and the representation choices are described in the package README. Every
 element outside that subset is reported in ``Infrastructure.warnings``; every inconsistency
@@ -23,6 +24,7 @@ from coupler_railway.infrastructure import (
     BaliseGroup,
     Infrastructure,
     Network,
+    PlatformEdge,
     Signal,
     Station,
     Switch,
@@ -36,10 +38,13 @@ _INTERPRETED = frozenset(
         "trackEnd", "connection", "bufferStop", "openEnd", "geoCoord", "trackElements",
         "geoMappings", "geoMapping", "gradientChanges", "gradientChange", "ocsElements",
         "balises", "balise", "baliseGroup", "baliseRef", "operationControlPoints", "ocp",
-        "metadata", "connections", "switch", "signals", "signal",
+        "metadata", "connections", "switch", "signals", "signal", "platformEdges", "platformEdge",
     }
 )  # fmt: skip
 _DIRECTIONS = frozenset({"up", "down", "both", "none", "unknown"})
+_SIDES = frozenset({"left", "right"})
+PLATFORM_HEIGHT_M = 0.76
+"""A platform edge's height when railML gives none (the European standard height)."""
 _WGS84 = frozenset({"4326", "EPSG:4326", "urn:ogc:def:crs:EPSG::4326"})
 
 
@@ -244,6 +249,7 @@ class _Reader:
                     stations=tuple(s for s, i in stations if i == index),
                     warnings=tuple(self.warnings),
                     signals=self.read_signals(line.tracks, model),
+                    platform_edges=self.read_platform_edges(line.tracks, model),
                     switches=tuple(sorted(switches[index], key=lambda w: w.distance_m)),
                 )
             )
@@ -702,10 +708,58 @@ class _Reader:
                         direction=direction,
                         type=element.get("type", ""),
                         function=element.get("function", ""),
+                        side="left" if direction == "down" else "right",
                         line=element.sourceline or 0,
                     )
                 )
         return tuple(sorted(signals, key=lambda s: s.distance_m))
+
+    def read_platform_edges(
+        self, raw: list[_RawTrack], model: TrackModel
+    ) -> tuple[PlatformEdge, ...]:
+        edges = [
+            self.read_platform_edge(element, r, section, model)
+            for r, section in zip(raw, model.sections, strict=True)
+            for element in _children(r.element, "trackElements", "platformEdges", "platformEdge")
+        ]
+        return tuple(sorted(edges, key=lambda e: e.start_m))
+
+    def read_platform_edge(
+        self, element: etree._Element, raw: _RawTrack, section: TrackSection, model: TrackModel
+    ) -> PlatformEdge:
+        """A platform edge from where it begins (pos/absPos or geoCoord) over ``length`` metres,
+        on ``side``, ``height`` metres above the rails (default 0.76)."""
+        begin, _ = self.place(element, raw, section, model)
+        length = self.number(element, "length")
+        if length is None or length <= 0.0:
+            raise self.error(element, "has no positive length", "give length in metres")
+        if begin + length > model.length + self.tolerance:
+            raise self.error(
+                element,
+                f"runs {begin + length - model.length:.1f} m past the end of the line",
+                "shorten it",
+            )
+        side = element.get("side")
+        if side not in _SIDES:
+            raise self.error(
+                element, f"side {side!r} is not 'left' or 'right'", 'give side="left"/"right"'
+            )
+        height = self.number(element, "height")
+        if height is None:
+            height = PLATFORM_HEIGHT_M
+        if not 0.0 < height <= 2.0:
+            raise self.error(
+                element, f"height {height} m is not in (0, 2]", "give height in metres"
+            )
+        return PlatformEdge(
+            id=element.get("id", ""),
+            name=element.get("name") or element.get("id", ""),
+            start_m=begin,
+            end_m=min(begin + length, model.length),
+            side=side,
+            height_m=height,
+            line=_line(element),
+        )
 
     def place_switches(self, lines: list[_Line], models: list[TrackModel]) -> list[list[Switch]]:
         """Every switch on its line, with the line that branches off it; checked to meet."""

@@ -12,7 +12,7 @@ from collections.abc import Mapping
 from coupler.channels import Capabilities, Causality, Channel, Description, RunSetup, Value
 from coupler.channels import ValueType as T
 from coupler.participant import Participant, Values
-from coupler_railway.messages import BALISE_READING, TRAIN_STATE
+from coupler_railway.messages import BALISE_DETECTIONS, BALISE_READING, IMAGE, TRAIN_STATE
 from mapserver.state import RunState
 
 NAME = "MapServer"
@@ -50,6 +50,15 @@ CHANNELS = (
     _input("train_state", T.BINARY, b"", "", "Train state (empty: not connected)", TRAIN_STATE),
     _input(
         "balise_reading", T.BINARY, b"", "", "Last balise reading (empty: none)", BALISE_READING
+    ),
+    _input("camera", T.BINARY, b"", "", "Camera frame, rgb8 (empty: no camera)", IMAGE),
+    _input(
+        "detections",
+        T.BINARY,
+        b"",
+        "",
+        "Balises a perception saw in a camera frame (empty: none connected)",
+        BALISE_DETECTIONS,
     ),
 )
 

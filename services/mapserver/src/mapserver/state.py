@@ -29,6 +29,7 @@ from coupler.errors import ChannelValueError
 from coupler.messages import decode_message
 from coupler_railway import TrackModel
 from coupler_railway.messages import BALISE_READING, TRAIN_STATE
+from mapserver.camera import CameraView
 
 log = structlog.get_logger("mapserver.state")
 
@@ -231,6 +232,8 @@ class RunState:
         self._inputs: dict[str, Value] = {}
         self._wall_start = 0.0
         self._sources = BaliseSources(balise_distances or {})
+        self.camera = CameraView()
+        """The latest camera frame and the balises a perception saw in it."""
 
     # --- changes, from the participant ------------------------------------------------------
 
@@ -244,6 +247,7 @@ class RunState:
         self.readings.clear()
         self.readings_total = 0
         self._sources.reset()
+        self.camera.reset()
         self._inputs = {**defaults, **setup.inputs}
         self._wall_start = self.clock()
         self._apply(setup.start_time)
@@ -268,6 +272,7 @@ class RunState:
         self._emit("run", {"run": self._run_json(), "reset": False})
 
     def _apply(self, time: float) -> None:
+        self.camera.update(self._inputs)
         self.train = self._train_of(self._inputs)
         distance = self.train.distance_m if self.train else _real(self._inputs.get("distance"))
         for at, balise_id, group_id, balise_distance in self._sources.readings(
@@ -348,7 +353,11 @@ class RunState:
         }
 
     def _step_json(self) -> dict[str, Any]:
-        return {"run": self._run_json(), "train": self._train_json()}
+        return {
+            "run": self._run_json(),
+            "train": self._train_json(),
+            "camera": self.camera.to_json(),
+        }
 
     def snapshot(self) -> Event:
         """The whole state so far (readings: the last ``max_readings``), as one event."""
@@ -358,6 +367,7 @@ class RunState:
             {
                 "run": self._run_json(),
                 "train": self._train_json(),
+                "camera": self.camera.to_json(),
                 "readings": [r.to_json() for r in self.readings],
             },
         )

@@ -6,6 +6,7 @@
     GET /api/geojson   the line, balises and stations (coupler_railway.to_geojson)
     GET /api/state     the whole state so far (the snapshot event, as JSON)
     GET /api/events    text/event-stream: a snapshot, then events as DoSteps arrive
+    GET /api/frame.jpg the camera frame shown (``?n=<frame number>``: that one, if still kept)
     GET /healthz       200 "ok"
 
 Every event is one SSE message whose ``id`` is its sequence number and whose data is JSON with
@@ -63,6 +64,7 @@ def create_app(
     app.router.add_get("/api/geojson", geojson)
     app.router.add_get("/api/state", state)
     app.router.add_get("/api/events", events)
+    app.router.add_get("/api/frame.jpg", frame)
     app.router.add_get("/healthz", healthz)
     app.router.add_static("/static/", STATIC, append_version=False)
     app.on_shutdown.append(_close_streams)
@@ -106,6 +108,18 @@ async def geojson(request: web.Request) -> web.Response:
 async def state(request: web.Request) -> web.Response:
     snapshot = request.app[FEED].state.snapshot()
     return web.Response(text=snapshot.json, content_type="application/json")
+
+
+async def frame(request: web.Request) -> web.Response:
+    """The camera frame as JPEG; 404 while no camera frame has arrived."""
+    raw = request.query.get("n", "")
+    number = int(raw) if raw.isdigit() else None
+    picture = request.app[FEED].state.camera.jpeg(number)
+    if picture is None:
+        return web.json_response({"error": "no camera frame yet (connect Map.camera)"}, status=404)
+    return web.Response(
+        body=picture, content_type="image/jpeg", headers={"Cache-Control": "no-store"}
+    )
 
 
 async def healthz(request: web.Request) -> web.Response:

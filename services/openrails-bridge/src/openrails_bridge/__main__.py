@@ -11,7 +11,7 @@ from pathlib import Path
 
 from coupler.adapter import AdapterConfig, AdapterParticipant
 from coupler.channels import Causality
-from coupler.errors import CouplerError
+from coupler.errors import CouplerError, ScenarioError
 from coupler.logs import configure_logging
 from coupler.server import ParticipantServer, serve
 from coupler.server import run as run_participant
@@ -19,6 +19,7 @@ from coupler.settings import add_security_arguments
 
 from .adapter import OpenRailsAdapter
 from .config import BridgeSettings
+from .sensors import load_sensors
 
 
 def _parse(argv: list[str] | None) -> BridgeSettings:
@@ -37,6 +38,11 @@ def _parse(argv: list[str] | None) -> BridgeSettings:
         "--max-body-bytes", type=int, dest="max_body_bytes", help="largest answer read"
     )
     parser.add_argument("--channels", type=Path, help="channel mapping TOML")
+    parser.add_argument(
+        "--sensors",
+        type=Path,
+        help="OpenRails' sensor configuration (JSON): one Binary output channel per sensor",
+    )
     parser.add_argument("--locomotive", help="lockstep LocomotiveName (default PLAYER)")
     parser.add_argument("--host", help="gRPC bind address (default 127.0.0.1)")
     parser.add_argument("--port", type=int, help="gRPC port, 0 = any free one (default 50061)")
@@ -59,17 +65,37 @@ def load_channels(settings: BridgeSettings) -> AdapterConfig:
 
 
 def build(settings: BridgeSettings) -> AdapterParticipant:
-    """The bridge participant: the adapter and its channel mapping."""
+    """The bridge participant: the adapter and its channel mapping, with a Binary output
+    channel per configured sensor."""
     config = load_channels(settings)
+    sensors = load_sensors(settings.sensors) if settings.sensors is not None else ()
+    if sensors and settings.mode != "lockstep":
+        raise ScenarioError(
+            f"{settings.sensors} (OPENRAILS_BRIDGE_SENSORS): camera sensors exist in OpenRails' "
+            f"build for simulation only: use --mode lockstep, or no sensors"
+        )
+    names = {c.name for c in config.channel}
+    for sensor in sensors:
+        if sensor.name in names:
+            raise ScenarioError(
+                f"{settings.sensors}: sensor '{sensor.name}' would be a channel of the same "
+                f"name as one of the channel mapping's; rename the sensor"
+            )
+    config = config.model_copy(
+        update={"channel": [*config.channel, *(s.channel() for s in sensors)]}
+    )
     inputs = {c.field: c.name for c in config.channel if c.causality is Causality.INPUT}
-    adapter = OpenRailsAdapter(settings, name=config.name, channel_names=inputs)
+    adapter = OpenRailsAdapter(settings, name=config.name, channel_names=inputs, sensors=sensors)
     return AdapterParticipant(adapter, config, implementation="openrails-bridge")
 
 
 def main(argv: list[str] | None = None) -> None:
     settings = _parse(argv)
     configure_logging(settings.log_level, json=settings.log_json)
-    participant = build(settings)
+    try:
+        participant = build(settings)
+    except CouplerError as exc:
+        raise SystemExit(f"openrails-bridge: {exc}") from None
 
     def announce(server: ParticipantServer) -> None:
         print(

@@ -27,8 +27,10 @@ OpenRails.
 
 ``get_state()`` has the lockstep reply's fields (``locomotiveState.v``, ``trackLocation...``)
 in both modes, plus ``MAP`` (raw) and the derived ``latitude``, ``longitude``, ``heading``,
-``direction`` (reverser: 1, 0, -1), ``time`` and ``train_state`` (a serialized
-``coupler.v1.TrainState``).
+``direction`` (reverser: 1, 0, -1), ``time``, ``train_state`` (a serialized
+``coupler.v1.TrainState``) and ``sensors.<name>``: the latest frame of each configured camera
+or depth sensor as a serialized ``coupler.v1.Image`` (lockstep only; ``sensors``), fetched
+once per step after the last post, beside GET /API/MAP.
 """
 
 from __future__ import annotations
@@ -37,7 +39,7 @@ import asyncio
 import math
 import re
 import time as wallclock
-from collections.abc import Mapping
+from collections.abc import Awaitable, Mapping, Sequence
 from typing import Any
 
 import structlog
@@ -54,6 +56,7 @@ from .config import BridgeSettings
 from .replies import (
     CONTROLS,
     DISPLAY,
+    CameraSensor,
     ControlValue,
     DisplayRow,
     LatLonDirection,
@@ -64,6 +67,7 @@ from .replies import (
     TrainLength,
     WorldPosition,
 )
+from .sensors import Sensor, image
 
 log = structlog.get_logger("openrails_bridge")
 
@@ -100,9 +104,12 @@ class OpenRailsAdapter(Adapter):
         *,
         name: str = "OpenRails",
         channel_names: Mapping[str, str] | None = None,
+        sensors: Sequence[Sensor] = (),
     ) -> None:
-        """``channel_names`` maps control fields (THROTTLE, ...) to channel names for errors."""
+        """``channel_names`` maps control fields (THROTTLE, ...) to channel names for errors;
+        ``sensors`` are the camera and depth sensors OpenRails was started with."""
         self.settings = settings
+        self.sensors = tuple(sensors)
         self.name = name
         self.base_url = _base_url(settings.openrails_url)
         self.channel_names = dict(channel_names or {})
@@ -120,6 +127,9 @@ class OpenRailsAdapter(Adapter):
         self._reverser: int = 1
         self._time = 0.0
         self._stale = True
+        # the sensors as the last step reply describes them, and their latest frames
+        self._described: Mapping[str, CameraSensor] = {}
+        self._frames: dict[str, bytes] = {sensor.name: b"" for sensor in self.sensors}
         # readiness: why OpenRails cannot take a run (None: it can), and who to tell
         self._reason: str | None = f"connecting to OpenRails at {self.base_url}"
         self._ready = asyncio.Event()
@@ -155,6 +165,7 @@ class OpenRailsAdapter(Adapter):
         self._wall_start = wallclock.monotonic()
         self._last_poll = None
         self._stale = True
+        self._frames = {sensor.name: b"" for sensor in self.sensors}
         await self._reset()
 
     async def apply_inputs(self, inputs: Mapping[str, Value]) -> None:
@@ -167,7 +178,9 @@ class OpenRailsAdapter(Adapter):
         if self.settings.mode == "lockstep":
             for _ in range(self._steps(step)):
                 self._train = await self._post_lockstep()
-            self._map = await self._get_map()
+            self._map, self._frames = await _together(
+                self._get_map(), self._fetch_frames(time + step)
+            )
             self._stale = False
         else:
             answer = await self.client.send(
@@ -211,6 +224,7 @@ class OpenRailsAdapter(Adapter):
             "direction": self._reverser,
             "time": self._time,
             "train_state": train_state,
+            "sensors": dict(self._frames),
         }
 
     async def shutdown(self) -> None:
@@ -303,7 +317,10 @@ class OpenRailsAdapter(Adapter):
         if self.settings.mode == "lockstep" and answer.body.strip():
             reply = self.client.parse(answer, "/API/RESET", StepReply, call="initialize")
             self._train = self._train_of(reply, "/API/RESET")
-            self._map = await self._get_map()
+            self._described = reply.CameraSensors
+            self._map, self._frames = await _together(
+                self._get_map(), self._fetch_frames(self._time, call="initialize")
+            )
             self._stale = False
 
     async def _check_at_start(self, status: int) -> None:
@@ -357,6 +374,7 @@ class OpenRailsAdapter(Adapter):
             "SwitchCommands": {},
         }
         reply = await self.client.fetch("POST", "/API/CABCONTROLS", StepReply, body=body)
+        self._described = reply.CameraSensors
         return self._train_of(reply, "/API/CABCONTROLS")
 
     def _train_of(self, reply: StepReply, path: str) -> Train:
@@ -369,6 +387,47 @@ class OpenRailsAdapter(Adapter):
                 f"player train's name"
             )
         return train
+
+    async def _fetch_frames(self, time_s: float, *, call: str = "step") -> dict[str, bytes]:
+        """Every sensor's current frame as a serialized Image, fetched side by side."""
+        frames = await _together(*(self._frame(s, time_s, call) for s in self.sensors))
+        return {sensor.name: frame for sensor, frame in zip(self.sensors, frames, strict=True)}
+
+    async def _frame(self, sensor: Sensor, time_s: float, call: str) -> bytes:
+        """GET /API/CAMERASENSOR/<name>, checked against the size ``CameraSensors`` declares."""
+        described = self._described.get(sensor.name)
+        if described is None:
+            raise self.client.error(
+                f"OpenRails at {self.base_url} has no camera sensor '{sensor.name}' "
+                f"(its step reply's CameraSensors: {sorted(self._described) or 'none'}): start "
+                f"OpenRails with the sensor configuration the bridge reads "
+                f"({self.settings.sensors}, OPENRAILS_BRIDGE_SENSORS)",
+                call=call,
+            )
+        if (described.width, described.height) != (sensor.width, sensor.height):
+            raise self.client.error(
+                f"OpenRails at {self.base_url} describes camera sensor '{sensor.name}' as "
+                f"{described.width} x {described.height}, but {self.settings.sensors} "
+                f"(OPENRAILS_BRIDGE_SENSORS) configures {sensor.width} x {sensor.height}: give "
+                f"the bridge the file OpenRails was started with",
+                call=call,
+            )
+        size = sensor.frame_bytes
+        path = f"/API/CAMERASENSOR/{sensor.name}"
+        declared = (
+            f"the {size} bytes CameraSensors declares for sensor '{sensor.name}' "
+            f"({sensor.width} x {sensor.height} {sensor.type})"
+        )
+        answer = await self.client.send("GET", path, call=call, limit=(size, declared))
+        self.client.check(answer, "GET", path, call=call)
+        if len(answer.body) != size:
+            raise self.client.error(
+                f"OpenRails at {self.base_url}{path} answered a frame of {len(answer.body)} "
+                f"bytes, but CameraSensors declares sensor '{sensor.name}' {sensor.width} x "
+                f"{sensor.height} {sensor.type}: {size} bytes",
+                call=call,
+            )
+        return image(sensor, described, answer.body, time_s)
 
     async def _get_map(self) -> LatLonDirection:
         return await self.client.fetch("GET", "/API/MAP", LatLonDirection)
@@ -451,6 +510,19 @@ class OpenRailsAdapter(Adapter):
         for item in listed:
             ranges.setdefault(item.TypeName, item)
         return ranges
+
+
+async def _together(*calls: Awaitable[Any]) -> list[Any]:
+    """Like asyncio.gather, but the first failure cancels the other requests (and waits for
+    them) before it is raised: no request outlives the step that made it."""
+    tasks = [asyncio.ensure_future(call) for call in calls]
+    try:
+        return list(await asyncio.gather(*tasks))
+    except BaseException:
+        for task in tasks:
+            task.cancel()
+        await asyncio.gather(*tasks, return_exceptions=True)
+        raise
 
 
 def _base_url(url: str) -> str:

@@ -116,8 +116,12 @@ class OpenRailsClient:
         body: Any = None,
         deadline_s: float | None = None,
         call: str = "step",
+        limit: tuple[int, str] | None = None,
     ) -> Answer:
-        """One request with a deadline and a capped body, whatever its status."""
+        """One request with a deadline and a capped body, whatever its status.
+
+        ``limit``: (cap, why) instead of ``max_body_bytes`` -- a camera frame may be bigger
+        than any JSON answer, but no bigger than its declared size."""
         url = f"{self.base_url}{path}"
         if self._session is None:
             raise self.error(f"not connected to OpenRails at {url}; open() first", call=call)
@@ -126,7 +130,7 @@ class OpenRailsClient:
             async with self._session.request(
                 method, url, json=body, timeout=aiohttp.ClientTimeout(total=total)
             ) as response:
-                return Answer(response.status, await self._read(response, method, url, call))
+                return Answer(response.status, await self._read(response, method, url, call, limit))
         except TimeoutError as exc:
             raise self.error(
                 f"OpenRails at {url} did not answer {method} within {total:g} s "
@@ -140,11 +144,19 @@ class OpenRailsClient:
             raise self.error(reason, call=call) from exc
 
     async def _read(
-        self, response: aiohttp.ClientResponse, method: str, url: str, call: str
+        self,
+        response: aiohttp.ClientResponse,
+        method: str,
+        url: str,
+        call: str,
+        limit: tuple[int, str] | None,
     ) -> bytes:
-        """The body, at most ``max_body_bytes``: a bigger one is refused as soon as it shows,
-        and the connection dropped rather than drained."""
-        cap = self.max_body_bytes
+        """The body, at most ``max_body_bytes`` (or ``limit``): a bigger one is refused as soon
+        as it shows, and the connection dropped rather than drained."""
+        cap, why = limit or (
+            self.max_body_bytes,
+            f"the {self.max_body_bytes} bytes the bridge reads (OPENRAILS_BRIDGE_MAX_BODY_BYTES)",
+        )
         declared = response.content_length
         body = bytearray()
         if declared is None or declared <= cap:
@@ -160,8 +172,7 @@ class OpenRailsClient:
         else:
             size, refused = "more than", f"after {len(body)} bytes"
         raise self.error(
-            f"OpenRails at {url} answered {method} with {size} the {cap} bytes the bridge reads "
-            f"(OPENRAILS_BRIDGE_MAX_BODY_BYTES); refused {refused}",
+            f"OpenRails at {url} answered {method} with {size} {why}; refused {refused}",
             call=call,
         )
 

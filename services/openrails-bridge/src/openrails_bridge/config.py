@@ -38,6 +38,9 @@ class BridgeSettings(ParticipantSettings):
     """Largest answer read from OpenRails; a bigger one is refused without reading the rest."""
     channels: Path | None = None
     """Channel mapping (TOML); unset: the packaged ``channels.toml``."""
+    sensors: Path | None = None
+    """OpenRails' sensor configuration (the JSON list it was started with): one Binary
+    output channel per camera or depth sensor (lockstep only). Unset: no sensor channels."""
     locomotive: str = "PLAYER"
     """Lockstep: ``LocomotiveName`` of the driven train and its key in the step reply."""
     control_index: int = 1

@@ -4,7 +4,7 @@ Written from the simulation build's server source (DLR-SE/openrails-for-simulati
 ``Source/RunActivity/Viewer3D/WebServices/OutputGenerator.cs``, ``WebServer.cs``,
 ``ControlValue.cs``); services/openrails-mock/README.md lists the shapes. Parsing is strict
 (a string is not a number, 1 is not ``true``) and ignores fields the bridge does not read
-(``carPositions``, ``CameraSensors``, ...). Older builds send ``location`` without tiles; the
+(``carPositions``, ...). Older builds send ``location`` without tiles; the
 tiles then read 0.
 """
 
@@ -74,10 +74,24 @@ class Train(Reply):
     trainLength: TrainLength
 
 
+class CameraSensor(Reply):
+    """A sensor as ``CameraSensors`` describes it (``OutputGenerator.GetCameraSensorConfigs``)."""
+
+    width: int
+    height: int
+    h_scale: float
+    """M11 of the sensor's projection matrix."""
+    v_scale: float
+    """M22 of the sensor's projection matrix."""
+    max_distance: float | None = None
+    """Depth sensors: the distance 65535 stands for [m]."""
+
+
 class StepReply(Reply):
     """POST /API/CABCONTROLS of the simulation build (and the mock's POST /API/RESET)."""
 
     trains: dict[str, Train]
+    CameraSensors: dict[str, CameraSensor] = {}
 
 
 class ControlValue(Reply):

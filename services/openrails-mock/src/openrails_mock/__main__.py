@@ -13,6 +13,7 @@ from typing import Any
 
 import structlog
 from aiohttp import web
+from pydantic import ValidationError
 
 from coupler.errors import CouplerError
 from coupler.ports import listening
@@ -39,6 +40,14 @@ def _parse(argv: list[str] | None) -> MockConfig:
     parser.add_argument("--loading-delay-s", type=float, dest="loading_delay_s")
     parser.add_argument("--start-time-s", type=float, dest="start_time_s")
     parser.add_argument(
+        "--sensors",
+        type=Path,
+        help="sensor configuration: JSON list of {sensorName, sensorType, trainName, width, "
+        "height, fov[, range]} (lockstep only)",
+    )
+    parser.add_argument("--camera-height", type=float, dest="camera_height_m")
+    parser.add_argument("--camera-pitch", type=float, dest="camera_pitch_deg")
+    parser.add_argument(
         "--no-reset",
         action="store_false",
         dest="reset",
@@ -63,6 +72,7 @@ async def _serve(config: MockConfig) -> None:
         raise
     port = runner.addresses[0][1]
     consist = app[SERVER].simulation.consist
+    cameras = app[SERVER].cameras
     log.info(
         "openrails_mock.started",
         host=config.host,
@@ -73,6 +83,7 @@ async def _serve(config: MockConfig) -> None:
         path=str(config.path) if config.path else None,
         railml=str(config.railml) if config.railml else None,
         consist=consist.name,
+        sensors=sorted(cameras.specs) if cameras else [],
     )
     print(f"openrails-mock listening on http://{config.host}:{port}/API", flush=True)
     stop = asyncio.Event()
@@ -88,7 +99,14 @@ async def _serve(config: MockConfig) -> None:
 
 def main(argv: list[str] | None = None) -> None:
     logging.basicConfig(level=logging.INFO, format="%(message)s")
-    config = _parse(argv)
+    try:
+        config = _parse(argv)
+    except ValidationError as exc:
+        problems = "; ".join(
+            f"{'.'.join(str(p) for p in e['loc'])}: {e['msg']}" for e in exc.errors()
+        )
+        print(f"openrails-mock: error: invalid configuration: {problems}", file=sys.stderr)
+        sys.exit(1)
     try:
         with contextlib.suppress(KeyboardInterrupt):
             asyncio.run(_serve(config))

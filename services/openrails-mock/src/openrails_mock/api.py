@@ -11,6 +11,7 @@ the simulation build's (README: "Endpoints"). Every request the mock cannot take
 
 from __future__ import annotations
 
+import asyncio
 import itertools
 import json
 import math
@@ -20,9 +21,14 @@ from typing import Any
 
 from aiohttp import web
 
+from coupler.errors import ScenarioError
+
 from .config import MAX_STEP_MS, MockConfig
 from .objects import CommandError
-from .route import Route, StraightRoute
+from .renderer import Mount, Renderer
+from .route import Route, StraightRoute, load_infrastructure_file
+from .scene import Scene
+from .sensors import Cameras, load_sensors, sensor_names
 from .simulation import (
     CONTROL_SPECS,
     ControlError,
@@ -64,12 +70,15 @@ class MockServer:
         simulation: Simulation,
         clock: Clock,
         world: TrackWorld | None = None,
+        cameras: Cameras | None = None,
     ) -> None:
         self.config = config
         self.simulation = simulation
         self.world = world
         """The route folder's track, junctions and objects; None on the straight route."""
         self.clock = clock
+        self.cameras = cameras
+        """The configured camera and depth sensors (None: none)."""
         self.ready_at = math.inf
         self.last_wall_s = 0.0
 
@@ -125,7 +134,7 @@ def create_app(
     )
     if world is not None:
         add_other_trains(world, simulation)
-    server = MockServer(config, simulation, clock, world)
+    server = MockServer(config, simulation, clock, world, _cameras(config, route))
     app = web.Application(middlewares=[_errors, _pacing])
     app[SERVER] = server
 
@@ -147,7 +156,28 @@ def create_app(
     app.router.add_get("/API/TRAININFO", get_traininfo)
     app.router.add_get("/API/TRAINDRIVINGDISPLAY", get_traindrivingdisplay)
     app.router.add_get("/API/OBJECTS", get_objects)
+    app.router.add_get("/API/CAMERASENSOR/{name}", get_camerasensor)
     return app
+
+
+def _cameras(config: MockConfig, route: Route) -> Cameras | None:
+    """The configured sensors. With a railML file (``--railml``) they see its balises, signals
+    and platform edges on its track; on a route folder alone, the bare track of the train's
+    path."""
+    if config.sensors is None:
+        return None
+    specs = load_sensors(config.sensors, train_name=config.train_name)
+    if specs and config.mode != "lockstep":
+        raise ScenarioError(
+            f"{config.sensors}: camera sensors are a feature of OpenRails' build for "
+            f"simulation: run the mock with --mode lockstep, or without --sensors"
+        )
+    if config.railml is not None:
+        scene = Scene.of_infrastructure(load_infrastructure_file(config.railml))
+    else:
+        scene = Scene(route)
+    mount = Mount(height_m=config.camera_height_m, pitch_deg=config.camera_pitch_deg)
+    return Cameras(specs, Renderer(scene, mount))
 
 
 def _error(status: int, message: str) -> web.Response:
@@ -203,7 +233,7 @@ async def post_cabcontrols_lockstep(request: web.Request) -> web.Response:
     simulation.apply(posts)
     apply_request(server.world, simulation, world)
     simulation.advance(float(step_ms) / 1000.0)
-    return web.json_response(_state(simulation))
+    return web.json_response(_state(server))
 
 
 async def post_reset(request: web.Request) -> web.Response:
@@ -217,7 +247,7 @@ async def post_reset(request: web.Request) -> web.Response:
         raise BadRequest("POST /API/RESET takes no options: send no body or {}")
     reset_world(server.world, server.simulation)
     server.last_wall_s = server.clock()
-    return web.json_response(_state(server.simulation))
+    return web.json_response(_state(server))
 
 
 async def post_cabcontrols_stock(request: web.Request) -> web.Response:
@@ -302,6 +332,24 @@ async def get_objects(request: web.Request) -> web.Response:
     """A mock extension: the route's movable (animated) world objects and where they stand."""
     world = request.app[SERVER].world
     return web.json_response(world.objects.listing() if world is not None else [])
+
+
+async def get_camerasensor(request: web.Request) -> web.Response:
+    """The current frame of a sensor, raw: RGB bytes, or (class/id, distance, intensity) as
+    little-endian uint16 per pixel; rows top to bottom."""
+    server = request.app[SERVER]
+    name = request.match_info["name"]
+    cameras = server.cameras
+    if cameras is None or name not in cameras.specs:
+        configured = sensor_names(list(cameras.specs.values())) if cameras else "none"
+        return _error(
+            404,
+            f"No camera sensor named {name} found (configured: {configured}; "
+            f"OPENRAILS_MOCK_SENSORS / --sensors)",
+        )
+    distance = server.simulation.front_distance_m
+    data = await asyncio.to_thread(cameras.frame, name, distance)
+    return web.Response(body=data, content_type="application/octet-stream")
 
 
 async def get_traininfo(request: web.Request) -> web.Response:
@@ -410,11 +458,15 @@ def _world(position: WorldPosition) -> dict[str, float | int]:
     }
 
 
-def _state(simulation: Simulation) -> dict[str, Any]:
-    """The lockstep reply: every train and the camera sensors (none)."""
+def _state(server: MockServer) -> dict[str, Any]:
+    """The lockstep reply: every train and the camera sensors."""
+    simulation = server.simulation
     trains = {simulation.train_name: _train(simulation.snapshot())}
     trains.update({name: _train(other.snapshot()) for name, other in simulation.others.items()})
-    return {"trains": trains, "CameraSensors": {}}
+    return {
+        "trains": trains,
+        "CameraSensors": server.cameras.descriptions() if server.cameras else {},
+    }
 
 
 def _train(snap: Snapshot) -> dict[str, Any]:

@@ -95,6 +95,13 @@ class MockConfig(BaseSettings):
     drawn from the other end: ``movementDirection`` is ``"Backward"``."""
     reset: bool = True
     """Answer POST /API/RESET (a mock extension); false: 404, like OpenRails' builds."""
+    sensors: Path | None = None
+    """OpenRails-for-simulation's sensor configuration: a JSON list of camera and depth
+    sensors (``sensors.py``); lockstep mode only. Unset: no sensors."""
+    camera_height_m: float = Field(default=2.5, gt=0, le=10)
+    """Height of the sensors above the top of the rails, at the train's front."""
+    camera_pitch_deg: float = Field(default=4.0, ge=-45, le=45)
+    """How far the sensors look down from the track's direction [deg]."""
     consist_preset: str = "br642"
     """Consist the train starts from (see ``physics.PRESETS``)."""
     consist: ConsistOverrides = ConsistOverrides()

@@ -12,7 +12,11 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Protocol
+
+from coupler.errors import ScenarioError
+from coupler_railway import Infrastructure, RailMLError, load_infrastructure
 
 EARTH_RADIUS_M = 6_371_008.8
 """Mean Earth radius, for the straight route's lat/lon."""
@@ -148,3 +152,14 @@ class StraightRoute:
 
     def gradient(self, distance: float) -> float:
         return self._gradient
+
+
+def load_infrastructure_file(path: Path) -> Infrastructure:
+    """A railML infrastructure file read by ``coupler_railway``: the cameras' scene (its track,
+    balises, signals and platform edges)."""
+    try:
+        return load_infrastructure(path)
+    except (OSError, RailMLError) as exc:
+        raise ScenarioError(
+            f"cannot use {path} as the route (OPENRAILS_MOCK_RAILML): {exc}"
+        ) from exc

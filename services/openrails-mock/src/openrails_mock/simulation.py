@@ -173,6 +173,11 @@ class Simulation:
         )
 
     @property
+    def front_distance_m(self) -> float:
+        """Route distance of the train's front: where its cameras are."""
+        return self.dynamics.state.position_m
+
+    @property
     def clock_time_s(self) -> float:
         """Time of day, seconds since midnight."""
         return (self._start_time_s + self.elapsed_s) % SECONDS_PER_DAY

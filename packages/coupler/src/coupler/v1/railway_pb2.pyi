@@ -3,8 +3,10 @@
 isort:skip_file
 Railway messages that travel serialized in binary channels."""
 
+from collections import abc as _abc
 from google.protobuf import descriptor as _descriptor
 from google.protobuf import message as _message
+from google.protobuf.internal import containers as _containers
 import builtins as _builtins
 import sys
 import typing as _typing
@@ -126,3 +128,101 @@ class BaliseReading(_message.Message):
     def WhichOneof(self, oneof_group: _Never) -> None: ...
 
 Global___BaliseReading: _TypeAlias = BaliseReading  # noqa: Y015
+
+@_typing.final
+class PixelBox(_message.Message):
+    """A rectangle of pixels, inclusive: columns left..right, rows top..bottom (row 0 at the top)."""
+
+    DESCRIPTOR: _descriptor.Descriptor
+
+    LEFT_FIELD_NUMBER: _builtins.int
+    TOP_FIELD_NUMBER: _builtins.int
+    RIGHT_FIELD_NUMBER: _builtins.int
+    BOTTOM_FIELD_NUMBER: _builtins.int
+    left: _builtins.int
+    top: _builtins.int
+    right: _builtins.int
+    bottom: _builtins.int
+    def __init__(
+        self,
+        *,
+        left: _builtins.int = ...,
+        top: _builtins.int = ...,
+        right: _builtins.int = ...,
+        bottom: _builtins.int = ...,
+    ) -> None: ...
+    _HasFieldArgType: _TypeAlias = _Never  # noqa: Y015
+    def HasField(self, field_name: _HasFieldArgType) -> _builtins.bool: ...
+    _ClearFieldArgType: _TypeAlias = _typing.Literal["bottom", b"bottom", "left", b"left", "right", b"right", "top", b"top"]  # noqa: Y015
+    def ClearField(self, field_name: _ClearFieldArgType) -> None: ...
+    def WhichOneof(self, oneof_group: _Never) -> None: ...
+
+Global___PixelBox: _TypeAlias = PixelBox  # noqa: Y015
+
+@_typing.final
+class BaliseDetection(_message.Message):
+    """One balise seen in one camera frame by a perception participant."""
+
+    DESCRIPTOR: _descriptor.Descriptor
+
+    TIME_S_FIELD_NUMBER: _builtins.int
+    BOX_FIELD_NUMBER: _builtins.int
+    DISTANCE_AHEAD_M_FIELD_NUMBER: _builtins.int
+    TRACK_POSITION_M_FIELD_NUMBER: _builtins.int
+    CONFIDENCE_FIELD_NUMBER: _builtins.int
+    time_s: _builtins.float
+    """Simulation time of the frame it was seen in [s]."""
+    distance_ahead_m: _builtins.float
+    """Estimated distance along the track from the camera to the balise's centre [m]."""
+    track_position_m: _builtins.float
+    """Estimated position of the balise along the track, from the line's start [m]."""
+    confidence: _builtins.float
+    """0..1, the detector's own belief that this is a balise."""
+    @_builtins.property
+    def box(self) -> Global___PixelBox: ...
+    def __init__(
+        self,
+        *,
+        time_s: _builtins.float = ...,
+        box: Global___PixelBox | None = ...,
+        distance_ahead_m: _builtins.float = ...,
+        track_position_m: _builtins.float = ...,
+        confidence: _builtins.float = ...,
+    ) -> None: ...
+    _HasFieldArgType: _TypeAlias = _typing.Literal["box", b"box"]  # noqa: Y015
+    def HasField(self, field_name: _HasFieldArgType) -> _builtins.bool: ...
+    _ClearFieldArgType: _TypeAlias = _typing.Literal["box", b"box", "confidence", b"confidence", "distance_ahead_m", b"distance_ahead_m", "time_s", b"time_s", "track_position_m", b"track_position_m"]  # noqa: Y015
+    def ClearField(self, field_name: _ClearFieldArgType) -> None: ...
+    def WhichOneof(self, oneof_group: _Never) -> None: ...
+
+Global___BaliseDetection: _TypeAlias = BaliseDetection  # noqa: Y015
+
+@_typing.final
+class BaliseDetections(_message.Message):
+    """Every balise seen in one frame (none: an empty list)."""
+
+    DESCRIPTOR: _descriptor.Descriptor
+
+    TIME_S_FIELD_NUMBER: _builtins.int
+    SENSOR_FIELD_NUMBER: _builtins.int
+    DETECTIONS_FIELD_NUMBER: _builtins.int
+    time_s: _builtins.float
+    """Simulation time of the frame [s]."""
+    sensor: _builtins.str
+    """Name of the sensor whose frame was searched."""
+    @_builtins.property
+    def detections(self) -> _containers.RepeatedCompositeFieldContainer[Global___BaliseDetection]: ...
+    def __init__(
+        self,
+        *,
+        time_s: _builtins.float = ...,
+        sensor: _builtins.str = ...,
+        detections: _abc.Iterable[Global___BaliseDetection] | None = ...,
+    ) -> None: ...
+    _HasFieldArgType: _TypeAlias = _Never  # noqa: Y015
+    def HasField(self, field_name: _HasFieldArgType) -> _builtins.bool: ...
+    _ClearFieldArgType: _TypeAlias = _typing.Literal["detections", b"detections", "sensor", b"sensor", "time_s", b"time_s"]  # noqa: Y015
+    def ClearField(self, field_name: _ClearFieldArgType) -> None: ...
+    def WhichOneof(self, oneof_group: _Never) -> None: ...
+
+Global___BaliseDetections: _TypeAlias = BaliseDetections  # noqa: Y015

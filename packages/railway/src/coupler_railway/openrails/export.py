@@ -828,6 +828,8 @@ class _Builder:
             for end, passed in self._routes(start):
                 (first, first_name), (last, last_name) = self._end_name(start), self._end_name(end)
                 stem = f"{first}-{last}"
+                if f"PATHS/{stem}.pat" in written:  # two ends named alike (no station near)
+                    stem = f"{stem}-{sum(w.startswith(f'PATHS/{stem}') for w in written) + 1}"
                 self._write_path(
                     folder / "PATHS" / f"{stem}.pat",
                     stem,

@@ -25,6 +25,8 @@
       return { x: p.x, y: p.y, width: size.x, height: size.y };
     },
     readingIds: () => Array.from(rows.children, (tr) => Number(tr.dataset.baliseId)),
+    camera: null, // the camera panel's state: frame number, size, time, detection boxes
+    frameLoaded: 0, // number of the frame the <img> shows once loaded
   };
   window.coupler = view;
 
@@ -115,6 +117,7 @@
       setReadings(event.readings);
       showRun(event.run);
       showTrain(event.train);
+      showCamera(event.camera);
       return;
     }
     if (event.seq <= view.seq) return; // already in the snapshot
@@ -126,6 +129,7 @@
     } else if (event.type === "step") {
       showRun(event.run);
       showTrain(event.train);
+      showCamera(event.camera);
     } else if (event.type === "run") {
       if (event.reset) setReadings([]);
       showRun(event.run);
@@ -205,6 +209,46 @@
       }).addTo(map);
       trainMarker.getElement().id = "train";
     }
+  }
+
+  // The camera panel: the frame the latest detections belong to, their boxes drawn over it.
+  const frameImage = $("camera-frame");
+  const boxes = $("camera-boxes");
+  frameImage.addEventListener("load", () => {
+    view.frameLoaded = Number(frameImage.dataset.frame);
+  });
+
+  function showCamera(camera) {
+    view.camera = camera || null;
+    if (!camera) return;
+    $("camera-panel").hidden = false;
+    if (frameImage.dataset.frame !== String(camera.frame)) {
+      frameImage.dataset.frame = String(camera.frame);
+      frameImage.src = `/api/frame.jpg?n=${camera.frame}`;
+    }
+    boxes.setAttribute("viewBox", `0 0 ${camera.width} ${camera.height}`);
+    const svg = "http://www.w3.org/2000/svg";
+    const shapes = [];
+    for (const [index, box] of camera.detections.entries()) {
+      const rect = document.createElementNS(svg, "rect");
+      const pad = 3; // around the blob, so the balise itself stays visible
+      rect.setAttribute("x", box.left - pad);
+      rect.setAttribute("y", box.top - pad);
+      rect.setAttribute("width", box.right - box.left + 1 + 2 * pad);
+      rect.setAttribute("height", box.bottom - box.top + 1 + 2 * pad);
+      rect.classList.add("detection");
+      // labels of neighbours (a balise group) alternate sides so they do not overlap
+      const label = document.createElementNS(svg, "text");
+      const right = index % 2 === 0;
+      label.setAttribute("x", right ? box.right + pad + 4 : box.left - pad - 4);
+      label.setAttribute("y", box.bottom + pad);
+      label.setAttribute("text-anchor", right ? "start" : "end");
+      label.textContent = `${box.distance_ahead_m.toFixed(1)} m`;
+      shapes.push(rect, label);
+    }
+    boxes.replaceChildren(...shapes);
+    const seen = camera.judged ? `, ${camera.detections.length} balise(s) detected` : "";
+    $("camera-caption").textContent = `${camera.sensor} at ${camera.time_s.toFixed(1)} s${seen}`;
   }
 
   function setConnection(text, lost) {

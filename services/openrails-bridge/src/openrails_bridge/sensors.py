@@ -1,0 +1,129 @@
+"""OpenRails' camera and depth sensors as binary output channels, one per sensor.
+
+OpenRails' build for simulation takes its sensors from a JSON file at start (a list of
+``{sensorName, sensorType, trainName, width, height, fov[, range]}``, what its Python client's
+sensors write). Given the same file (``OPENRAILS_BRIDGE_SENSORS``), the bridge offers one
+output channel per sensor, named as the sensor, of type Binary carrying a ``coupler.v1.Image``
+(sensors.proto): no code per sensor, the file is the configuration.
+
+Each step, after the last lockstep post, the bridge GETs ``/API/CAMERASENSOR/<name>`` of every
+sensor, on its one aiohttp session, and checks the frame against the size the step reply's
+``CameraSensors`` declares (``width * height`` times 3 bytes for RGB, 6 for depth). The Image
+carries the bytes unchanged, the Coupler time, the encoding (``rgb8``, ``depth16-class-id``),
+the intrinsics from ``h_scale``/``v_scale`` (fx = width / 2 * h_scale, fy = height / 2 *
+v_scale, cx = width / 2 - 0.5, cy = height / 2 - 0.5) and a depth sensor's ``max_distance``.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Literal
+
+from coupler.adapter import ChannelMap
+from coupler.channels import Causality, ValueType
+from coupler.errors import ScenarioError
+from coupler.v1.sensors_pb2 import CameraIntrinsics, Image
+from coupler_railway.messages import BYTES_PER_PIXEL, DEPTH16_CLASS_ID, IMAGE, RGB8
+
+from .replies import CameraSensor
+
+SensorType = Literal["rgb", "depth"]
+ENCODING: dict[SensorType, str] = {"rgb": RGB8, "depth": DEPTH16_CLASS_ID}
+"""Image.encoding of each sensor type."""
+FIELD = "sensors"
+"""Where the frames are in ``OpenRailsAdapter.get_state()``: ``sensors.<name>``."""
+_NAME = re.compile(r"^[A-Za-z0-9_.\-]{1,64}$")
+
+
+@dataclass(frozen=True)
+class Sensor:
+    """A sensor as the configuration file declares it."""
+
+    name: str
+    type: SensorType
+    width: int
+    height: int
+
+    @property
+    def frame_bytes(self) -> int:
+        return self.width * self.height * BYTES_PER_PIXEL[ENCODING[self.type]]
+
+    def channel(self) -> ChannelMap:
+        """Its output channel: Binary, ``coupler.v1.Image``."""
+        kind = "camera frame" if self.type == "rgb" else "depth frame (class/id, distance)"
+        return ChannelMap(
+            name=self.name,
+            causality=Causality.OUTPUT,
+            type=ValueType.BINARY,
+            field=f"{FIELD}.{self.name}",
+            message_type=IMAGE,
+            description=(
+                f"OpenRails sensor '{self.name}': {kind}, {self.width} x {self.height}, "
+                f"{ENCODING[self.type]} (empty until OpenRails has sent a step reply)"
+            ),
+        )
+
+
+def load_sensors(path: Path) -> tuple[Sensor, ...]:
+    """The sensors of OpenRails' sensor configuration file; ScenarioError naming the file,
+    the entry and the fix. Keys the bridge does not need (trainName, fov, range) are
+    OpenRails' business and not checked here."""
+    where = f"{path} (OPENRAILS_BRIDGE_SENSORS)"
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except OSError as exc:
+        raise ScenarioError(f"cannot read the sensor configuration {where}: {exc}") from exc
+    except json.JSONDecodeError as exc:
+        raise ScenarioError(f"{path}:{exc.lineno}: not valid JSON: {exc.msg}") from exc
+    if not isinstance(data, list):
+        raise ScenarioError(f"{where}: must be a JSON list of sensors, as given to OpenRails")
+    sensors: list[Sensor] = []
+    for index, entry in enumerate(data):
+        at = f"{where}: sensor {index}"
+        if not isinstance(entry, dict):
+            raise ScenarioError(f"{at}: must be an object with sensorName, sensorType, ...")
+        name = entry.get("sensorName")
+        if not isinstance(name, str) or not _NAME.match(name):
+            raise ScenarioError(
+                f"{at}: sensorName must be 1 to 64 letters, digits, '_', '.' or '-', got {name!r}"
+            )
+        kind = entry.get("sensorType")
+        if kind not in ENCODING:
+            raise ScenarioError(
+                f"{at} ({name!r}): unknown sensorType {kind!r}; the sensor types are 'rgb' "
+                f"and 'depth'"
+            )
+        size = [entry.get(k) for k in ("width", "height")]
+        if not all(isinstance(v, int) and not isinstance(v, bool) and v > 0 for v in size):
+            raise ScenarioError(
+                f"{at} ({name!r}): width and height must be positive whole numbers of pixels, "
+                f"got {size[0]!r} x {size[1]!r}"
+            )
+        if any(s.name == name for s in sensors):
+            raise ScenarioError(f"{at}: sensorName {name!r} is used twice")
+        sensors.append(Sensor(name, kind, int(size[0]), int(size[1])))  # type: ignore[arg-type]
+    return tuple(sensors)
+
+
+def image(sensor: Sensor, described: CameraSensor, data: bytes, time_s: float) -> bytes:
+    """A frame as a serialized ``coupler.v1.Image``."""
+    width, height = described.width, described.height
+    message = Image(
+        sensor=sensor.name,
+        time_s=time_s,
+        width=width,
+        height=height,
+        encoding=ENCODING[sensor.type],
+        intrinsics=CameraIntrinsics(
+            fx=width / 2.0 * described.h_scale,
+            fy=height / 2.0 * described.v_scale,
+            cx=width / 2.0 - 0.5,
+            cy=height / 2.0 - 0.5,
+        ),
+        max_distance_m=described.max_distance or 0.0,
+        data=data,
+    )
+    return message.SerializeToString(deterministic=True)

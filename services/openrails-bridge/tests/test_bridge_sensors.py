@@ -1,0 +1,223 @@
+"""OpenRails' camera and depth sensors through the bridge: one Binary channel per sensor.
+
+    sensors.json --> openrails_mock (renders the frames)
+    sensors.json --> bridge: Describe lists `front` and `lidar` (coupler.v1.Image)
+    RemoteParticipant --gRPC--> bridge --GET /API/CAMERASENSOR/<name>--> mock
+
+The frames arrive unchanged (byte for byte what the mock serves for that state), wrapped in
+an Image with the size, encoding and intrinsics of the sensor. What the mock cannot do (a
+frame of the wrong size, a sensor OpenRails does not have) comes from a tiny OpenRails.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+from typing import Any
+
+import aiohttp
+import pytest
+from aiohttp import web
+
+from coupler.channels import Causality, RunSetup, ValueType
+from coupler.errors import ParticipantError, ScenarioError
+from coupler.messages import decode_message
+from coupler.v1.sensors_pb2 import Image
+from coupler_railway.messages import IMAGE
+from openrails_bridge.__main__ import build
+from openrails_bridge.config import BridgeSettings
+
+from .conftest import RANGES, Bridge, Mock, serve_app, step_reply
+
+ROOT = Path(__file__).resolve().parents[3]
+TEST_LINE = ROOT / "packages/railway/tests/data/test-line.railml"
+SENSORS = [
+    {"sensorName": "front", "sensorType": "rgb", "trainName": "PLAYER", "width": 800,
+     "height": 600, "fov": 45.0},
+    {"sensorName": "lidar", "sensorType": "depth", "trainName": "PLAYER", "width": 200,
+     "height": 150, "fov": 45.0, "range": 200.0},
+]  # fmt: skip
+
+
+@pytest.fixture
+def sensors(tmp_path: Path) -> Path:
+    path = tmp_path / "sensors.json"
+    path.write_text(json.dumps(SENSORS))
+    return path
+
+
+def image(data: bytes) -> Image:
+    message = Image()
+    message.ParseFromString(data)
+    return message
+
+
+async def test_describe_offers_one_image_channel_per_sensor(
+    mock: Mock, bridge: Bridge, sensors: Path
+) -> None:
+    async with mock(sensors=sensors) as url, bridge(url, sensors=sensors) as remote:
+        description = await remote.describe()
+    outputs = description.of(Causality.OUTPUT)
+    assert [c.name for c in outputs][-2:] == ["front", "lidar"]
+    for name in ("front", "lidar"):
+        channel = description.channel(name)
+        assert channel is not None
+        assert channel.type is ValueType.BINARY and channel.message_type == IMAGE
+    assert "800 x 600, rgb8" in description.channel("front").description  # type: ignore[union-attr]
+
+
+async def test_frames_arrive_unchanged_in_images(mock: Mock, bridge: Bridge, sensors: Path) -> None:
+    config = {"sensors": sensors, "railml": TEST_LINE, "start_distance_m": 75.0}
+    async with mock(**config) as url, bridge(url, sensors=sensors) as remote:
+        first = await remote.initialize(
+            RunSetup(run_id="s", start_time=0.0, step_size=0.4, inputs={"throttle": 1.0})
+        )
+        outputs = [await remote.do_step(0.4 * k, 0.4, {}) for k in range(3)]
+        async with aiohttp.ClientSession(url) as http:
+            served = {}
+            for name in ("front", "lidar"):
+                async with http.get(f"/API/CAMERASENSOR/{name}") as resp:
+                    served[name] = await resp.read()
+        await remote.terminate()
+
+    start = image(first["front"])
+    assert (start.width, start.height, start.encoding, start.time_s) == (800, 600, "rgb8", 0.0)
+    assert len(start.data) == 1_440_000  # a 1.44 MB frame through gRPC
+    front, lidar = image(outputs[-1]["front"]), image(outputs[-1]["lidar"])
+    assert front.data == served["front"] and lidar.data == served["lidar"]
+    assert front.data != start.data  # the train moved
+    assert front.time_s == pytest.approx(1.2) and front.sensor == "front"
+    assert lidar.encoding == "depth16-class-id" and lidar.max_distance_m == 200.0
+    assert (lidar.width, lidar.height) == (200, 150)
+    # fov 45 degrees vertical: fy = 300 / tan(22.5 deg); square pixels
+    assert front.intrinsics.fy == pytest.approx(724.2640687, rel=1e-6)
+    assert front.intrinsics.fx == pytest.approx(front.intrinsics.fy)
+    assert (front.intrinsics.cx, front.intrinsics.cy) == (399.5, 299.5)
+    fields = decode_message(IMAGE, outputs[-1]["lidar"])
+    assert fields["intrinsics"]["fy"] == pytest.approx(75 / 0.41421356, rel=1e-6)
+
+
+async def test_a_sensor_openrails_does_not_have_fails_initialize_naming_it(
+    mock: Mock, bridge: Bridge, sensors: Path, tmp_path: Path
+) -> None:
+    only_front = tmp_path / "front.json"
+    only_front.write_text(json.dumps(SENSORS[:1]))
+    async with mock(sensors=only_front) as url, bridge(url, sensors=sensors) as remote:
+        with pytest.raises(ParticipantError) as caught:
+            await remote.initialize(RunSetup(run_id="x", start_time=0.0, step_size=0.2))
+    assert caught.value.status == "UNAVAILABLE"
+    assert "has no camera sensor 'lidar' (its step reply's CameraSensors: ['front'])" in str(
+        caught.value
+    )
+    assert "OPENRAILS_BRIDGE_SENSORS" in str(caught.value)
+
+
+def tiny_with_sensor(
+    frame: bytes, declared: dict[str, Any] | None, status: int = 200
+) -> web.Application:
+    """OpenRails whose step reply declares one 4 x 3 RGB sensor ``cam`` (or ``declared``)
+    and whose GET of its frame answers ``frame``."""
+
+    async def ready(request: web.Request) -> web.Response:
+        return web.Response(status=200)
+
+    async def cabcontrols(request: web.Request) -> web.Response:
+        return web.json_response(RANGES)
+
+    async def step(request: web.Request) -> web.Response:
+        reply = step_reply()
+        reply["CameraSensors"] = {
+            "cam": declared or {"width": 4, "height": 3, "h_scale": 1.0, "v_scale": 1.3}
+        }
+        return web.json_response(reply)
+
+    async def map_(request: web.Request) -> web.Response:
+        return web.json_response({"LatLon": {"Lat": 50.5, "Lon": 13.0}, "DirectionDeg": 90.0})
+
+    async def display(request: web.Request) -> web.Response:
+        return web.json_response([{"FirstCol": "Speed", "LastCol": "0.0 km/h"}])
+
+    async def camera(request: web.Request) -> web.Response:
+        return web.Response(body=frame, status=status, content_type="application/octet-stream")
+
+    app = web.Application()
+    app.router.add_get("/API/READY", ready)
+    app.router.add_get("/API/CABCONTROLS", cabcontrols)
+    app.router.add_post("/API/CABCONTROLS", step)
+    app.router.add_get("/API/MAP", map_)
+    app.router.add_get("/API/TRAINDRIVINGDISPLAY", display)
+    app.router.add_get("/API/CAMERASENSOR/cam", camera)
+    return app
+
+
+@pytest.mark.parametrize(
+    ("frame", "declared", "status", "message"),
+    [
+        (b"\x01" * 35, None, 200, "answered a frame of 35 bytes, but CameraSensors declares "
+                                  "sensor 'cam' 4 x 3 rgb: 36 bytes"),
+        (b"\x01" * 5000, None, 200, "with 5000 bytes, more than the 36 bytes CameraSensors "
+                                    "declares for sensor 'cam' (4 x 3 rgb); refused unread"),
+        (b"{}", None, 404, "/API/CAMERASENSOR/cam answered 404 to GET"),
+        (b"", {"width": 8, "height": 3, "h_scale": 1.0, "v_scale": 1.3}, 200,
+         "describes camera sensor 'cam' as 8 x 3, but"),
+    ],
+)  # fmt: skip
+async def test_a_frame_that_does_not_match_its_declared_size_is_an_error_naming_it(
+    bridge: Bridge,
+    tmp_path: Path,
+    frame: bytes,
+    declared: dict[str, Any] | None,
+    status: int,
+    message: str,
+) -> None:
+    path = tmp_path / "cam.json"
+    path.write_text(
+        json.dumps([{"sensorName": "cam", "sensorType": "rgb", "width": 4, "height": 3}])
+    )
+    tiny = tiny_with_sensor(frame, declared, status)
+    async with serve_app(tiny) as url, bridge(url, sensors=path) as remote:
+        await remote.initialize(RunSetup(run_id="x", start_time=0.0, step_size=0.2))
+        with pytest.raises(ParticipantError) as caught:
+            await remote.do_step(0.0, 0.2, {})
+    assert caught.value.status == "UNAVAILABLE"
+    assert message in str(caught.value)
+
+
+def test_bad_sensor_files_are_refused_naming_the_entry(tmp_path: Path) -> None:
+    cases = [
+        ([{"sensorName": "cam", "sensorType": "thermal", "width": 4, "height": 3}],
+         "sensor 0 ('cam'): unknown sensorType 'thermal'; the sensor types are 'rgb' and"),
+        ([{"sensorName": "cam", "sensorType": "rgb", "width": 0, "height": 3}],
+         "width and height must be positive whole numbers of pixels, got 0 x 3"),
+        ([{"sensorName": "speed", "sensorType": "rgb", "width": 4, "height": 3}],
+         "sensor 'speed' would be a channel of the same name"),
+        ({"sensorName": "cam"}, "must be a JSON list of sensors"),
+    ]  # fmt: skip
+    for entries, message in cases:
+        path = tmp_path / "s.json"
+        path.write_text(json.dumps(entries))
+        with pytest.raises(ScenarioError) as caught:
+            build(BridgeSettings(sensors=path))
+        assert message in str(caught.value)
+    path = tmp_path / "ok.json"
+    path.write_text(json.dumps(SENSORS))
+    with pytest.raises(ScenarioError, match="use --mode lockstep"):
+        build(BridgeSettings(sensors=path, mode="stock"))
+
+
+def test_the_bridge_process_refuses_a_bad_sensor_file_without_a_traceback(
+    tmp_path: Path,
+) -> None:
+    path = tmp_path / "s.json"
+    path.write_text("[{\n")
+    done = subprocess.run(
+        [sys.executable, "-m", "openrails_bridge", "--port", "0", "--sensors", str(path)],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert done.returncode == 1
+    assert f"openrails-bridge: {path}:2: not valid JSON" in done.stderr
+    assert "Traceback" not in done.stderr

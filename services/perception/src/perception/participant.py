@@ -1,0 +1,159 @@
+"""``PerceptionParticipant``: camera frames in, balise detections out.
+
+Inputs (both Binary, start empty): ``image``, a ``coupler.v1.Image`` (rgb8) from a camera --
+the OpenRails bridge offers one per sensor -- and ``train_state``, a ``coupler.v1.TrainState``
+for the participant's own odometry: where along the line the camera is. Output
+``detections``: a ``coupler.v1.BaliseDetections`` of every balise found in the frame (time =
+the frame's), each with its pixel box, distance ahead, track position and confidence; and
+``detection_count``.
+
+Track position of a detection = ``track_offset`` + the train's distance travelled (TrainState,
+of the same communication point as the frame) + the distance ahead: the camera is taken at
+``track_offset`` along the line when the train has travelled 0 m, moving forward.
+
+A step with an empty image (no frame yet) detects nothing; an image that is not rgb8, or whose
+data does not match its width and height, is an error naming the channel.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+
+from coupler.channels import Capabilities, Causality, Channel, Description, RunSetup, Value
+from coupler.channels import ValueType as T
+from coupler.errors import ChannelValueError
+from coupler.participant import Participant, Values
+from coupler.v1.railway_pb2 import BaliseDetection, BaliseDetections, PixelBox, TrainState
+from coupler.v1.sensors_pb2 import Image
+from coupler_railway.messages import BALISE_DETECTIONS, IMAGE, RGB8, TRAIN_STATE
+
+from .detector import Intrinsics, Mounting, detect
+
+NAME = "Perception"
+
+
+def _channel(
+    name: str, causality: Causality, type: T, start: Value | None, unit: str = "", **more: Any
+) -> Channel:
+    return Channel(name=name, causality=causality, type=type, start=start, unit=unit, **more)
+
+
+_IN, _OUT, _PAR = Causality.INPUT, Causality.OUTPUT, Causality.PARAMETER
+CHANNELS = (
+    _channel("image", _IN, T.BINARY, b"", message_type=IMAGE,
+             description="Camera frame (coupler.v1.Image, rgb8); empty: no frame yet"),
+    _channel("train_state", _IN, T.BINARY, b"", message_type=TRAIN_STATE,
+             description="Train state of the frame's time: distance travelled (odometry)"),
+    _channel("camera_height", _PAR, T.REAL, 2.5, "m",
+             description="Camera above the top of the rails"),
+    _channel("camera_pitch", _PAR, T.REAL, 4.0, "deg",
+             description="Camera pitched down from the track's direction"),
+    _channel("track_offset", _PAR, T.REAL, 0.0, "m",
+             description="Camera's position along the line when the train has travelled 0 m"),
+    _channel("max_range", _PAR, T.REAL, 40.0, "m",
+             description="Balises farther ahead are not reported"),
+    _channel("min_pixels", _PAR, T.INTEGER, 2,
+             description="Smallest yellow blob taken for a balise [pixels]"),
+    _channel("detections", _OUT, T.BINARY, None, message_type=BALISE_DETECTIONS,
+             description="Every balise found in the last frame (coupler.v1.BaliseDetections)"),
+    _channel("detection_count", _OUT, T.INTEGER, None,
+             description="How many balises the last frame showed"),
+)  # fmt: skip
+
+
+class PerceptionParticipant(Participant):
+    """Finds balises in each frame it is given; see the module docstring."""
+
+    def __init__(self) -> None:
+        self._parameters: dict[str, Value] = {}
+        self._inputs: dict[str, Value] = {}
+        self._outputs: Values = {}
+
+    async def describe(self) -> Description:
+        return Description(
+            name=NAME,
+            channels=CHANNELS,
+            capabilities=Capabilities(streaming=True, variable_step_size=True),
+            implementation="coupler perception 0.1.0 (yellow blobs, ground-plane distance)",
+        )
+
+    async def initialize(self, setup: RunSetup) -> Values:
+        self._parameters = {**_starts(_PAR), **setup.parameters}
+        self._inputs = {**_starts(_IN), **setup.inputs}
+        self._outputs = self._perceive(self._inputs)
+        return self._outputs
+
+    async def do_step(self, time: float, step: float, inputs: Mapping[str, Value]) -> Values:
+        self._inputs.update(inputs)
+        self._outputs = self._perceive(self._inputs)
+        return self._outputs
+
+    async def terminate(self, reason: str = "") -> None:
+        self._outputs = {}
+
+    def _perceive(self, inputs: Mapping[str, Value]) -> Values:
+        frame = inputs.get("image", b"")
+        if not isinstance(frame, bytes) or not frame:
+            return _result(BaliseDetections())
+        image = Image()
+        image.ParseFromString(frame)
+        if image.encoding != RGB8:
+            raise ChannelValueError(
+                f"channel 'image' carries a '{image.encoding}' frame of sensor "
+                f"'{image.sensor}'; the detector reads '{RGB8}' (connect a camera, not a "
+                f"depth sensor)",
+                channel="image",
+                expected=RGB8,
+            )
+        size = image.width * image.height * 3
+        if len(image.data) != size:
+            raise ChannelValueError(
+                f"channel 'image': sensor '{image.sensor}' declares {image.width} x "
+                f"{image.height} rgb8 ({size} bytes) but its data has {len(image.data)} bytes",
+                channel="image",
+                expected=f"{size} bytes",
+            )
+        state = TrainState()
+        raw_state = inputs.get("train_state", b"")
+        if isinstance(raw_state, bytes):
+            state.ParseFromString(raw_state)
+        p = self._parameters
+        pixels = np.frombuffer(image.data, dtype=np.uint8).reshape(image.height, image.width, 3)
+        k = image.intrinsics
+        found = detect(
+            pixels,
+            Intrinsics(fx=k.fx, fy=k.fy, cx=k.cx, cy=k.cy),
+            Mounting(height_m=float(p["camera_height"]), pitch_deg=float(p["camera_pitch"])),
+            max_range_m=float(p["max_range"]),
+            min_pixels=int(p["min_pixels"]),
+        )
+        camera_at = float(p["track_offset"]) + state.distance_m
+        message = BaliseDetections(
+            time_s=image.time_s,
+            sensor=image.sensor,
+            detections=[
+                BaliseDetection(
+                    time_s=image.time_s,
+                    box=PixelBox(left=d.left, top=d.top, right=d.right, bottom=d.bottom),
+                    distance_ahead_m=round(d.distance_ahead_m, 3),
+                    track_position_m=round(camera_at + d.distance_ahead_m, 3),
+                    confidence=d.confidence,
+                )
+                for d in found
+            ],
+        )
+        return _result(message)
+
+
+def _starts(causality: Causality) -> dict[str, Value]:
+    return {c.name: c.start for c in CHANNELS if c.causality is causality and c.start is not None}
+
+
+def _result(message: BaliseDetections) -> Values:
+    return {
+        "detections": message.SerializeToString(deterministic=True),
+        "detection_count": len(message.detections),
+    }

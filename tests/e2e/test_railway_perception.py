@@ -1,0 +1,188 @@
+"""The railway scenario's perception variant end to end: `coupler fleet` with the variant's
+services as real local processes, the map in Chromium, the detections scored.
+
+    Driver (FMU) == throttle, brake ==> OpenRails bridge ==HTTP==> OpenRails mock (camera)
+    OpenRails bridge == front (800 x 600 Image), train_state ==> Perception == detections ==> Map
+    OpenRails bridge == distance ==> TrackBalises == passed_in_step ==> Map
+    OpenRails bridge == front ==> Map
+
+The fleet file is the scenario's own (scenarios/railway/perception-fleet.toml: its services,
+commands and health checks), run for the first 40 s only and paced at real time, so the map
+can be watched while the train passes the first two balise groups (120 m and 320 m). Then
+`python -m coupler_railway.scoring` scores the run against TrackBalises: every balise passed
+was seen before it was passed, within a metre, and nothing else was seen.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import csv
+import io
+import json
+import os
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import aiohttp
+import numpy as np
+import pytest
+from PIL import Image
+
+ROOT = Path(__file__).resolve().parents[2]
+FLEET = ROOT / "scenarios" / "railway" / "perception-fleet.toml"
+FMUS = ROOT / "build" / "fmus"
+COUPLER = Path(sys.executable).parent / "coupler"
+STOP_TIME = "40"
+CHROMIUM = Path("/usr/bin/chromium")
+ARTIFACT = ROOT / "test-artifacts" / "railway-perception-map.png"
+BROWSER_ARGS = ["--headless=new", "--no-sandbox", "--disable-gpu", "--no-first-run",
+                "--disable-background-networking", "--disable-component-update"]  # fmt: skip
+PORTS = ("MOCK_PORT", "BRIDGE_PORT", "BALISE_PORT", "PERCEPTION_PORT", "MAP_PORT",
+         "MAP_HTTP_PORT", "MONITOR_PORT")  # fmt: skip
+
+pytestmark = pytest.mark.timeout(600)
+
+
+def free_ports(names: tuple[str, ...]) -> dict[str, str]:
+    sockets = [socket.socket() for _ in names]
+    try:
+        for s in sockets:
+            s.bind(("127.0.0.1", 0))
+        return {name: str(s.getsockname()[1]) for name, s in zip(names, sockets, strict=True)}
+    finally:
+        for s in sockets:
+            s.close()
+
+
+def short_fleet(folder: Path, out: Path) -> Path:
+    """The scenario's fleet file, its run stopped at STOP_TIME and written to ``out``; the
+    services, commands and health checks as they are."""
+    text = FLEET.read_text()
+    services = text[text.index("[[service]]") :]
+    args = [
+        "--stop-time", STOP_TIME, "--output-variables", "Driver.*", "OpenRails.distance",
+        "OpenRails.speed", "OpenRails.train_state", "TrackBalises.*", "Perception.*",
+    ]  # fmt: skip
+    path = folder / "fleet.toml"
+    path.write_text(
+        f'[scenario]\nssp = "scenarios/railway/Perception.ssd"\nout = "{out}"\n'
+        f"args = {json.dumps(args)}\n\n{services}"
+    )
+    return path
+
+
+async def wait_for_map(url: str, process: subprocess.Popen[str], within: float = 180.0) -> None:
+    deadline = time.monotonic() + within
+    async with aiohttp.ClientSession() as session:
+        while time.monotonic() < deadline:
+            assert process.poll() is None, "the fleet ended before the map served"
+            try:
+                async with session.get(url + "healthz") as response:
+                    if response.status == 200:
+                        return
+            except aiohttp.ClientError:
+                pass
+            await asyncio.sleep(0.5)
+    raise AssertionError(f"the map at {url} did not answer within {within:.0f} s")
+
+
+async def watch(url: str) -> dict[str, Any]:
+    """The map in Chromium until it shows a frame with a balise detected within 25 m: the
+    screenshot, and the frame (JPEG from the map) with its boxes."""
+    from playwright.async_api import async_playwright
+
+    async with async_playwright() as playwright:
+        browser = await playwright.chromium.launch(executable_path=str(CHROMIUM), args=BROWSER_ARGS)
+        try:
+            page = await browser.new_page(viewport={"width": 1280, "height": 900})
+            errors: list[str] = []
+            page.on("pageerror", lambda exc: errors.append(str(exc)))
+            await page.goto(url)
+            await page.wait_for_function(
+                "window.coupler && window.coupler.camera && window.coupler.camera.judged && "
+                "window.coupler.camera.detections.some(d => d.distance_ahead_m < 25) && "
+                "window.coupler.frameLoaded === window.coupler.camera.frame",
+                timeout=240_000,
+            )
+            camera = await page.evaluate("window.coupler.camera")
+            shown = await page.evaluate("document.getElementById('camera-frame').naturalWidth")
+            boxes = await page.locator("#camera-boxes rect.detection").count()
+            ARTIFACT.parent.mkdir(parents=True, exist_ok=True)
+            await page.screenshot(path=str(ARTIFACT))
+            assert errors == []
+        finally:
+            await browser.close()
+    async with (
+        aiohttp.ClientSession() as session,
+        session.get(f"{url}api/frame.jpg?n={camera['frame']}") as response,
+    ):
+        picture = np.asarray(Image.open(io.BytesIO(await response.read())))
+    return {"camera": camera, "natural_width": shown, "boxes": boxes, "picture": picture}
+
+
+async def observe(url: str, process: subprocess.Popen[str], browser: bool) -> Any:
+    """Wait for the map, then watch it in Chromium (when there is one)."""
+    await wait_for_map(url, process)
+    return await watch(url) if browser else None
+
+
+def test_the_perception_variant_end_to_end(tmp_path: Path) -> None:
+    for fmu in ("Driver2.fmu", "TrackBalises.fmu"):
+        if not (FMUS / fmu).exists():
+            pytest.fail(f"{FMUS / fmu} is missing: run 'make setup' (make test does)")
+    out = tmp_path / "run"
+    ports = free_ports(PORTS)
+    env = {**os.environ, **ports}
+    map_url = f"http://127.0.0.1:{ports['MAP_HTTP_PORT']}/"
+    command = [str(COUPLER), "fleet", str(short_fleet(tmp_path, out)), "--exit",
+               "--realtime-factor", "1"]  # fmt: skip
+    with subprocess.Popen(
+        command, cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True
+    ) as process:
+        try:
+            seen = asyncio.run(observe(map_url, process, CHROMIUM.exists()))
+            output, _ = process.communicate(timeout=400)
+        finally:
+            if process.poll() is None:
+                process.terminate()
+    assert process.returncode == 0, output[-3000:]
+
+    # the run, and the frames kept out of results.csv
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["status"] == "completed"
+    with (out / "results.csv").open() as handle:
+        header = next(csv.reader(handle))
+    assert "Perception.detections" in header and "OpenRails.front" not in header
+
+    # the map showed a real frame: the track's rails, and a yellow balise in each box
+    if seen is not None:
+        camera, picture = seen["camera"], seen["picture"]
+        assert seen["natural_width"] == 800 and seen["boxes"] == len(camera["detections"])
+        assert picture.shape == (600, 800, 3)
+        rails = picture[560:600, 250:550].reshape(-1, 3).astype(int)
+        assert ((rails.min(axis=1) > 150) & (np.ptp(rails, axis=1) < 30)).any()  # grey steel
+        for box in camera["detections"]:
+            block = picture[box["top"] : box["bottom"] + 1, box["left"] : box["right"] + 1]
+            r, g, b = (block[..., i].astype(int) for i in range(3))
+            assert ((r > 150) & (g > 110) & (b < 100)).any(), box  # yellow, after JPEG
+            assert 5.0 < box["distance_ahead_m"] <= 40.0
+
+    # scored against TrackBalises: both groups seen before they were passed
+    scored = subprocess.run(
+        [sys.executable, "-m", "coupler_railway.scoring", str(out)],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert scored.returncode == 0, scored.stderr
+    report = json.loads((out / "perception-report.json").read_text())
+    passed = [b["balise_id"] for b in report["balises"]]
+    assert passed == [1000, 1001, 1010, 1011, 1012]
+    assert report["recall"] == 1.0 and report["precision"] == 1.0
+    assert report["max_abs_error_m"] < 1.0
+    for balise in report["balises"]:
+        assert balise["first_detected_at_s"] < balise["passed_at_s"]
