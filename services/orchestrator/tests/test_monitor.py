@@ -113,8 +113,7 @@ async def test_a_late_joiner_gets_the_history(
     assert frame["layout"]["members"] == MEMBERS
     assert {"name": "Gain.y", "unit": "m/s"} in frame["layout"]["channels"]
     values = frame["values"]
-    assert values["t"][0] == 0.0 and values["t"][-1] == pytest.approx(3.0)
-    assert len(values["t"]) == 31
+    assert values["t"] == [k / 10 for k in range(31)]  # the grid as written: 0.3, not 0.30...04
     assert set(values["series"]) == {"Gain.y", "Feed.real_out"}  # unknown names ignored
     assert set(frame["latency"]["series"]) == set(MEMBERS)
     assert values["series"]["Gain.y"] == Coupler.column(tmp_path, "Gain.y")

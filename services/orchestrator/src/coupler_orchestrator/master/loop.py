@@ -11,8 +11,9 @@ in flight — under the eye of a ``Watchdog`` that ends the run when such a step
 deadline. Remote members on the native step channel are sent their requests first and
 answered last, on this thread too; the others are awaited. A run of in-process FMUs only is stepped
 by one call into C per base step (``native_fmu_step``), with the same meaning.
-t_k = t_0 + k*h; each member steps from t_k by exactly its configured step (its deltaTime,
-else h), never by a difference of two communication points.
+t_k is the double nearest to the exact decimal t_0 + k*h (``TimeGrid.time``); each member
+steps from t_k by exactly its configured step (its deltaTime, else h), never by a difference
+of two communication points.
 """
 
 from __future__ import annotations
