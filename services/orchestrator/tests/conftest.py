@@ -87,12 +87,17 @@ class Coupler:
 
     @staticmethod
     def process(
-        *argv: str | Path, timeout: float = 120, env: Mapping[str, str] | None = None
+        *argv: str | Path,
+        timeout: float = 120,
+        env: Mapping[str, str] | None = None,
+        cwd: Path | None = None,
     ) -> Outcome:
         """``coupler ARGV...`` as a process of its own (the installed console script), stdin
         and stderr not a terminal: only what the command itself imports is imported."""
         script = Path(sys.executable).with_name("coupler")
-        command = [str(script)] if script.exists() else [sys.executable, "-m", "coupler_orchestrator"]
+        command = (
+            [str(script)] if script.exists() else [sys.executable, "-m", "coupler_orchestrator"]
+        )
         done = subprocess.run(
             [*command, *(str(a) for a in argv)],
             capture_output=True,
@@ -100,6 +105,7 @@ class Coupler:
             timeout=timeout,
             stdin=subprocess.DEVNULL,
             env=None if env is None else {**os.environ, **env},
+            cwd=cwd,
         )
         return Outcome(done.returncode, done.stdout, done.stderr)
 

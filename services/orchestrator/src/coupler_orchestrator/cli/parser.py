@@ -128,6 +128,23 @@ def run_options(command: argparse.ArgumentParser) -> None:
     security_options(command)
 
 
+def out_options(command: argparse.ArgumentParser, default: str = "results/<scenario>") -> None:
+    command.add_argument(
+        "--out",
+        type=Path,
+        metavar="DIR",
+        help=f"results folder of this run (default: a new folder {default}/<UTC time>-<run id>/ "
+        "per run, `latest` linking to the newest; the SSD's OpenMCx outputDirectory instead of "
+        f"{default} when it names one); a folder holding an earlier run's results is refused",
+    )
+    command.add_argument(
+        "--force",
+        action="store_true",
+        help="--out DIR holds an earlier run's results: replace them (results.csv, "
+        "results.parquet, summary.json and recordings/ are removed first; nothing else)",
+    )
+
+
 def record_options(command: argparse.ArgumentParser) -> None:
     command.add_argument(
         "--record",

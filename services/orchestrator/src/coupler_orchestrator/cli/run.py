@@ -12,6 +12,7 @@ from typing import TYPE_CHECKING, TextIO
 from coupler_orchestrator.cli.exits import EXIT_ERROR, EXIT_OK
 from coupler_orchestrator.cli.parser import (
     options_of,
+    out_options,
     record_options,
     run_options,
     scenario_argument,
@@ -47,11 +48,7 @@ def arguments(run: argparse.ArgumentParser) -> None:
         action="store_true",
         help="also write results.parquet, typed columns (needs the pyarrow package)",
     )
-    run.add_argument(
-        "--out",
-        type=Path,
-        help="results directory (default: the SSD's OpenMCx outputDirectory, else ./results)",
-    )
+    out_options(run)
     record_options(run)
     run.add_argument("--realtime-factor", type=float, help="pace at X times real time")
     run.add_argument(
@@ -85,7 +82,6 @@ async def run(args: argparse.Namespace, options: RunOptions, out: TextIO, sessio
     from coupler_orchestrator.outputs.progress import ProgressBar, ProgressLines
     from coupler_orchestrator.runner import run_scenario
 
-    session.out_dir = args.out
     observers: list[Observer] = [session]
     if not args.no_progress:
         observers.append(ProgressBar() if sys.stderr.isatty() else ProgressLines())
@@ -97,7 +93,15 @@ async def run(args: argparse.Namespace, options: RunOptions, out: TextIO, sessio
             session.monitor = monitor
         if session.monitor is not None:
             observers.append(session.monitor.state)
-        outcome = await run_scenario(args.ssp, options, out_dir=args.out, observers=observers)
+        outcome = await run_scenario(
+            args.ssp,
+            options,
+            out_dir=args.out,
+            base=getattr(args, "results_base", None),
+            replace=args.force,
+            observers=observers,
+            on_results=session.results_in,
+        )
     end = outcome.end
     print(
         f"{end.status}: {end.steps} steps to t={end.end_time:g} s in {end.wall_time:.3g} s",

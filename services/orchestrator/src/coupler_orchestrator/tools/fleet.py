@@ -4,7 +4,7 @@ A fleet file (TOML) names the scenario and the services::
 
     [scenario]
     ssp = "scenarios/railway/SystemStructure.ssd"
-    out = "results/railway"
+    out = "results/railway"           # each run: a new folder in it (default results/<scenario>)
     args = ["--realtime-factor", "20"]       # extra `coupler run` options
 
     [[service]]
@@ -51,6 +51,7 @@ import structlog
 
 from coupler.errors import CouplerError, ScenarioError
 from coupler.health import probe
+from coupler_orchestrator.outputs.files import default_base
 from coupler_orchestrator.ssp.expansion import expand
 
 log = structlog.get_logger("coupler.fleet")
@@ -103,7 +104,7 @@ class FleetSpec:
     ssp: Path
     """The scenario."""
     out: Path
-    """Results directory."""
+    """Results base folder: each run writes a new folder in it (``outputs.files``)."""
     run_args: tuple[str, ...] = ()
     """Extra ``coupler run`` options."""
     services: tuple[ServiceSpec, ...] = ()
@@ -123,10 +124,11 @@ class FleetSpec:
             data = tomllib.loads(path.read_text(encoding="utf-8"))
             scenario = data["scenario"]
             root = root or Path.cwd()
+            ssp = root / scenario["ssp"]
             return cls(
                 root=root,
-                ssp=root / scenario["ssp"],
-                out=root / scenario.get("out", "results"),
+                ssp=ssp,
+                out=root / scenario["out"] if "out" in scenario else root / default_base(ssp),
                 run_args=tuple(
                     expand(str(a), env, what=f"{path} [scenario] args")
                     for a in scenario.get("args", ())
