@@ -416,10 +416,11 @@ def test_an_infinite_openmcx_delta_time_is_refused(coupler: Coupler, tmp_path: P
 def test_output_interval_and_variables_select_what_is_recorded(
     coupler: Coupler, tmp_path: Path
 ) -> None:
+    """``--output-variables A,B`` before the scenario takes the list, not the scenario."""
     path = Path(__file__).parent / "data" / "chain.ssd"
     outcome = coupler(
-        "run", path, "--out", tmp_path / "o", "--output-interval", "1.0",
-        "--output-variables", "Integ.*", "Source.ramp",
+        "run", "--output-variables", "Integ.*,Source.ramp", path,
+        "--out", tmp_path / "o", "--output-interval", "1.0",
     )  # fmt: skip
     assert outcome.code == 0, outcome.err
     rows = coupler.results(tmp_path / "o")
@@ -513,7 +514,7 @@ def test_results_as_parquet_equal_the_csv(coupler: Coupler, tmp_path: Path) -> N
     path = Path(__file__).parent / "data" / "chain.ssd"
     outcome = coupler(
         "run", path, "--out", tmp_path, "--parquet", "--output-interval", "1.0",
-        "--output-variables", "Source.*", "Integ.x",
+        "--output-variables", "Source.*", "--output-variables", "Integ.x",
     )  # fmt: skip
     assert outcome.code == 0, outcome.err
     table = pq.read_table(tmp_path / "results.parquet")

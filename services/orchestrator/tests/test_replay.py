@@ -258,7 +258,7 @@ def test_replay_refuses_another_grid(coupler: Coupler, tmp_path: Path, recorded:
             *flags,
         )
         assert outcome.code == 1
-        assert "1 problem(s)" in outcome.err
+        assert "1 problem\n" in outcome.err
         assert recorded_grid in outcome.err and asked in outcome.err, outcome.err
     checked = coupler(
         "validate", DATA / "mixed.ssd", "--replay", f"Gain={recorded}", "--step", "0.25"

@@ -219,17 +219,17 @@ def options_of(args: argparse.Namespace) -> RunOptions:
         security=security_of(args),
         on_abandoned=end_abandoned,
         output_interval=getattr(args, "output_interval", None),
-        output_variables=tuple(getattr(args, "output_variables", ())),
+        output_variables=_listed(getattr(args, "output_variables", ())),
         parquet=getattr(args, "parquet", False),
-        record=tuple(
-            name.strip()
-            for item in getattr(args, "record", ())
-            for name in item.split(",")
-            if name.strip()
-        ),
+        record=_listed(getattr(args, "record", ())),
         replays=_replays_of(getattr(args, "replay", ())),
         **({"run_id": args.run_id} if args.run_id else {}),
     )
+
+
+def _listed(items: Sequence[str]) -> tuple[str, ...]:
+    """The names of a repeatable option whose values may be comma-separated lists."""
+    return tuple(name.strip() for item in items for name in item.split(",") if name.strip())
 
 
 def _replays_of(items: Sequence[str]) -> dict[str, Path]:

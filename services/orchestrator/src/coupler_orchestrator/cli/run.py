@@ -6,7 +6,6 @@ import argparse
 import contextlib
 import sys
 from dataclasses import replace
-from pathlib import Path
 from typing import TYPE_CHECKING, TextIO
 
 from coupler_orchestrator.cli.exits import EXIT_ERROR, EXIT_OK
@@ -38,10 +37,11 @@ def arguments(run: argparse.ArgumentParser) -> None:
     )
     run.add_argument(
         "--output-variables",
-        nargs="+",
+        action="append",
         default=[],
-        metavar="NAME",
-        help="record only these outputs: Component.output names or globs (Gain.*)",
+        metavar="NAME[,NAME...]",
+        help="record only these outputs: Component.output names or globs, comma-separated "
+        "(--output-variables 'Gain.*,Integrator.x'; repeatable)",
     )
     run.add_argument(
         "--parquet",

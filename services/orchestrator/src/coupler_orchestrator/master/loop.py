@@ -182,7 +182,8 @@ class Master:
                     yielded = wallclock.perf_counter()
         except CouplerError as exc:
             status, reason = "failed", f"{exc} (the run had reached t={self._time_reached():g} s)"
-            log.error("run_failed", run_id=plan.run_id, reason=reason)
+            # an expected end, said by the outcome (the command line prints it once): info
+            log.info("run_failed", run_id=plan.run_id, reason=reason)
         except Exception as exc:  # a bug or a foreign error: still a clean end and a summary
             status, reason = "failed", f"{type(exc).__name__}: {exc}"
             log.exception("run_failed", run_id=plan.run_id, reason=reason)
@@ -294,7 +295,8 @@ class Master:
         )
         self._finish(end)
         self._abandoned = True
-        log.error(
+        told = self.plan.on_abandoned is not None  # the caller says it (the CLI: once)
+        (log.info if told else log.error)(
             "run_abandoned",
             run_id=self.plan.run_id,
             reason=reason,

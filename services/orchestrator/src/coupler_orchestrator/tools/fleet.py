@@ -258,12 +258,14 @@ class Fleet:
     """Checks ports and results directory, starts the services on enter (healthy or
     FleetError), stops them all on exit."""
 
-    def __init__(self, spec: FleetSpec, *, health_timeout: float = 60.0) -> None:
+    def __init__(
+        self, spec: FleetSpec, *, health_timeout: float = 60.0, logs: Path | None = None
+    ) -> None:
         self.spec = spec
         self.health_timeout = health_timeout
-        self.logs = spec.root / "build" / "logs"
-        """This fleet's own log folder (``build/logs/fleet-<UTC time>-<random>/`` once
-        entered): no other fleet writes there."""
+        self.logs = logs or spec.root / "build" / "logs"
+        """This fleet's own log folder (``<logs>/fleet-<UTC time>-<random>/`` once entered,
+        ``logs`` defaulting to the project's ``build/logs``): no other fleet writes there."""
         self._processes: dict[str, asyncio.subprocess.Process] = {}
         self._lock: IO[str] | None = None
 
