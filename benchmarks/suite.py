@@ -208,7 +208,9 @@ async def coupler_run(ssd: Path, steps: int, out: Path) -> _Clock:
 
     clock = _Clock(time.perf_counter())
     options = RunOptions(stop_time=steps * STEP, step_size=STEP, run_id=f"bench-{time.time_ns()}")
-    outcome = await run_scenario(ssd, options, out_dir=out, observers=[clock.observer])
+    outcome = await run_scenario(  # runs repeat into one folder: each replaces the last
+        ssd, options, out_dir=out, replace=True, observers=[clock.observer]
+    )
     if outcome.end.status != "completed":
         raise RuntimeError(f"{ssd.name}: {outcome.end.status}: {outcome.end.reason}")
     return clock

@@ -143,10 +143,12 @@ local_run() {
     { mkdir -p "$OUT/local-logs" && cp -r build/logs/. "$OUT/local-logs/" 2>/dev/null; exit 1; }
 }
 
-# Local and container results: the same balise sequence, and whether byte-identical.
+# Local and container results: the same balise sequence, and whether byte-identical. $2 is the
+# orchestrator's /results copied out: its run's folder is railway/latest (a folder per run).
 compare_runs() {
-  python3 scripts/compare-runs.py "$CHECK" "$1" "$2"
-  if cmp -s "$1/results.csv" "$2/results.csv"; then
+  local local_run=$1 container_run=$2/railway/latest
+  python3 scripts/compare-runs.py "$CHECK" "$local_run" "$container_run"
+  if cmp -s "$local_run/results.csv" "$container_run/results.csv"; then
     say "results.csv of the two runs are byte-identical (every channel, every step)"
   else
     say "results.csv of the two runs differ outside the balise columns (see $OUT)"

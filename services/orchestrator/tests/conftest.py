@@ -12,6 +12,8 @@ import csv
 import importlib.abc
 import io
 import json
+import os
+import subprocess
 import sys
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass
@@ -72,7 +74,8 @@ class Outcome:
 
 
 class Coupler:
-    """Runs the ``coupler`` CLI in-process and reads what a run recorded."""
+    """Runs the ``coupler`` CLI in-process (or, ``process``, as the user does: a command of its
+    own) and reads what a run recorded."""
 
     def __init__(self, capsys: pytest.CaptureFixture[str]) -> None:
         self.capsys = capsys
@@ -82,6 +85,30 @@ class Coupler:
         stdout = io.StringIO()
         code = main([str(a) for a in argv], stdout=stdout)
         return Outcome(code, stdout.getvalue(), self.capsys.readouterr().err)
+
+    @staticmethod
+    def process(
+        *argv: str | Path,
+        timeout: float = 120,
+        env: Mapping[str, str] | None = None,
+        cwd: Path | None = None,
+    ) -> Outcome:
+        """``coupler ARGV...`` as a process of its own (the installed console script), stdin
+        and stderr not a terminal: only what the command itself imports is imported."""
+        script = Path(sys.executable).with_name("coupler")
+        command = (
+            [str(script)] if script.exists() else [sys.executable, "-m", "coupler_orchestrator"]
+        )
+        done = subprocess.run(
+            [*command, *(str(a) for a in argv)],
+            capture_output=True,
+            text=True,
+            timeout=timeout,
+            stdin=subprocess.DEVNULL,
+            env=None if env is None else {**os.environ, **env},
+            cwd=cwd,
+        )
+        return Outcome(done.returncode, done.stdout, done.stderr)
 
     @staticmethod
     def results(out_dir: Path) -> list[dict[str, str]]:

@@ -134,6 +134,30 @@ async def test_the_same_campaign_on_a_dask_local_cluster(ramp_gain: Path, tmp_pa
     assert result.table_parquet is not None and result.table_parquet.is_file()
 
 
+@pytest.mark.timeout(600)  # a Dask cluster and two fleets, from a process of its own
+def test_a_campaign_on_dask_prints_only_its_own_lines_and_leaves_no_logs_behind(
+    ramp_gain: Path, tmp_path: Path
+) -> None:
+    """``coupler campaign --scheduler local`` as a user runs it: the workers log as the command
+    does (WARNING: no INFO line of theirs), and the runs' services leave no build/logs/fleet-*
+    folder (a completed run's service logs go with its scratch folder)."""
+    path = campaign_file(
+        tmp_path, '[[variant]]\n"Gain.gain" = 2.0\n\n[[variant]]\n"Gain.gain" = 3.0\n'
+    )
+    logs = REPO / "build" / "logs"
+    before = set(logs.iterdir()) if logs.is_dir() else set()
+    done = subprocess.run(
+        [Path(sys.executable).with_name("coupler"), "campaign", path, "--scheduler", "local",
+         "--jobs", "2"],
+        cwd=REPO, capture_output=True, text=True, timeout=600, stdin=subprocess.DEVNULL,
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    assert [r["status"] for r in table(tmp_path / "out" / "campaign.csv")] == ["completed"] * 2
+    assert all(line.startswith("campaign: ") for line in done.stderr.splitlines()), done.stderr
+    after = set(logs.iterdir()) if logs.is_dir() else set()
+    assert after == before
+
+
 def test_a_failing_run_is_a_row_and_the_others_complete(
     ramp_gain: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
@@ -163,6 +187,9 @@ y_final = "Gain.y"
     assert float(rows[0]["y_final"]) == pytest.approx(2 * 0.5 * 1.9)  # slope 0.5 (the SSD)
     assert float(rows[2]["y_final"]) == pytest.approx(3 * 0.5 * 0.9)  # its own stop time
     assert rows[1]["y_final"] == ""
+    folders = [tmp_path / "out" / r["directory"] for r in rows]
+    assert "participant_serving" in (folders[1] / "service-gain.log").read_text()  # its service
+    assert not any((f / "service-gain.log").exists() for f in (folders[0], folders[2]))
 
     assert main(["campaign", str(path)]) == 1  # again: only the failed run runs again
     assert "2 of 3 runs completed earlier" in capsys.readouterr().err

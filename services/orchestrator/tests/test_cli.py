@@ -7,14 +7,18 @@ coupler describe Source2.fmu            -->  FMU
 from __future__ import annotations
 
 import io
+import subprocess
+import sys
 import time
 from pathlib import Path
+
+import pytest
 
 from coupler.server import ParticipantServer
 from coupler_orchestrator.observer import RunEnd, RunInfo
 from coupler_orchestrator.outputs.progress import ProgressLines
 
-from .conftest import DATA, Coupler
+from .conftest import DATA, REPO, Coupler
 
 
 def test_describe_grpc_participant(coupler: Coupler, gain_server: ParticipantServer) -> None:
@@ -79,3 +83,111 @@ def test_progress_lines_when_not_on_a_terminal(tmp_path: Path) -> None:
     assert 2 <= len(written) <= 8
     assert all(line.startswith("progress: t=") and "x real time  ETA" in line for line in written)
     assert "%" in written[-1]
+
+
+# The first hour's papercuts: what a new user typed, and what the command must say.
+
+SSD = """<?xml version="1.0" encoding="UTF-8"?>
+<ssd:SystemStructureDescription version="1.0" name="T"
+    xmlns:ssd="http://ssp-standard.org/SSP1/SystemStructureDescription"
+    xmlns:ssc="http://ssp-standard.org/SSP1/SystemStructureCommon">
+  <ssd:System name="T">
+    <ssd:Elements>
+      <ssd:Component name="A" source="{fmus}/Source2.fmu"/>
+      <ssd:Component name="B" source="{fmus}/Integrator2.fmu">
+        <ssd:Connectors><ssd:Connector name="u" kind="input"/></ssd:Connectors>
+      </ssd:Component>
+    </ssd:Elements>
+    <ssd:Connections>
+      <ssd:Connection startElement="A" startConnector="ramp" endElement="B" endConnector="u"/>
+    </ssd:Connections>
+  </ssd:System>
+  <ssd:DefaultExperiment startTime="0" stopTime="1"{step}/>
+</ssd:SystemStructureDescription>
+"""
+
+
+def test_an_undeclared_connector_says_how_to_declare_it(
+    coupler: Coupler, fmus: dict[str, Path], tmp_path: Path
+) -> None:
+    ssd = tmp_path / "t.ssd"
+    ssd.write_text(SSD.format(fmus=fmus["Source2"].parent, step=""))
+    outcome = coupler("validate", ssd, "--step", "0.1")
+    assert outcome.code == 1
+    assert (
+        "t.ssd line 13: connection A.ramp -> B.u: component 'A' declares no connector 'ramp' "
+        "(it declares none); a connection joins declared connectors: add "
+        '<ssd:Connector name="ramp" kind="output"/> to its <ssd:Connectors> (`coupler '
+        "describe` lists the participant's channels)"
+    ) in outcome.err
+    assert "t.ssd: 1 problem\n" in outcome.err  # not "1 problem(s)"
+
+
+def test_a_step_size_in_the_default_experiment_says_where_a_step_goes(
+    coupler: Coupler, fmus: dict[str, Path], tmp_path: Path
+) -> None:
+    ssd = tmp_path / "t.ssd"
+    ssd.write_text(SSD.format(fmus=fmus["Source2"].parent, step=' stepSize="0.1"'))
+    outcome = coupler("validate", ssd)
+    assert outcome.code == 1
+    assert (
+        "attribute 'stepSize': The attribute 'stepSize' is not allowed: SSP's "
+        "DefaultExperiment has no step size; remove stepSize and give the step with --step "
+        "0.1, or in the SSD inside the DefaultExperiment: <ssd:Annotations><ssc:Annotation "
+        'type="com.avl.model.connect.ssp.task"><mc:Task xmlns:mc="com.avl.model.connect.ssp.task" '
+        'deltaTime="0.1"/></ssc:Annotation></ssd:Annotations>'
+    ) in outcome.err
+
+
+def test_a_param_typo_names_what_can_be_set(coupler: Coupler, fmus: dict[str, Path]) -> None:
+    outcome = coupler("validate", fmus["Source2"], "--param", "Source.slop=2")
+    assert outcome.code == 1
+    assert (
+        "--param Source.slop: no parameter or input 'slop' on component 'Source'; did you mean "
+        "'Source.slope'? (its parameters and inputs: slope, offset, amplitude, freq)"
+    ) in outcome.err
+
+
+def test_validate_counts_in_words(coupler: Coupler, fmus: dict[str, Path]) -> None:
+    outcome = coupler("validate", fmus["Source2"])
+    assert outcome.code == 0, outcome.err
+    assert outcome.out.endswith("Source2.fmu: valid (1 component, 0 connections)\n")
+
+
+def test_describe_says_at_once_what_it_waits_for() -> None:
+    """Nothing listens there: the first line says so while the command still waits."""
+    script = Path(sys.executable).with_name("coupler")
+    with subprocess.Popen(
+        [str(script), "describe", "grpc://127.0.0.1:1", "--timeout", "60"],
+        stderr=subprocess.PIPE,
+        stdin=subprocess.DEVNULL,
+        text=True,
+    ) as process:
+        try:
+            assert process.stderr is not None
+            first = process.stderr.readline()
+            still_waiting = process.poll() is None
+        finally:
+            process.kill()
+    assert first == (
+        "waiting up to 60 s for a participant at grpc://127.0.0.1:1 (connection refused: "
+        "nothing listens on that port yet)\n"
+    )
+    assert still_waiting
+
+
+def test_a_failed_run_is_said_once_off_a_terminal(tmp_path: Path) -> None:
+    """stderr a file (CI, compose): one ``error:`` line, not a JSON log line saying it too."""
+    fmu = REPO / "build" / "faulty-fmus" / "Faulty2.fmu"
+    if not fmu.exists():
+        pytest.fail(f"{fmu} is missing: run `make setup` (make test does)")
+    outcome = Coupler.process(
+        "run", fmu, "--isolate-fmus", "--param", "crash_at=0.5", "--stop-time", "1",
+        "--step", "0.25", "--out", tmp_path / "o", "--no-progress",
+    )  # fmt: skip
+    assert outcome.code == 1
+    assert outcome.err.splitlines() == [
+        "error: run failed: Faulty.DoStep [UNAVAILABLE]: the FMU host process was killed by "
+        "SIGSEGV during DoStep at t=0.5 (Faulty2.fmu runs isolated; the FMU itself crashed) "
+        "(the run had reached t=0.5 s)"
+    ]

@@ -14,6 +14,7 @@ import os
 import shutil
 import zipfile
 from collections.abc import Mapping
+from fractions import Fraction
 from pathlib import Path
 from typing import Any
 
@@ -196,10 +197,38 @@ def test_step_sizes_arrive_exactly_as_configured(coupler: Coupler, tmp_path: Pat
         outcome = coupler("run", path, "--step", "0.1", "--out", tmp_path / "o")
     assert outcome.code == 0, outcome.err
     assert every.setup is not None and every.setup.step_size == 0.1
-    assert every.steps == [(0.2 + k * 0.1, 0.1) for k in range(18)]
+    assert every.steps == [((2 + k) / 10, 0.1) for k in range(18)]
     assert third.setup is not None and third.setup.step_size == 0.3
-    assert third.steps == [(0.2 + k * 0.1, 0.3) for k in range(0, 18, 3)]
+    assert third.steps == [((2 + k) / 10, 0.3) for k in range(0, 18, 3)]
     assert all(step == 0.1 for _, step in every.steps)  # bit for bit, not approximately
+
+
+@pytest.mark.parametrize(("start", "step", "stop"), [("0", "0.1", "100"), ("0.25", "0.1", "3.35")])
+def test_the_time_column_is_the_grid_the_user_wrote(
+    coupler: Coupler,
+    tmp_path: Path,
+    fmus: dict[str, Path],
+    fmu_path: str,
+    start: str,
+    step: str,
+    stop: str,
+) -> None:
+    """A 0.1 s grid writes 0.3, 0.6, ... — the nearest double to the exact decimal t_0 + k h,
+    not the sum or product of doubles (0.30000000000000004): a user filtering ``time == 0.3``
+    or joining with another tool's 0.1 s grid finds every row. The FMU is stepped from those
+    very times (FMI's currentCommunicationPoint), in C and in Python alike."""
+    out = tmp_path / "o"
+    outcome = coupler(
+        "run", fmus["Source2"], "--out", out,
+        "--start-time", start, "--step", step, "--stop-time", stop,
+    )  # fmt: skip
+    assert outcome.code == 0, outcome.err
+    times = [row["time"] for row in coupler.results(out)]
+    t0, h = Fraction(start), Fraction(step)
+    expected = [repr(float(t0 + k * h)) for k in range(len(times))]
+    assert times == expected
+    assert float(times[-1]) == float(stop)
+    assert all(len(t.partition(".")[2]) <= 2 for t in times)  # 0.3, 12.7, 3.35: never ...0004
 
 
 class Tank(Source):
@@ -387,10 +416,11 @@ def test_an_infinite_openmcx_delta_time_is_refused(coupler: Coupler, tmp_path: P
 def test_output_interval_and_variables_select_what_is_recorded(
     coupler: Coupler, tmp_path: Path
 ) -> None:
+    """``--output-variables A,B`` before the scenario takes the list, not the scenario."""
     path = Path(__file__).parent / "data" / "chain.ssd"
     outcome = coupler(
-        "run", path, "--out", tmp_path / "o", "--output-interval", "1.0",
-        "--output-variables", "Integ.*", "Source.ramp",
+        "run", "--output-variables", "Integ.*,Source.ramp", path,
+        "--out", tmp_path / "o", "--output-interval", "1.0",
     )  # fmt: skip
     assert outcome.code == 0, outcome.err
     rows = coupler.results(tmp_path / "o")
@@ -433,9 +463,12 @@ class Train(Participant):
 
 
 def test_a_train_state_column_reads_as_json(coupler: Coupler, tmp_path: Path) -> None:
+    """``coupler run`` as the user runs it — a process that never imported coupler_railway —
+    finds coupler.v1.TrainState through the installed package's ``coupler.messages`` entry
+    point and writes the column as JSON, not hex."""
     with serving(Train()) as server:
         path = write(tmp_path, [remote("Train", server.port)], [])
-        outcome = coupler("run", path, "--step", "0.5", "--out", tmp_path / "o")
+        outcome = coupler.process("run", path, "--step", "0.5", "--out", tmp_path / "o")
     assert outcome.code == 0, outcome.err
     cells = [row["Train.state"] for row in coupler.results(tmp_path / "o")]
     assert cells[0] == ""  # no state yet
@@ -481,7 +514,7 @@ def test_results_as_parquet_equal_the_csv(coupler: Coupler, tmp_path: Path) -> N
     path = Path(__file__).parent / "data" / "chain.ssd"
     outcome = coupler(
         "run", path, "--out", tmp_path, "--parquet", "--output-interval", "1.0",
-        "--output-variables", "Source.*", "Integ.x",
+        "--output-variables", "Source.*", "--output-variables", "Integ.x",
     )  # fmt: skip
     assert outcome.code == 0, outcome.err
     table = pq.read_table(tmp_path / "results.parquet")

@@ -253,7 +253,7 @@ def test_validate_lists_every_problem(coupler: Coupler, tmp_path: Path) -> None:
     assert outcome.code == 1
     problems = [line for line in outcome.err.splitlines() if line.startswith("  - ")]
     assert len(problems) == 4, outcome.err
-    assert "bad.ssd: 4 problem(s)" in outcome.err
+    assert "bad.ssd: 4 problems" in outcome.err
     for fragment in (
         "bad.ssd line 7: connector 'Source.speed' does not exist on participant 'Source'",
         "bad.ssd line 7: connector 'Source.ramp' expects Boolean, but the participant declares "

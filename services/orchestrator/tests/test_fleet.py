@@ -5,7 +5,8 @@ untouched), Ctrl-C during and after a run, and what a run waiting for a particip
     coupler fleet (process) --starts--> gain participant (process, GAIN_PORT)
          |  run: Source (FMU) -> Gain (gRPC) -> Feed, Feed2 (FMUs)      tests/data/mixed.ssd
          v
-    out/results.csv, out/summary.json, build/logs/fleet-<time>-<random>/gain.log
+    out/<time>-<run id>/results.csv, summary.json (out/latest links to it),
+    build/logs/fleet-<time>-<random>/gain.log
 """
 
 from __future__ import annotations
@@ -162,7 +163,8 @@ def test_a_second_fleet_is_refused_and_the_first_is_untouched(
     (log_folder,) = (fleet_dir / "build" / "logs").iterdir()
     assert (log_folder / "gain.log").exists()
     before = files_of(fleet_dir)
-    assert json.loads((fleet_dir / "out" / "summary.json").read_text())["status"] == "completed"
+    latest = fleet_dir / "out" / "latest"
+    assert json.loads((latest / "summary.json").read_text())["status"] == "completed"
 
     second = coupler(["fleet", "fleet.toml"], fleet_dir, env)
     assert second.returncode == 1
@@ -183,7 +185,8 @@ def test_a_second_fleet_is_refused_and_the_first_is_untouched(
     first.process.send_signal(signal.SIGINT)
     assert first.finish() == 0
     assert first.err[-1] == (
-        "stopped the services; the run had ended completed at t=1.5 s, results in out"
+        "stopped the services; the run had ended completed at t=1.5 s, results in "
+        f"out/{os.readlink(latest)}"
     )
     assert not any("Traceback" in line or line.startswith("{") for line in first.err)
     assert port_is_free(port)
@@ -207,7 +210,7 @@ def test_ctrl_c_during_a_run_says_where_and_when_it_stopped(
 ) -> None:
     run = Console(["fleet", "fleet.toml", "--exit", "--realtime-factor", "0.25"], fleet_dir, env)
     consoles.append(run)
-    csv = fleet_dir / "out" / "results.csv"
+    csv = fleet_dir / "out" / "latest" / "results.csv"
 
     def stepping() -> bool:
         assert run.process.poll() is None, run.err
@@ -219,11 +222,11 @@ def test_ctrl_c_during_a_run_says_where_and_when_it_stopped(
     rows = len(csv.read_text().splitlines()) - 1
     reached = (rows - 1) * 0.5
     assert run.err[-1] == (
-        f"interrupted at t={reached:g} s of 1.5 s; the results so far are in out "
-        "(summary.json: status aborted)"
+        f"interrupted at t={reached:g} s of 1.5 s; the results so far are in "
+        f"out/{os.readlink(csv.parent)} (summary.json: status aborted)"
     )
     assert not any("Traceback" in line or line.startswith("{") for line in run.err)
-    summary = json.loads((fleet_dir / "out" / "summary.json").read_text())
+    summary = json.loads((csv.parent / "summary.json").read_text())
     assert summary["status"] == "aborted"
     assert port_is_free(int(env["GAIN_PORT"]))  # the fleet stopped its service
 

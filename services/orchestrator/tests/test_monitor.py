@@ -109,18 +109,40 @@ async def test_a_late_joiner_gets_the_history(
 ) -> None:
     async with MonitorServer("0") as monitor:
         outcome = await run(3.0, None, monitor, tmp_path)
-        [frame] = await frames(monitor.url, 1, "?channels=Gain.y,Feed.real_out,Nope.x")
+        _state, frame = await frames(monitor.url, 2, "?channels=Gain.y,Feed.real_out,Nope.x")
     assert outcome.end.status == "completed"
     assert frame["header"]["status"] == "completed"
     assert frame["header"]["progress"] == pytest.approx(1.0)
     assert frame["layout"]["members"] == MEMBERS
     assert {"name": "Gain.y", "unit": "m/s"} in frame["layout"]["channels"]
     values = frame["values"]
-    assert values["t"][0] == 0.0 and values["t"][-1] == pytest.approx(3.0)
-    assert len(values["t"]) == 31
+    assert values["t"] == [k / 10 for k in range(31)]  # the grid as written: 0.3, not 0.30...04
     assert set(values["series"]) == {"Gain.y", "Feed.real_out"}  # unknown names ignored
     assert set(frame["latency"]["series"]) == set(MEMBERS)
     assert values["series"]["Gain.y"] == Coupler.column(tmp_path, "Gain.y")
+
+
+async def test_the_first_paint_waits_for_no_history(
+    fmus: dict[str, Path], gain_server: ParticipantServer, tmp_path: Path
+) -> None:
+    """However busy the run keeps its process, a page paints the run's state from the page
+    itself, and every stream starts with that small state; the history comes second."""
+    async with MonitorServer("0") as monitor:
+        outcome = await run(3.0, None, monitor, tmp_path)
+        first, second = await frames(monitor.url, 2, "?channels=Gain.y")
+        async with aiohttp.ClientSession() as session, session.get(monitor.url) as reply:
+            page = await reply.text()
+    assert outcome.end.status == "completed"
+    assert set(first) == {"header", "layout"}  # no history in the first frame
+    assert first["header"]["status"] == "completed"
+    assert {"name": "Gain.y", "unit": "m/s"} in first["layout"]["channels"]
+    assert len(second["values"]["t"]) == 31 and len(second["values"]["series"]["Gain.y"]) == 31
+    inlined = page.split('<script id="state" type="application/json">', 1)[1].split("</script>")[0]
+    assert json.loads(inlined) == {
+        "header": json.loads(inlined)["header"],
+        "layout": first["layout"],
+    }
+    assert json.loads(inlined)["header"]["status"] == "completed"
 
 
 async def test_a_browser_that_never_reads_does_not_slow_the_run(

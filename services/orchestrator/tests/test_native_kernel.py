@@ -174,7 +174,7 @@ def test_what_is_recorded_is_picked_from_the_same_row(
 ) -> None:
     """--output-variables and --output-interval pick from the row the native step reads."""
     ssd = chain(tmp_path, fmus, "Source2", ROUTES)
-    picked = ("--output-variables", "Feed2.*", "Source.counter", "--output-interval", "0.05")
+    picked = ("--output-variables", "Feed2.*,Source.counter", "--output-interval", "0.05")
     recorded = {}
     for path, flag in (("C", ()), ("Python", ("--no-native-steps",))):
         out = tmp_path / path

@@ -7,6 +7,7 @@ needs nothing but itself, rendered in Debian's Chromium.
 
 from __future__ import annotations
 
+import json
 import re
 import shutil
 import tempfile
@@ -134,3 +135,31 @@ def test_bad_requests_are_named(
     assert outcome.code == 1
     assert message in outcome.err
     assert "Traceback" not in outcome.err
+
+
+def test_a_campaigns_runs_are_labelled_by_their_parameters(
+    coupler: Coupler, runs: tuple[Path, Path], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Runs as a campaign leaves them (out/runs/<n>-<key>/ with variant.json): each series is
+    named by the parameters that differ, the title is the campaign's folder, not every path."""
+    campaign = tmp_path / "campaign"
+    variants = [
+        {"Gain.gain": 2.0, "Source.slope": 0.5},
+        {"Gain.gain": 3.0, "Source.slope": 0.5},
+    ]
+    folders = []
+    for index, (run, variant) in enumerate(zip(runs, variants, strict=True), start=1):
+        folder = campaign / "runs" / f"{index:03d}-{index:012x}"
+        shutil.copytree(run, folder)
+        (folder / "variant.json").write_text(json.dumps(variant))
+        folders.append(folder)
+    monkeypatch.chdir(tmp_path)
+    out = tmp_path / "plot.html"
+    outcome = coupler("plot", *folders, "Integ.x", "-o", out)
+    assert outcome.code == 0, outcome.err
+    data = json.loads(re.search(r'id="plot-data"[^>]*>(.*?)</script>', out.read_text()).group(1))
+    assert [s["label"] for s in data["charts"][0]["series"]] == [
+        "Gain.gain=2: Integ.x",
+        "Gain.gain=3: Integ.x",
+    ]  # Source.slope is the same in both: not repeated
+    assert data["title"] == "campaign: 2 runs over Gain.gain"

@@ -258,7 +258,7 @@ def test_replay_refuses_another_grid(coupler: Coupler, tmp_path: Path, recorded:
             *flags,
         )
         assert outcome.code == 1
-        assert "1 problem(s)" in outcome.err
+        assert "1 problem\n" in outcome.err
         assert recorded_grid in outcome.err and asked in outcome.err, outcome.err
     checked = coupler(
         "validate", DATA / "mixed.ssd", "--replay", f"Gain={recorded}", "--step", "0.25"
@@ -397,7 +397,8 @@ def test_step_multiples_replay(
 def test_fleet_passes_record_on(
     coupler: Coupler, tmp_path: Path, fmus: dict[str, Path], monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    """``coupler fleet FLEET --record Gain``: the fleet's run records Gain."""
+    """``coupler fleet FLEET --record Gain``: the fleet's run records Gain (in a folder of its
+    own in the fleet file's ``out``, ``latest`` linking to it)."""
     monkeypatch.setenv("GAIN_PORT", str(free_port()))
     fleet = tmp_path / "fleet.toml"
     fleet.write_text(
@@ -408,4 +409,34 @@ def test_fleet_passes_record_on(
     )
     outcome = coupler("fleet", fleet, "--exit", "--record", "Gain")
     assert outcome.code == 0, outcome.err
-    assert recording.read(tmp_path / "out" / "recordings" / "Gain.crec").steps == 3
+    assert recording.read(tmp_path / "out" / "latest" / "recordings" / "Gain.crec").steps == 3
+
+
+def test_replay_never_picks_up_another_runs_recording(
+    coupler: Coupler, tmp_path: Path, recorded: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A results folder whose own run recorded nothing, holding an older run's recordings/
+    (as the old single ./results folder left them): refused, not replayed."""
+    monkeypatch.setenv("GAIN_PORT", str(free_port()))
+    other = tmp_path / "other"
+    other.mkdir()
+    for name in ("results.csv", "summary.json"):
+        (other / name).write_bytes((recorded / name).read_bytes())
+    summary = json.loads((other / "summary.json").read_text())
+    summary.pop("recordings")
+    summary["run_id"] = "later-run"
+    (other / "summary.json").write_text(json.dumps(summary))
+    (other / "recordings").mkdir()
+    (other / "recordings" / "Gain.crec").write_bytes(
+        (recorded / "recordings" / "Gain.crec").read_bytes()
+    )
+    outcome = coupler(
+        "run", DATA / "mixed.ssd", "--out", tmp_path / "o", "--replay", f"Gain={other}"
+    )
+    assert outcome.code == 1
+    assert (
+        f"{other}/recordings/Gain.crec is not a recording of the run whose results are in "
+        f"{other} (run later-run did not --record Gain): another run left it there"
+    ) in outcome.err
+    ok = coupler("run", DATA / "mixed.ssd", "--out", tmp_path / "p", "--replay", f"Gain={recorded}")
+    assert ok.code == 0, ok.err

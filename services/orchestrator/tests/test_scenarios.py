@@ -166,8 +166,9 @@ def test_shipped_example_runs_bit_exact(
         Source (FMI 2, slope 0.5) --ramp--> Gain (gRPC, gain 4) --y--> Integrator (FMI 2)
 
     Jacobi, h = 0.1, 0 .. 10 s; compared bit for bit with the same arithmetic in Python. The
-    grid is t_k = k h; each step is doStep(t_k, h) with h exactly 0.1, so the FMUs' own clock
-    after a step is t_k + h (which need not equal t_{k+1} to the last bit).
+    grid is t_k = k/10, the decimals as written (0.3, not 3 * 0.1); each step is
+    doStep(t_k, h) with h exactly 0.1, so the FMUs' own clock after a step is t_k + h (which
+    need not equal t_{k+1} to the last bit).
     """
     example = tmp_path / "examples" / "ramp-gain"
     example.mkdir(parents=True)
@@ -178,7 +179,7 @@ def test_shipped_example_runs_bit_exact(
     out = tmp_path / "out"
     outcome = coupler("run", example / "SystemStructure.ssd", "--out", out)
     assert outcome.code == 0, outcome.err
-    times = [k * 0.1 for k in range(101)]
+    times = [k / 10 for k in range(101)]
     clock = [0.0] + [t + 0.1 for t in times[:-1]]  # the FMU's time after doStep(t_k, h)
     ramp = [0.5 * t + 0.0 for t in clock]
     y = [0.0] + [4.0 * r for r in ramp[:-1]]

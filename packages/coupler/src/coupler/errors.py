@@ -33,7 +33,8 @@ class ValidationError(ScenarioError):
         self.problems = list(problems)
         self.subject = subject
         lines = "\n".join(f"  - {p}" for p in self.problems)
-        super().__init__(f"{subject}: {len(self.problems)} problem(s)\n{lines}")
+        count = len(self.problems)
+        super().__init__(f"{subject}: {count} problem{'' if count == 1 else 's'}\n{lines}")
 
 
 class PortInUse(ScenarioError):

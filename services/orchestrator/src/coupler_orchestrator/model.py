@@ -13,9 +13,11 @@ It imports nothing heavy at run time, so that the command line can name the choi
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from enum import StrEnum
+from fractions import Fraction
 from typing import TYPE_CHECKING
 
 from coupler.channels import Channel, Description, Value
@@ -65,21 +67,45 @@ class Roster:
 
 @dataclass(frozen=True, kw_only=True)
 class TimeGrid:
-    """Communication points t_k = start + k * step, computed by multiplication, never summed."""
+    """Communication points: t_k is the double nearest to the exact decimal start + k * step.
+
+    ``start`` and ``step`` are read as the decimals the user wrote (the shortest text that reads
+    back to each double: ``0.1`` is 1/10, not 0.1000000000000000055...), and t_k is computed
+    exactly, by integers, then rounded once: a 0.1 s grid gives 0.3, never the
+    0.30000000000000004 that 3 * 0.1 or 0.1 + 0.1 + 0.1 would.
+    """
 
     start: float
     """t_0 [s]."""
     step: float
     """Base communication step h [s]."""
     steps: int
-    """Number of base steps; the last point is start + steps * step."""
+    """Number of base steps; the last point is ``time(steps)``."""
+    _origin: int = field(init=False, repr=False, compare=False)
+    _stride: int = field(init=False, repr=False, compare=False)
+    _scale: int = field(init=False, repr=False, compare=False)
+    """t_k = (_origin + k * _stride) / _scale, in integers until the one rounding division."""
+
+    def __post_init__(self) -> None:
+        start, step = decimal_of(self.start), decimal_of(self.step)
+        scale = math.lcm(start.denominator, step.denominator)
+        object.__setattr__(self, "_origin", start.numerator * (scale // start.denominator))
+        object.__setattr__(self, "_stride", step.numerator * (scale // step.denominator))
+        object.__setattr__(self, "_scale", scale)
 
     def time(self, k: int) -> float:
-        return self.start + k * self.step
+        """t_k: the double nearest to start + k * step (Python's int / int rounds correctly)."""
+        return (self._origin + k * self._stride) / self._scale
 
     @property
     def stop(self) -> float:
         return self.time(self.steps)
+
+
+def decimal_of(value: float) -> Fraction:
+    """The decimal a user wrote for ``value``, exactly: the shortest text that reads back to
+    this double (``repr``) — the text given, for any value of up to 15 significant digits."""
+    return Fraction(repr(value))
 
 
 @dataclass(frozen=True, kw_only=True)

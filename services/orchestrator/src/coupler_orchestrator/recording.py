@@ -136,32 +136,62 @@ def _same(a: float, b: float) -> bool:
 def locate(path: Path, component: str | None) -> Path:
     """The recording file of ``component`` at ``path``: the file itself, or
     ``PATH/recordings/C.crec`` (a results directory), or ``PATH/C.crec``; with no component
-    named, a directory's only recording."""
+    named, a directory's only recording. A results directory's recording must be its own run's
+    (its summary.json lists it): a file another run left there is refused."""
     if path.is_dir():
         if component is None:
             found = sorted({*path.glob(f"recordings/*{SUFFIX}"), *path.glob(f"*{SUFFIX}")})
             if len(found) == 1:
-                return found[0]
+                return _own(path, found[0])
             names = ", ".join(p.stem for p in found) or "none"
             raise ScenarioError(
                 f"{path} holds {len(found)} recordings ({names}); name the component "
-                f"(--component C, or replay:PATH#C)"
+                f"(--component C, or replay:PATH#C){_runs_inside(path)}"
             )
         for candidate in (
             path / "recordings" / f"{component}{SUFFIX}",
             path / f"{component}{SUFFIX}",
         ):
             if candidate.is_file():
-                return candidate
+                return _own(path, candidate)
         raise ScenarioError(
             f"no recording of '{component}' in {path} (looked for recordings/{component}{SUFFIX} "
             f"and {component}{SUFFIX}); record it with coupler run --record {component}"
+            f"{_runs_inside(path)}"
         )
     if not path.is_file():
         raise ScenarioError(
             f"recording {path} does not exist; record one with coupler run --record COMPONENT"
         )
     return path
+
+
+def _own(results: Path, found: Path) -> Path:
+    """``found``, unless ``results`` holds a run's results (summary.json) that did not record
+    it: then it is another run's file, and replaying it would mix two runs."""
+    try:
+        summary = json.loads((results / "summary.json").read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return found
+    own = summary.get("recordings", {}) if isinstance(summary, dict) else {}
+    if found.parent == results / "recordings" and own.get(found.stem) != (
+        f"recordings/{found.name}"
+    ):
+        raise ScenarioError(
+            f"{found} is not a recording of the run whose results are in {results} (run "
+            f"{summary.get('run_id', '?')} did not --record {found.stem}): another run left it "
+            f"there. Replay the results folder of the run that recorded it, or the .crec file "
+            f"itself if you are sure"
+        )
+    return found
+
+
+def _runs_inside(path: Path) -> str:
+    """A hint when ``path`` is a base folder holding runs of their own (``latest``)."""
+    latest = path / "latest"
+    if latest.is_dir():
+        return f"; {path} holds one folder per run: give one of them, e.g. {latest}"
+    return ""
 
 
 class Recorder(Observer):

@@ -11,7 +11,7 @@ import asyncio
 import shutil
 import tempfile
 import threading
-from collections.abc import AsyncIterator, Mapping, Sequence
+from collections.abc import AsyncIterator, Callable, Mapping, Sequence
 from contextlib import asynccontextmanager
 from dataclasses import dataclass
 from pathlib import Path
@@ -28,7 +28,7 @@ from coupler_orchestrator.model import Checked, Plan
 from coupler_orchestrator.observer import Observer, RunEnd
 from coupler_orchestrator.options import RunOptions
 from coupler_orchestrator.outputs.csv import CsvRecorder, Selection
-from coupler_orchestrator.outputs.files import check_writable
+from coupler_orchestrator.outputs.files import check_writable, claim, default_base, new_run_folder
 from coupler_orchestrator.outputs.parquet import ParquetRecorder, parquet_available
 from coupler_orchestrator.outputs.summary import SummaryWriter, coupler_version
 from coupler_orchestrator.pipeline.checks import check
@@ -102,20 +102,28 @@ async def run_scenario(
     options: RunOptions,
     *,
     out_dir: Path | None = None,
+    base: Path | None = None,
+    replace: bool = False,
     observers: Sequence[Observer] = (),
+    on_results: Callable[[Path], None] | None = None,
 ) -> RunOutcome:
-    """Run the scenario at ``path``; results go to ``out_dir`` (default: the OpenMCx results
-    annotation's outputDirectory, else ``results``).
+    """Run the scenario at ``path``; results go to a folder of the run's own
+    (``outputs.files``): ``out_dir`` when given — refused when it holds an earlier run's
+    results, unless ``replace`` — else a new folder in ``base`` (default: the OpenMCx results
+    annotation's outputDirectory, else ``results/<scenario>``). ``on_results`` is told that
+    folder before any participant starts.
 
     Raises ScenarioError/ValidationError before anything runs; a participant failing during
     the run ends it as ``failed`` with every completed step recorded.
     """
     budget = Budget.of(options.unpack_limit)  # the archive and its FMUs together
     async with loaded(path, budget) as scenario:
-        if out_dir is None:
+        if out_dir is None and base is None:
             configured = scenario.results.output_directory if scenario.results else None
-            out_dir = Path(configured) if configured else Path("results")
-        check_writable(out_dir)
+            base = Path(configured) if configured else default_base(path)
+        check_writable(out_dir or base)  # before any participant starts
+        if out_dir is not None and not replace:
+            claim(out_dir, replace=False)
         if options.parquet and not parquet_available():
             raise ScenarioError(
                 "--parquet needs the pyarrow package: install it (pip install pyarrow, or "
@@ -124,6 +132,12 @@ async def run_scenario(
         async with opened(scenario, options, budget) as roster:
             checked = check(scenario, roster, options)
             plan = build_plan(checked, wire(checked), options)
+            if out_dir is None:  # made once the run is sure to start: no empty folders
+                out_dir = new_run_folder(base, options.run_id)
+            else:
+                claim(out_dir, replace=replace)
+            if on_results is not None:
+                on_results(out_dir)
             csv_path, summary_path = out_dir / "results.csv", out_dir / "summary.json"
             recordings = recorders_of(plan, roster.described(), out_dir, options)
             extra = _extra(checked, roster.described())

@@ -57,6 +57,10 @@ async def execute(args: argparse.Namespace, out: TextIO, session: Session) -> in
         scheduler=args.scheduler,
         force=args.force,
         progress=CampaignProgress(sys.stderr),
+        logs=(
+            args.log_level,
+            {"auto": not sys.stderr.isatty(), "console": False, "json": True}[args.log_format],
+        ),
     )
     print(format_table(spec, result.reports), file=out)
     print(f"table: {shown(result.table_csv)}", file=out)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, TextIO
 
@@ -36,7 +37,16 @@ async def execute(args: argparse.Namespace, out: TextIO, session: Session) -> in
     target, security = args.target, security_of(args)
     participant: Participant
     if target.startswith(("grpc://", "grpcs://")) or not target.endswith(".fmu"):
-        participant = RemoteParticipant(target, connect_timeout=args.timeout, security=security)
+        participant = RemoteParticipant(
+            target,
+            connect_timeout=args.timeout,
+            security=security,
+            on_waiting=lambda reason: print(
+                f"waiting up to {args.timeout:g} s for a participant at {target} ({reason})",
+                file=sys.stderr,
+                flush=True,
+            ),
+        )
     else:
         participant = FmuParticipant(Path(target))
     try:

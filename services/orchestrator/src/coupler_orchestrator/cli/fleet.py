@@ -10,7 +10,13 @@ from typing import TYPE_CHECKING, TextIO
 
 from coupler import durations
 from coupler_orchestrator.cli.exits import EXIT_OK
-from coupler_orchestrator.cli.parser import options_of, parser, realtime_factor, record_options
+from coupler_orchestrator.cli.parser import (
+    options_of,
+    out_options,
+    parser,
+    realtime_factor,
+    record_options,
+)
 from coupler_orchestrator.cli.session import Session, shown
 
 if TYPE_CHECKING:
@@ -24,7 +30,7 @@ def arguments(fleet: argparse.ArgumentParser) -> None:
         "fleet", type=Path, help="fleet file (TOML), e.g. scenarios/railway/fleet.toml"
     )
     fleet.add_argument("--exit", action="store_true", help="stop the services when the run ends")
-    fleet.add_argument("--out", type=Path, help="results directory (default from the fleet file)")
+    out_options(fleet, default="the fleet file's out")
     fleet.add_argument(
         "--realtime-factor",
         type=realtime_factor,
@@ -44,12 +50,17 @@ async def execute(args: argparse.Namespace, out: TextIO, session: Session) -> in
     from coupler_orchestrator.tools.fleet import FleetSpec
 
     spec = FleetSpec.load(args.fleet)
-    run_argv = ["run", str(spec.ssp), "--out", str(args.out or spec.out), *spec.run_args]
+    run_argv = ["run", str(spec.ssp), *spec.run_args]
+    if args.out is not None:  # this folder; else a new one per run in the fleet file's out
+        spec = replace(spec, out=args.out)
+        run_argv += ["--out", str(args.out), *(["--force"] if args.force else [])]
     run_argv += [f"--record={item}" for item in args.record]
     run_argv += [f"--replay={item}" for item in args.replay]
     if args.realtime_factor is not None:
         run_argv += ["--realtime-factor", str(args.realtime_factor)]
     run_args = parser().parse_args(run_argv)
+    if args.out is None:
+        run_args.results_base = spec.out
     async with contextlib.AsyncExitStack() as stack:
         if run_args.monitor is not None:  # up as long as the fleet, from before its services
             session.monitor = await stack.enter_async_context(MonitorServer(run_args.monitor))

@@ -150,6 +150,23 @@ def run_options(command: argparse.ArgumentParser) -> None:
     security_options(command)
 
 
+def out_options(command: argparse.ArgumentParser, default: str = "results/<scenario>") -> None:
+    command.add_argument(
+        "--out",
+        type=Path,
+        metavar="DIR",
+        help=f"results folder of this run (default: a new folder {default}/<UTC time>-<run id>/ "
+        "per run, `latest` linking to the newest; the SSD's OpenMCx outputDirectory instead of "
+        f"{default} when it names one); a folder holding an earlier run's results is refused",
+    )
+    command.add_argument(
+        "--force",
+        action="store_true",
+        help="--out DIR holds an earlier run's results: replace them (results.csv, "
+        "results.parquet, summary.json and recordings/ are removed first; nothing else)",
+    )
+
+
 def record_options(command: argparse.ArgumentParser) -> None:
     command.add_argument(
         "--record",
@@ -224,17 +241,17 @@ def options_of(args: argparse.Namespace) -> RunOptions:
         security=security_of(args),
         on_abandoned=end_abandoned,
         output_interval=getattr(args, "output_interval", None),
-        output_variables=tuple(getattr(args, "output_variables", ())),
+        output_variables=_listed(getattr(args, "output_variables", ())),
         parquet=getattr(args, "parquet", False),
-        record=tuple(
-            name.strip()
-            for item in getattr(args, "record", ())
-            for name in item.split(",")
-            if name.strip()
-        ),
+        record=_listed(getattr(args, "record", ())),
         replays=_replays_of(getattr(args, "replay", ())),
         **({"run_id": args.run_id} if args.run_id else {}),
     )
+
+
+def _listed(items: Sequence[str]) -> tuple[str, ...]:
+    """The names of a repeatable option whose values may be comma-separated lists."""
+    return tuple(name.strip() for item in items for name in item.split(",") if name.strip())
 
 
 def _replays_of(items: Sequence[str]) -> dict[str, Path]:

@@ -6,7 +6,6 @@ import argparse
 import contextlib
 import sys
 from dataclasses import replace
-from pathlib import Path
 from typing import TYPE_CHECKING, TextIO
 
 from coupler import durations
@@ -14,6 +13,7 @@ from coupler_orchestrator.cli.exits import EXIT_ERROR, EXIT_OK
 from coupler_orchestrator.cli.parser import (
     MIN_REALTIME_FACTOR,
     options_of,
+    out_options,
     realtime_factor,
     record_options,
     run_options,
@@ -47,21 +47,18 @@ def arguments(run: argparse.ArgumentParser) -> None:
     )
     run.add_argument(
         "--output-variables",
-        nargs="+",
+        action="append",
         default=[],
-        metavar="NAME",
-        help="record only these outputs: Component.output names or globs (Gain.*)",
+        metavar="NAME[,NAME...]",
+        help="record only these outputs: Component.output names or globs, comma-separated "
+        "(--output-variables 'Gain.*,Integrator.x'; repeatable)",
     )
     run.add_argument(
         "--parquet",
         action="store_true",
         help="also write results.parquet, typed columns (needs the pyarrow package)",
     )
-    run.add_argument(
-        "--out",
-        type=Path,
-        help="results directory (default: the SSD's OpenMCx outputDirectory, else ./results)",
-    )
+    out_options(run)
     record_options(run)
     run.add_argument(
         "--realtime-factor",
@@ -100,7 +97,6 @@ async def run(args: argparse.Namespace, options: RunOptions, out: TextIO, sessio
     from coupler_orchestrator.outputs.progress import ProgressBar, ProgressLines
     from coupler_orchestrator.runner import run_scenario
 
-    session.out_dir = args.out
     observers: list[Observer] = [session]
     if not args.no_progress:
         observers.append(ProgressBar() if sys.stderr.isatty() else ProgressLines())
@@ -112,7 +108,15 @@ async def run(args: argparse.Namespace, options: RunOptions, out: TextIO, sessio
             session.monitor = monitor
         if session.monitor is not None:
             observers.append(session.monitor.state)
-        outcome = await run_scenario(args.ssp, options, out_dir=args.out, observers=observers)
+        outcome = await run_scenario(
+            args.ssp,
+            options,
+            out_dir=args.out,
+            base=getattr(args, "results_base", None),
+            replace=args.force,
+            observers=observers,
+            on_results=session.results_in,
+        )
     end = outcome.end
     print(
         f"{end.status}: {end.steps} steps to t={end.end_time:g} s in {end.wall_time:.3g} s",

@@ -36,6 +36,10 @@ class Session(Observer):
             self.monitor.state.waiting(name, address, reason)
         print(f"waiting for {name} at {address} ({reason})", file=sys.stderr, flush=True)
 
+    def results_in(self, folder: Path) -> None:
+        """The run's results folder, once it is chosen."""
+        self.out_dir = folder
+
     def started(self, info: RunInfo) -> None:
         self.info, self.end = info, None
 
@@ -54,7 +58,7 @@ class Session(Observer):
             )
         if args.command == "replay":
             return EXIT_OK, "stopped serving the recording"
-        where = shown(self.out_dir) if self.out_dir else "./results (or the SSD's outputDirectory)"
+        where = shown(self.out_dir) if self.out_dir else "no folder yet"
         end = self.end
         if end is not None and end.status != "aborted":
             return EXIT_OK, (

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+from collections.abc import Sized
 from dataclasses import replace
 from typing import TextIO
 
@@ -32,9 +33,13 @@ async def execute(args: argparse.Namespace, out: TextIO, session: Session) -> in
     for warning in validation.warnings:
         print(f"warning: {warning}", file=out)
     scenario = validation.scenario
-    print(
-        f"{args.ssp}: valid ({len(scenario.components)} components, "
-        f"{len(scenario.connections)} connections)",
-        file=out,
-    )
+    components = count(scenario.components, "component")
+    connections = count(scenario.connections, "connection")
+    print(f"{args.ssp}: valid ({components}, {connections})", file=out)
     return EXIT_OK
+
+
+def count(items: Sized, noun: str) -> str:
+    """``1 component``, ``2 components``, ``0 connections``."""
+    number = len(items)
+    return f"{number} {noun}{'' if number == 1 else 's'}"

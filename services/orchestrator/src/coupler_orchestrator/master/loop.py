@@ -11,8 +11,9 @@ in flight — under the eye of a ``Watchdog`` that ends the run when such a step
 deadline. Remote members on the native step channel are sent their requests first and
 answered last, on this thread too; the others are awaited. A run of in-process FMUs only is stepped
 by one call into C per base step (``native_fmu_step``), with the same meaning.
-t_k = t_0 + k*h; each member steps from t_k by exactly its configured step (its deltaTime,
-else h), never by a difference of two communication points.
+t_k is the double nearest to the exact decimal t_0 + k*h (``TimeGrid.time``); each member
+steps from t_k by exactly its configured step (its deltaTime, else h), never by a difference
+of two communication points.
 """
 
 from __future__ import annotations
@@ -183,7 +184,8 @@ class Master:
                     yielded = wallclock.perf_counter()
         except CouplerError as exc:
             status, reason = "failed", f"{exc} (the run had reached t={self._time_reached():g} s)"
-            log.error("run_failed", run_id=plan.run_id, reason=reason)
+            # an expected end, said by the outcome (the command line prints it once): info
+            log.info("run_failed", run_id=plan.run_id, reason=reason)
         except Exception as exc:  # a bug or a foreign error: still a clean end and a summary
             status, reason = "failed", f"{type(exc).__name__}: {exc}"
             log.exception("run_failed", run_id=plan.run_id, reason=reason)
@@ -318,7 +320,8 @@ class Master:
         )
         self._finish(end)
         self._abandoned = True
-        log.error(
+        told = self.plan.on_abandoned is not None  # the caller says it (the CLI: once)
+        (log.info if told else log.error)(
             "run_abandoned",
             run_id=self.plan.run_id,
             reason=reason,

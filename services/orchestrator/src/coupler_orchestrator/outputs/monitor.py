@@ -12,7 +12,10 @@ server's rules: the run never waits for a browser.
   is new since what that browser already has, read from the state at that moment: nothing
   queues up for a slow browser, and one whose socket stays full for ``write_timeout`` seconds
   is dropped (the page reconnects and starts over).
-- The first frame of every stream is the whole history: a late joiner sees the run so far.
+- A page's first paint is fast however busy the run keeps this process: the page itself carries
+  the run's status (header and layout, inlined into the HTML), and every stream's first frame is
+  that small state again; the whole history follows in the second frame, so a late joiner sees
+  the run so far.
 """
 
 from __future__ import annotations
@@ -166,6 +169,10 @@ class MonitorState(Observer):
             ],
         }
 
+    def first(self) -> dict[str, Any]:
+        """The small state a page paints first: header and layout, no history."""
+        return {"header": self.header(), "layout": self.layout()}
+
     def frame(
         self, since: tuple[float, float] | None, channels: Sequence[str]
     ) -> tuple[dict[str, Any], tuple[float, float]]:
@@ -214,6 +221,7 @@ class MonitorSettings:
 STATE: web.AppKey[MonitorState] = web.AppKey("state", MonitorState)
 SETTINGS: web.AppKey[MonitorSettings] = web.AppKey("settings", MonitorSettings)
 STREAMS: web.AppKey[set[asyncio.Event]] = web.AppKey("streams", set)
+PAGE: web.AppKey[str] = web.AppKey("page", str)
 SSE_HEADERS = {"Content-Type": "text/event-stream", "Cache-Control": "no-store"}
 
 
@@ -222,6 +230,7 @@ def application(state: MonitorState, settings: MonitorSettings | None = None) ->
     app[STATE] = state
     app[SETTINGS] = settings or MonitorSettings()
     app[STREAMS] = set()
+    app[PAGE] = (STATIC / "monitor.html").read_text(encoding="utf-8")
     app.router.add_get("/", _index)
     app.router.add_get("/api/state", _state)
     app.router.add_get("/api/events", _events)
@@ -235,8 +244,17 @@ async def _close_streams(app: web.Application) -> None:
         stop.set()
 
 
+PAGE_STATE = "<!-- the run's state -->"
+"""Where the page's HTML receives the run's state at the time it is served."""
+
+
 async def _index(request: web.Request) -> web.StreamResponse:
-    return web.FileResponse(STATIC / "monitor.html", headers={"Cache-Control": "no-store"})
+    """The page, with the run's state inlined: the first paint needs no other request."""
+    state = json.dumps(request.app[STATE].first(), separators=(",", ":")).replace("</", "<\\/")
+    page = request.app[PAGE].replace(
+        PAGE_STATE, f'<script id="state" type="application/json">{state}</script>'
+    )
+    return web.Response(text=page, content_type="text/html", headers={"Cache-Control": "no-store"})
 
 
 async def _state(request: web.Request) -> web.Response:
@@ -246,7 +264,8 @@ async def _state(request: web.Request) -> web.Response:
 
 
 async def _events(request: web.Request) -> web.StreamResponse:
-    """One browser's stream: the whole history first, then what is new, at its own pace."""
+    """One browser's stream: the small state first (painted at once), then the whole history,
+    then what is new, at its own pace."""
     state, settings = request.app[STATE], request.app[SETTINGS]
     channels = [c for c in request.query.get("channels", "").split(",") if c]
     response = web.StreamResponse(headers=SSE_HEADERS)
@@ -259,6 +278,10 @@ async def _events(request: web.Request) -> web.StreamResponse:
     cursor: tuple[float, float] | None = None
     seen = -1
     try:
+        first = json.dumps(state.first(), separators=(",", ":"))
+        await asyncio.wait_for(
+            response.write(f"data: {first}\n\n".encode()), settings.write_timeout_s
+        )
         while not stop.is_set():
             if state.version != seen:
                 seen = state.version

@@ -21,6 +21,7 @@ connection.
 
 from __future__ import annotations
 
+import difflib
 import fnmatch
 import graphlib
 import math
@@ -46,6 +47,7 @@ from coupler_orchestrator.model import (
 from coupler_orchestrator.options import RunOptions
 from coupler_orchestrator.pipeline.participants import where
 from coupler_orchestrator.pipeline.replay import ReplayParticipant
+from coupler_orchestrator.ssp.documents import STEP_ANNOTATION
 from coupler_orchestrator.ssp.units import Affine, IncompatibleUnits, affine, from_symbol
 
 T = TypeVar("T")
@@ -400,8 +402,16 @@ class _Checker:
                 continue
             channel = candidate.description.channel(name)
             if channel is None or channel.causality is Causality.OUTPUT:
+                settable = [
+                    c.name
+                    for c in candidate.description.channels
+                    if c.causality is not Causality.OUTPUT
+                ]
+                close = difflib.get_close_matches(name, settable, n=1)
                 self.problems.append(
                     f"--param {key}: no parameter or input '{name}' on component '{component}'"
+                    + (f"; did you mean '{component}.{close[0]}'?" if close else "")
+                    + f" (its parameters and inputs: {', '.join(settable) or 'none'})"
                 )
                 continue
             try:
@@ -534,7 +544,8 @@ def grid_of(scenario: ssp.Scenario, options: RunOptions) -> TimeGrid:
         )
     if step is None:
         raise ScenarioError(
-            f"{source}: no step size; give --step H or an OpenMCx task deltaTime in the SSD"
+            f"{source}: no step size; give --step H, or write it into the SSD's "
+            f"DefaultExperiment as {STEP_ANNOTATION.format(step='H')} (OpenMCx's task annotation)"
         )
     for value, origin, what in (
         (start, start_from, "start time"),

@@ -118,10 +118,32 @@ def validate(root: Element, display: str) -> str | None:
     if schema.validate(_without_variables(root)):
         return None
     problems = [
-        f"{display} line {e.line}: schema violation: {e.message}"
+        f"{display} line {e.line}: schema violation: {_with_fix(e.message, root)}"
         for e in schema.error_log  # type: ignore[attr-defined]
     ]
     raise ValidationError(problems, subject=display)
+
+
+STEP_ANNOTATION = (
+    '<ssd:Annotations><ssc:Annotation type="com.avl.model.connect.ssp.task">'
+    '<mc:Task xmlns:mc="com.avl.model.connect.ssp.task" deltaTime="{step}"/>'
+    "</ssc:Annotation></ssd:Annotations>"
+)
+"""How an SSD carries its step size (OpenMCx's task annotation in the DefaultExperiment)."""
+
+
+def _with_fix(message: str, root: Element) -> str:
+    """A schema violation's message, with the fix of one people make often (SSP 1.0 has no
+    step size)."""
+    if "DefaultExperiment" in message and "'stepSize'" in message:
+        experiment = next((e for e in root.iter() if local(e) == "DefaultExperiment"), None)
+        step = experiment.get("stepSize", "H") if experiment is not None else "H"
+        return (
+            f"{message.rstrip('.')}: SSP's DefaultExperiment has no step size; remove stepSize "
+            f"and give the step with --step {step}, or in the SSD inside the DefaultExperiment: "
+            + STEP_ANNOTATION.format(step=step)
+        )
+    return message
 
 
 _VARIABLE = re.compile(r"\$\{[^}:]*(?::-([^}]*))?\}")

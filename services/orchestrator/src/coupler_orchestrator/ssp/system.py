@@ -4,6 +4,7 @@ resolution (``parameters``)."""
 
 from __future__ import annotations
 
+import difflib
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -312,8 +313,8 @@ class SystemReader:
         start = f"{start_el}.{start_c}" if start_el else start_c
         label = f"{start} -> {f'{end_el}.{end_c}' if end_el else end_c}"
         what = f"{where(self.display, element)}: connection {label}"
-        a = self.endpoint(what, path, start_el, start_c, kinds, refs)
-        b = self.endpoint(what, path, end_el, end_c, kinds, refs)
+        a = self.endpoint(what, path, start_el, start_c, kinds, refs, start=True)
+        b = self.endpoint(what, path, end_el, end_c, kinds, refs, start=False)
         decoupled, decouple_type, priority = notes.decoupling(element, self.display)
         edge = Edge(
             transformation=read_transformation(element, self.display),
@@ -337,8 +338,11 @@ class SystemReader:
         connector: str,
         kinds: dict[str, str],
         refs: dict[str, tuple[tuple[str, ...], Element]],
+        *,
+        start: bool,
     ) -> Node:
-        """The graph node of one end of a connection, with its role seen from the system."""
+        """The graph node of one end of a connection (``start``: where it starts), with its
+        role seen from the system."""
         if not element:
             own = self.tree.systems[path]
             if connector not in own:
@@ -377,9 +381,7 @@ class SystemReader:
             c = component.connector(connector)
             if c is None:
                 raise ScenarioError(
-                    f"{what}: connector '{element}.{connector}' does not exist in component "
-                    f"'{flat}' (connectors: "
-                    f"{', '.join(x.name for x in component.connectors) or 'none'})"
+                    f"{what}: {_undeclared(flat, connector, component, start=start)}"
                 )
             return Node(
                 key=("comp", *full, connector), role=roles.get(c.kind), label=f"{flat}.{connector}"
@@ -431,3 +433,23 @@ class SystemReader:
                 parameters=tuple(parameters),
             )
         )
+
+
+def _undeclared(flat: str, connector: str, component: Component, *, start: bool) -> str:
+    """Why a connection's end names no connector of ``component``, and the fix: the name it
+    probably meant, or the element that declares it."""
+    names = [x.name for x in component.connectors]
+    declared = f"its connectors: {', '.join(names)}" if names else "it declares none"
+    close = difflib.get_close_matches(connector, names, n=1)
+    if close:
+        return (
+            f"component '{flat}' declares no connector '{connector}' ({declared}); did you "
+            f"mean '{close[0]}'?"
+        )
+    kind = "output" if start else "input"
+    return (
+        f"component '{flat}' declares no connector '{connector}' ({declared}); a "
+        f'connection joins declared connectors: add <ssd:Connector name="{connector}" '
+        f'kind="{kind}"/> to its <ssd:Connectors> (`coupler describe` lists the '
+        f"participant's channels)"
+    )

@@ -1,6 +1,8 @@
-// The run monitor's page: one server-sent event stream (/api/events?channels=...), whose first
-// frame is the whole history and whose later frames carry only what is new. Picking a channel
-// opens a new stream (its history comes with the first frame).
+// The run monitor's page: the run's state inlined into the page (painted at once), then one
+// server-sent event stream (/api/events?channels=...), whose first frame is that small state
+// again, whose second is the whole history and whose later frames carry only what is new.
+// Picking a channel opens a new stream (its history comes with it). The header never waits
+// for the chart library (loaded async); the charts do.
 "use strict";
 
 const MAX_POINTS = 4000; // per chart; beyond, every other point is dropped (as the server does)
@@ -119,9 +121,18 @@ function resetValueCharts() {
   });
 }
 
+const chartsReady = new Promise((resolve) => {
+  if (window.uPlot) resolve();
+  else document.getElementById("uplot").addEventListener("load", resolve);
+});
+
 function onFrame(frame) {
   view.frames++;
   showHeader(frame.header);
+  chartsReady.then(() => draw(frame)); // in the order the frames came
+}
+
+function draw(frame) {
   if (frame.layout) { showLayout(frame.layout); resetValueCharts(); }
   if (frame.latency && view.latency) {
     view.latencyData = append(view.latencyData, frame.latency.t, view.members.map((m) => frame.latency.series[m]));
@@ -163,4 +174,6 @@ function pick(name, on) {
 }
 
 document.getElementById("filter").addEventListener("input", filterChannels);
+const inlined = document.getElementById("state");
+if (inlined) showHeader(JSON.parse(inlined.textContent).header);
 connect();

@@ -4,7 +4,7 @@ A fleet file (TOML) names the scenario and the services::
 
     [scenario]
     ssp = "scenarios/railway/SystemStructure.ssd"
-    out = "results/railway"
+    out = "results/railway"           # each run: a new folder in it (default results/<scenario>)
     args = ["--realtime-factor", "20"]       # extra `coupler run` options
 
     [[service]]
@@ -52,6 +52,7 @@ import structlog
 from coupler.errors import CouplerError, ScenarioError
 from coupler.health import probe
 from coupler.ports import holders_of, port_is_free
+from coupler_orchestrator.outputs.files import default_base
 from coupler_orchestrator.ssp.expansion import expand
 
 log = structlog.get_logger("coupler.fleet")
@@ -104,7 +105,7 @@ class FleetSpec:
     ssp: Path
     """The scenario."""
     out: Path
-    """Results directory."""
+    """Results base folder: each run writes a new folder in it (``outputs.files``)."""
     run_args: tuple[str, ...] = ()
     """Extra ``coupler run`` options."""
     services: tuple[ServiceSpec, ...] = ()
@@ -124,10 +125,11 @@ class FleetSpec:
             data = tomllib.loads(path.read_text(encoding="utf-8"))
             scenario = data["scenario"]
             root = root or Path.cwd()
+            ssp = root / scenario["ssp"]
             return cls(
                 root=root,
-                ssp=root / scenario["ssp"],
-                out=root / scenario.get("out", "results"),
+                ssp=ssp,
+                out=root / scenario["out"] if "out" in scenario else root / default_base(ssp),
                 run_args=tuple(
                     expand(str(a), env, what=f"{path} [scenario] args")
                     for a in scenario.get("args", ())
@@ -200,12 +202,14 @@ class Fleet:
     """Checks ports and results directory, starts the services on enter (healthy or
     FleetError), stops them all on exit."""
 
-    def __init__(self, spec: FleetSpec, *, health_timeout: float = 60.0) -> None:
+    def __init__(
+        self, spec: FleetSpec, *, health_timeout: float = 60.0, logs: Path | None = None
+    ) -> None:
         self.spec = spec
         self.health_timeout = health_timeout
-        self.logs = spec.root / "build" / "logs"
-        """This fleet's own log folder (``build/logs/fleet-<UTC time>-<random>/`` once
-        entered): no other fleet writes there."""
+        self.logs = logs or spec.root / "build" / "logs"
+        """This fleet's own log folder (``<logs>/fleet-<UTC time>-<random>/`` once entered,
+        ``logs`` defaulting to the project's ``build/logs``): no other fleet writes there."""
         self._processes: dict[str, asyncio.subprocess.Process] = {}
         self._lock: IO[str] | None = None
 

@@ -2,8 +2,10 @@
 
 A run is a results directory (``results.csv`` and, when present, ``summary.json`` for units and
 types) or a ``results.csv``. Channels are named or globbed (``Gain.*``); several runs are
-overlaid, e.g. the variants of a campaign. Channels are grouped by unit, one chart per unit
-with the unit on its axis.
+overlaid, e.g. the variants of a campaign: a run with a ``variant.json`` beside its results (a
+campaign's) is labelled by the parameters that differ between the runs (``Gain.gain=2``),
+another by its folder's name. Channels are grouped by unit, one chart per unit with the unit
+on its axis.
 
 - PNG: matplotlib (the ``plot`` extra of coupler-orchestrator; ``make setup`` installs it).
 - HTML: one self-contained file, the chart library (uPlot, from npm) inlined, so it opens
@@ -17,7 +19,8 @@ import fnmatch
 import html
 import json
 import math
-from collections.abc import Sequence
+import os
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -42,7 +45,8 @@ class Series:
     """One channel of one run."""
 
     run: str
-    """The run's label (its directory name, or its path when names repeat)."""
+    """The run's label: its varied parameters (campaigns), else its directory's name (its path
+    when names repeat)."""
     channel: str
     """``Component.connector``."""
     unit: str
@@ -64,6 +68,8 @@ class Run:
     rows: tuple[tuple[str, ...], ...]
     units: dict[str, str]
     types: dict[str, str]
+    variant: Mapping[str, Any] | None = None
+    """The parameters of a campaign's run (``variant.json`` beside its results), else None."""
 
 
 def read_run(path: Path) -> Run:
@@ -100,7 +106,16 @@ def read_run(path: Path) -> Run:
         rows=tuple(tuple(row) for row in table[1:]),
         units=units,
         types=types,
+        variant=_variant(csv_path.parent / "variant.json"),
     )
+
+
+def _variant(path: Path) -> Mapping[str, Any] | None:
+    try:
+        found = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+    return found if isinstance(found, dict) else None
 
 
 def select(runs: Sequence[Run], patterns: Sequence[str]) -> list[Series]:
@@ -125,8 +140,57 @@ def select(runs: Sequence[Run], patterns: Sequence[str]) -> list[Series]:
 
 
 def _labels(runs: Sequence[Run]) -> list[str]:
-    names = [r.label for r in runs]
-    return [r.label if names.count(r.label) == 1 else str(r.csv.parent) for r in runs]
+    """Each run's label: the parameters that differ between the runs (all of them campaign
+    runs), else the folder's name; its path where labels would repeat."""
+    varied = varied_parameters(runs)
+    if varied:
+        labels = [", ".join(f"{k}={_shown(r.variant, k)}" for k in varied) for r in runs]
+    else:
+        labels = [r.label for r in runs]
+    return [
+        label if labels.count(label) == 1 else f"{label} ({r.csv.parent})"
+        for label, r in zip(labels, runs, strict=True)
+    ]
+
+
+def varied_parameters(runs: Sequence[Run]) -> list[str]:
+    """The parameters whose values differ between ``runs``, when every run has a variant
+    (in first-seen order); [] otherwise."""
+    if len(runs) < 2 or any(r.variant is None for r in runs):
+        return []
+    keys = list(dict.fromkeys(k for r in runs for k in r.variant or {}))
+    return [k for k in keys if len({_shown(r.variant, k) for r in runs}) > 1]
+
+
+def _shown(variant: Mapping[str, Any] | None, key: str) -> str:
+    """A variant's value as its campaign file would write it (2.0 -> 2, True -> true)."""
+    value = (variant or {}).get(key, "-")
+    if isinstance(value, bool):
+        return str(value).lower()
+    if isinstance(value, float):
+        return f"{value:g}"
+    return str(value)
+
+
+def default_title(runs: Sequence[Run]) -> str:
+    """One run: its folder. Several: the folder they share and how many they are (and over
+    which parameters, for a campaign's runs) — never every path joined."""
+    folders = [r.csv.parent.resolve() for r in runs]
+    if len(runs) == 1:
+        return _relative(folders[0])
+    common = Path(os.path.commonpath(folders))
+    varied = varied_parameters(runs)
+    if varied and common.name == "runs":  # a campaign's out/runs/<n>-<key>/
+        common = common.parent
+    over = f" over {', '.join(varied)}" if varied else ""
+    return f"{_relative(common)}: {len(runs)} runs{over}"
+
+
+def _relative(path: Path) -> str:
+    try:
+        return str(path.relative_to(Path.cwd()))
+    except ValueError:
+        return str(path)
 
 
 def _numeric(run: Run, name: str, index: int) -> bool:
@@ -197,7 +261,7 @@ def plot(paths: Sequence[Path], channels: Sequence[str], out: Path, *, title: st
         raise PlotError(f"-o {out}: write FILE.png (a picture) or FILE.html (interactive)")
     runs = [read_run(p) for p in paths]
     series = select(runs, channels)
-    title = title or ", ".join(str(r.csv.parent) for r in runs)
+    title = title or default_title(runs)
     out.parent.mkdir(parents=True, exist_ok=True)
     if suffix == ".png":
         write_png(series, out, title=title, several_runs=len(runs) > 1)

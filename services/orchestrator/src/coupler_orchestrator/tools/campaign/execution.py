@@ -55,10 +55,12 @@ async def run_campaign(
     scheduler: str | None = None,
     force: bool = False,
     progress: CampaignProgress | None = None,
+    logs: tuple[str, bool] = ("WARNING", False),
 ) -> CampaignResult:
     """Run every variant of ``spec`` (``jobs`` at once; on a Dask cluster with ``scheduler``)
     and write the campaign table; a run that fails is a row with its reason, never the end of
-    the campaign. Interrupted, the table holds the runs that ended."""
+    the campaign. Interrupted, the table holds the runs that ended. ``logs``: the log level and
+    JSON-ness of the runs' workers (``RunJob.logs``)."""
     runs_dir = spec.out / "runs"
     runs_dir.mkdir(parents=True, exist_ok=True)
     jobs_of = [
@@ -69,6 +71,7 @@ async def run_campaign(
             scenario=spec.scenario,
             outputs=spec.outputs,
             derive=spec.derive,
+            logs=logs,
         )
         for i, v in enumerate(spec.variants, start=1)
     ]
@@ -144,7 +147,7 @@ async def _executor(scheduler: str | None, jobs: int | None) -> Any:
                     n_workers=jobs or os.cpu_count() or 1,
                     threads_per_worker=1,
                     processes=True,
-                    dashboard_address=None,
+                    dashboard_address="127.0.0.1:0",  # None would still try port 8787
                     asynchronous=True,
                     silence_logs=logging.WARNING,
                 )

@@ -21,6 +21,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from coupler.errors import CouplerError
+from coupler.logs import configure_logging
 from coupler_orchestrator.tools.campaign.spec import (
     CampaignError,
     Derive,
@@ -31,6 +32,9 @@ from coupler_orchestrator.tools.campaign.variants import RUN_OPTIONS, Scalar, nu
 from coupler_orchestrator.tools.fleet import Fleet, FleetError, FleetSpec, free_port, port_variables
 
 COMPLETED = ("completed", "terminated")
+SERVICE_LOGS = "service-logs"
+"""The folder of a run's scratch folder its fleet's services log into (``service-NAME.log`` in
+the run's folder when the run did not complete)."""
 """Run statuses a re-run skips."""
 
 
@@ -59,6 +63,9 @@ class RunJob:
     derive: tuple[Derive, ...]
     env: dict[str, str] | None = None
     """A pool entry; None: start the fleet's services on free ports."""
+    logs: tuple[str, bool] = ("WARNING", False)
+    """The command's log level and whether its lines are JSON: a Dask worker's process logs
+    as the command does (its own default would print every INFO line)."""
 
 
 @dataclass(kw_only=True)
@@ -79,7 +86,9 @@ class RunReport:
 
 
 def execute(job: RunJob) -> RunReport:
-    """Run ``job`` to its report (a Dask task; blocks)."""
+    """Run ``job`` to its report (a Dask task, in a worker's process; blocks)."""
+    level, json_lines = job.logs
+    configure_logging(level, json=json_lines)
     return asyncio.run(run_job(job))
 
 
@@ -130,6 +139,9 @@ def _collect(job: RunJob, scratch: Path, report: RunReport, ran: bool) -> None:
     for path in scratch.iterdir():
         if path.is_file() and not path.name.startswith("."):
             report.files[path.name] = path.read_bytes()
+    if report.status not in COMPLETED:  # what its services said, to debug it
+        for path in sorted(scratch.glob(f"{SERVICE_LOGS}/*/*.log")):
+            report.files[f"service-{path.name}"] = path.read_bytes()
 
 
 async def _run_with_services(job: RunJob, scratch: Path) -> None:
@@ -140,7 +152,9 @@ async def _run_with_services(job: RunJob, scratch: Path) -> None:
     for attempt in range(3):  # another process may take a free port before the fleet binds it
         env = {**os.environ, **{name: str(free_port()) for name in port_variables(scenario.fleet)}}
         spec = replace(FleetSpec.load(scenario.fleet, root=scenario.root, env=env), out=scratch)
-        fleet = Fleet(spec, health_timeout=scenario.health_timeout)
+        fleet = Fleet(  # its services' logs stay with the run (kept when it fails)
+            spec, health_timeout=scenario.health_timeout, logs=scratch / SERVICE_LOGS
+        )
         try:
             fleet.check_ports()
         except FleetError:
