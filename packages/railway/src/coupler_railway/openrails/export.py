@@ -822,7 +822,7 @@ class _Builder:
         return track.id, track.name
 
     def _write_paths(self, folder: Path) -> list[str]:
-        written = []
+        written: list[str] = []
         ends = [n for n in self.nodes if n.switch is None]
         for start in ends:
             for end, passed in self._routes(start):
