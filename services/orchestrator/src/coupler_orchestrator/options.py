@@ -72,6 +72,8 @@ class RunOptions:
     security: ClientSecurity = field(default_factory=ClientSecurity.from_environment)
     """TLS trust, client certificate and token for every remote participant (default: the
     ``COUPLER_TLS_*`` and ``COUPLER_TOKEN_FILE`` environment variables)."""
+    on_results: Callable[[Path], None] | None = field(default=None, compare=False)
+    """Told the results directory once it is chosen, before any participant starts."""
     on_waiting: Callable[[str, str, str], None] | None = field(default=None, compare=False)
     """Called once per remote participant that is not SERVING at the first check, with its
     component name, address and the reason (e.g. "connection refused: ..."), so a person

@@ -80,6 +80,7 @@ async def execute(args: argparse.Namespace, out: TextIO, session: Session) -> in
 
 async def run(args: argparse.Namespace, options: RunOptions, out: TextIO, session: Session) -> int:
     """Run with a progress display and, when asked, the monitor page; say how it ended."""
+    from coupler_orchestrator.cli.supervisor import beacon
     from coupler_orchestrator.observer import Observer
     from coupler_orchestrator.outputs.monitor import MonitorServer
     from coupler_orchestrator.outputs.progress import ProgressBar, ProgressLines
@@ -87,6 +88,10 @@ async def run(args: argparse.Namespace, options: RunOptions, out: TextIO, sessio
 
     session.out_dir = args.out
     observers: list[Observer] = [session]
+    watched = beacon()
+    if watched is not None:  # the parent process says what a crash of this one left
+        observers.append(watched)
+        options = replace(options, on_results=watched.results)
     if not args.no_progress:
         observers.append(ProgressBar() if sys.stderr.isatty() else ProgressLines())
     async with contextlib.AsyncExitStack() as stack:
