@@ -21,6 +21,11 @@ Cases (steps/s, median of the repetitions; Coupler and its reference interleaved
 - scale: 100 gain participants in one run: steps/s, RSS per participant process, time from the
   run's start to its first step for 1, 10 and 100 participants;
 - memory: the orchestrator's RSS after 1e4 and after 1e5 steps of remote x1 (its own process);
+  the peak RSS of replaying 10 steps of a 160 MB recording (its own process) against its RSS
+  before it opened the recording (a replay holds one block, not the file);
+- the watched run: `coupler run` of Source2 alone (1e5 steps, its own process, as a user runs
+  it: a parent watching the run's process for a crash) against the same command run unwatched
+  (`cli.main.main()` called directly), wall time as steps/s;
 - the command line's start: `coupler --help`, median of five [s].
 - camera frames x1: an 800 x 600 RGB frame (1.44 MB) per 0.2 s step from the OpenRails mock
   (a standing train) through the bridge (HTTP GET, its sensor channel) and the orchestrator
@@ -706,6 +711,60 @@ async def rss_probe(port: int, steps: int, sample_at: int) -> dict[str, float]:
     return samples
 
 
+def replay_probe(recording: Path, steps: int) -> dict[str, float]:
+    """In this process: RSS after the imports, then the peak RSS once ``steps`` steps of the
+    recording were replayed (the way a run's replay reads it)."""
+    import resource
+
+    from coupler.channels import RunSetup
+    from coupler_orchestrator.pipeline.replay import ReplayParticipant
+
+    before = rss_mb(os.getpid())
+
+    async def replay() -> None:
+        participant = ReplayParticipant(recording)
+        await participant.open()
+        try:
+            grid = participant.recording.grid
+            h = grid.component_step
+            await participant.initialize(
+                RunSetup(run_id="bench", start_time=grid.start_time, step_size=h)
+            )
+            for k in range(steps):
+                await participant.do_step(grid.start_time + k * h, h, {})
+        finally:
+            await participant.close()
+
+    asyncio.run(replay())
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    return {"before_mb": before, "peak_mb": peak}
+
+
+def big_recording(path: Path, megabytes: int) -> Path:
+    """A recording of one Binary output, 6 kB a point, ``megabytes`` MB in all."""
+    from coupler.channels import Causality, Channel, Description, ValueType
+    from coupler_orchestrator.observer import Column, RunEnd, RunInfo
+    from coupler_orchestrator.recording import Recorder
+
+    blob = os.urandom(6000)
+    points = megabytes * 1_000_000 // len(blob)
+    channel = Channel(name="b", causality=Causality.OUTPUT, type=ValueType.BINARY)
+    recorder = Recorder(
+        path, Description(name="Big", channels=(channel,)), component="Big", multiple=1, step=STEP
+    )
+    recorder.started(
+        RunInfo(
+            run_id="bench", algorithm="jacobi", members=("Big",), multiples=(1,),
+            columns=(Column(name="Big.b", unit="", type="Binary"),), start_time=0.0,
+            stop_time=points * STEP, step_size=STEP, steps=points,
+        )
+    )  # fmt: skip
+    for k in range(points + 1):
+        recorder.stepped(k * STEP, [blob])
+    recorder.finished(RunEnd(status="completed", reason="", steps=points, end_time=0, wall_time=0))
+    return path
+
+
 # ---------------------------------------------------------------------------------- suite
 
 
@@ -750,7 +809,7 @@ async def suite(sizes: Sizes, log: Callable[[str], None]) -> tuple[list[Row], di
     rows: list[Row] = []
     extra: dict[str, Any] = {}
     work = Path(tempfile.mkdtemp(prefix="coupler-bench-"))
-    for section in (cli_start, chains, remotes, proxy_fmu, scale, frames, memory):
+    for section in (cli_start, watched_run, chains, remotes, proxy_fmu, scale, frames, memory):
         await section(sizes, log, work, rows, extra)
     return rows, extra
 
@@ -768,6 +827,41 @@ async def cli_start(
     extra["cli_help_s"] = round(median_of(seconds), 3)
     rows.append(
         Row("coupler --help", median_of(seconds), note="seconds, not steps/s; target: < 0.3 s")
+    )
+
+
+async def watched_run(
+    sizes: Sizes, log: Callable[[str], None], work: Path, rows: list[Row], extra: dict[str, Any]
+) -> None:
+    steps = 100_000
+    log(f"coupler run, watched (as a user runs it) and not watched: Source2, {steps:.0e} steps")
+    arguments = [
+        "run", str(FMUS / "Source2.fmu"), "--stop-time", str(steps * STEP), "--step", str(STEP),
+        "--no-progress", "--out", str(work / "watched"),
+    ]  # fmt: skip
+    watched = [str(Path(sys.executable).with_name("coupler")), *arguments]
+    direct = "import sys; from coupler_orchestrator.cli.main import main; sys.exit(main())"
+    unwatched = [sys.executable, "-c", direct, *arguments]
+
+    def timed(command: list[str]) -> Callable[[], Awaitable[float]]:
+        async def run() -> float:
+            started = time.perf_counter()
+            await asyncio.to_thread(subprocess.run, command, capture_output=True, check=True)
+            return steps / (time.perf_counter() - started)
+
+        return run
+
+    rate, reference = await interleaved(sizes.repeats, timed(watched), timed(unwatched))
+    assert rate is not None and reference is not None
+    rows.append(
+        Row(
+            "coupler run, watched",
+            rate,
+            "the same, not watched",
+            reference,
+            target=0.95,
+            note="whole command, start-up included",
+        )
     )
 
 
@@ -972,6 +1066,28 @@ async def memory(
             note="MB, not steps/s; target: within 5 %",
         )
     )
+    log("memory: peak RSS replaying 10 steps of a 160 MB recording")
+    recording = await asyncio.to_thread(big_recording, work / "Big.crec", 160)
+    size_mb = recording.stat().st_size / 1e6
+    probe = await asyncio.to_thread(
+        subprocess.run,
+        [sys.executable, __file__, "--replay-probe", str(recording), "10"],
+        capture_output=True,
+        text=True,
+        check=True,
+        cwd=ROOT,
+    )
+    replay = json.loads(probe.stdout.strip().splitlines()[-1])
+    extra["replay_rss_mb"] = replay | {"recording_mb": round(size_mb, 1)}
+    rows.append(
+        Row(
+            "replay RSS, 160 MB recording",
+            replay["peak_mb"],
+            "RSS before opening it",
+            replay["before_mb"],
+            note=f"MB, not steps/s; target: < 32 MB more (the file: {size_mb:.0f} MB)",
+        )
+    )
 
 
 RAILML = ROOT / "scenarios" / "railway" / "data" / "annaberg-schwarzenberg.railml"
@@ -1014,7 +1130,13 @@ async def only(case: str, steps: int) -> float:
 
 def rss_verdict(row: Row) -> str:
     assert row.reference_rate
+    if row.case.startswith("replay RSS"):
+        return "PASS" if row.coupler - row.reference_rate < 32 else "FAIL"
     return "PASS" if abs(row.coupler / row.reference_rate - 1) <= 0.05 else "FAIL"
+
+
+def _memory_row(row: Row) -> bool:
+    return row.case.startswith(("orchestrator RSS", "replay RSS"))
 
 
 def table(rows: Sequence[Row]) -> str:
@@ -1026,9 +1148,11 @@ def table(rows: Sequence[Row]) -> str:
     for row in rows:
         ratio = f"{row.ratio:.2f}" if row.ratio is not None else ""
         target = f">={row.target:g}" if row.target is not None else ""
-        verdict = rss_verdict(row) if row.case.startswith("orchestrator RSS") else row.verdict
+        verdict = rss_verdict(row) if _memory_row(row) else row.verdict
         if row.case.startswith("orchestrator RSS"):
             target = "1+-0.05"
+        elif row.case.startswith("replay RSS"):
+            target = "+32 MB"
         reference = f"{row.reference_rate:,.0f}" if row.reference_rate else ""
         figure = f"{row.coupler:.3f}" if row.case == "coupler --help" else f"{row.coupler:,.1f}"
         lines.append(
@@ -1053,6 +1177,7 @@ def main() -> int:
     parser.add_argument("--raw-server", type=int, help=argparse.SUPPRESS)
     parser.add_argument("--frames", choices=["in", "out"], default="", help=argparse.SUPPRESS)
     parser.add_argument("--rss-probe", nargs=2, type=int, help=argparse.SUPPRESS)
+    parser.add_argument("--replay-probe", nargs=2, help=argparse.SUPPRESS)
     args = parser.parse_args()
     from coupler.logs import configure_logging
 
@@ -1067,6 +1192,9 @@ def main() -> int:
     if args.only == "render":
         pairs, typical, worst = render_rate(args.steps if args.steps != 20000 else 20)
         print(f"render: {pairs:.1f} frame pairs/s, {typical:.0f} ms median, {worst:.0f} ms worst")
+    if args.replay_probe:
+        recording, steps = args.replay_probe
+        print(json.dumps(replay_probe(Path(recording), int(steps))))
         return 0
     if args.only:
         print(f"{args.only}: {asyncio.run(only(args.only, args.steps)):,.0f} steps/s")

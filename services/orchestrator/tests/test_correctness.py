@@ -12,6 +12,9 @@ import io
 import json
 import os
 import shutil
+import subprocess
+import sys
+import time
 import zipfile
 from collections.abc import Mapping
 from fractions import Fraction
@@ -506,6 +509,45 @@ def test_an_archive_and_its_fmus_share_one_unpack_budget(
         refused.err
     )
     assert "component 'Source'" in refused.err
+
+
+def padded_fmu(fmu: Path, target: Path, megabytes: int) -> Path:
+    """``fmu`` with ``megabytes`` MB of zeros in resources/: it unpacks that much more, from a
+    file of a few kB."""
+    with zipfile.ZipFile(fmu) as source, zipfile.ZipFile(target, "w") as copy:
+        for item in source.infolist():
+            copy.writestr(item, source.read(item))
+        copy.writestr("resources/padding.bin", bytes(megabytes << 20), zipfile.ZIP_DEFLATED)
+    return target
+
+
+@pytest.mark.parametrize("isolated", [False, True], ids=["in-process", "isolated"])
+def test_isolated_fmus_share_the_run_s_one_unpack_budget(
+    tmp_path: Path, fmus: dict[str, Path], isolated: bool
+) -> None:
+    """Three FMUs unpacking 24 MB each against --unpack-limit 64: refused before any of them
+    starts, naming the budget, in process and isolated alike (each isolated host used to get
+    a 2 GiB budget of its own: the run completed)."""
+    components = []
+    for i in (1, 2, 3):
+        padded_fmu(fmus["Source2"], tmp_path / f"Big{i}.fmu", 24)
+        components.append(f'      <ssd:Component name="Big{i}" source="Big{i}.fmu"/>')
+    ssd = write(tmp_path, components, [])
+    command = [
+        sys.executable, "-m", "coupler_orchestrator", "run", str(ssd), "--out",
+        str(tmp_path / "o"), "--step", "0.5", "--unpack-limit", "64",
+        *(["--isolate-fmus"] if isolated else []),
+    ]  # fmt: skip
+    started = time.monotonic()
+    ran = subprocess.run(command, capture_output=True, text=True, timeout=120)
+    took = time.monotonic() - started
+    assert ran.returncode == 1, ran.stderr
+    assert "exceed the 67108864 bytes a scenario may unpack (archive and FMUs together)" in (
+        ran.stderr
+    )
+    assert "crashed" not in ran.stderr and "Traceback" not in ran.stderr
+    assert not (tmp_path / "o" / "results.csv").exists()
+    assert took < 20, took  # not the host's 30 s start-up timeout
 
 
 def test_results_as_parquet_equal_the_csv(coupler: Coupler, tmp_path: Path) -> None:

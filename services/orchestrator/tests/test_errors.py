@@ -102,6 +102,42 @@ def test_unknown_component_type(coupler: Coupler, tmp_path: Path) -> None:
     )
 
 
+@pytest.mark.parametrize("command", ["validate", "run"])
+def test_duplicate_component_names(coupler: Coupler, tmp_path: Path, command: str) -> None:
+    """Two components of one name: refused naming both lines (the second used to replace the
+    first silently: "valid (1 components)" and a run of the other FMU)."""
+    path = ssd(
+        tmp_path,
+        fmu("Source", "Source2", connector("ramp", "output"))
+        + "\n"
+        + fmu("Source", "Integrator2", connector("u", "input")),
+    )
+    assert_refused(
+        coupler,
+        path,
+        "bad.ssd line 8: element 'Source' in system 'Bad' is already defined at line 7",
+        "rename or remove one of the two",
+        command=command,
+    )
+    assert not (tmp_path / "out" / "results.csv").exists()
+
+
+def test_duplicate_connector_names(coupler: Coupler, tmp_path: Path) -> None:
+    path = ssd(
+        tmp_path,
+        fmu(
+            "Source",
+            "Source2",
+            connector("ramp", "output") + "\n" + connector("ramp", "parameter"),
+        ),
+    )
+    assert_refused(
+        coupler,
+        path,
+        "bad.ssd line 8: connector 'ramp' of component 'Source' is already defined at line 7",
+    )
+
+
 def test_zip_slip_entry(coupler: Coupler, tmp_path: Path) -> None:
     archive = tmp_path / "evil.ssp"
     with zipfile.ZipFile(archive, "w") as zf:

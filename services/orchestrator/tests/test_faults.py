@@ -651,18 +651,29 @@ def test_an_interrupt_reaches_a_run_of_fast_in_process_fmus(
     assert 1000 <= len(assert_rows_kept(out)) < 100_000_001
 
 
-def test_an_fmu_crashing_in_process_leaves_the_summary_and_the_flushed_rows(
+def test_an_fmu_crashing_in_process_ends_the_run_crashed_with_a_sentence(
     faulty_ssd: Path, tmp_path: Path
 ) -> None:
-    """A segfault in-process ends the orchestrator with it (no Python code runs after it):
-    summary.json, written at the start, says running, and every row flushed before is whole.
-    That is why an FMU one does not trust runs isolated."""
+    """A segfault in-process ends the process running the run (no Python code runs after it);
+    the ``coupler`` process watching it says so in one sentence, exits 128 + SIGSEGV and marks
+    summary.json ``crashed`` with the time reached; every row flushed before is whole. (It
+    used to end silently, exit 139, summary.json ``running``.) An FMU one does not trust runs
+    isolated."""
     out = tmp_path / "o"
     run = orchestrator(
         faulty_ssd, out, *RUN, "--realtime-factor", "2", "--param", "Faulty.crash_at=3"
     )
-    run.communicate(timeout=30)
-    assert run.returncode == -signal.SIGSEGV
-    assert summary(out)["status"] == "running"
+    _, err = run.communicate(timeout=30)
+    assert run.returncode == 128 + signal.SIGSEGV, err
+    assert err.count("\n") == 1 and "Traceback" not in err, err
+    assert err.startswith("error: run crashed at t=3 s: ")
+    assert "killed by SIGSEGV" in err and "--isolate-fmus" in err
+    assert f"in {out.resolve()} (summary.json: status crashed)" in err
+    result = summary(out)
+    assert result["status"] == "crashed"
+    assert "killed by SIGSEGV" in result["reason"]
+    assert "the run had reached t=3 s" in result["reason"]
+    assert (result["end_time"], result["steps"]) == (3.0, 30)
     kept = rows(out)
     assert 10 <= len(kept) <= 31 and all(None not in row.values() for row in kept)
+    assert f"results.csv keeps the rows up to t={float(kept[-1]['time']):g} s" in err

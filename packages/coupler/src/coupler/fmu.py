@@ -16,8 +16,6 @@ from __future__ import annotations
 
 import asyncio
 import ctypes
-import shutil
-import tempfile
 import threading
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
@@ -30,7 +28,7 @@ from fmpy.fmi1 import FMICallException
 from fmpy.fmi2 import fmi2LastSuccessfulTime, fmi2Terminated
 from fmpy.model_description import ModelDescription, ScalarVariable
 
-from coupler.archives import Budget, extract
+from coupler.archives import Budget, extract, remove_scratch, scratch_folder
 from coupler.channels import Capabilities, Description, RunSetup, Value
 from coupler.errors import ParticipantError, ScenarioError
 from coupler.fmicalls import CallFailed, Calls, Group, prepare, status_name
@@ -94,14 +92,25 @@ def _accessor(fmi_version: str, fmi_type: str) -> str:
 
 
 class FmuParticipant(Participant):
-    """An FMU as a participant. ``path`` is the .fmu file; ``name`` defaults to its model name."""
+    """An FMU as a participant. ``path`` is the .fmu file; ``name`` defaults to its model name.
+
+    The FMU is unpacked within ``budget`` into a scratch folder removed on ``close`` (and by
+    ``coupler.archives.remove_all_scratch``); given ``unpacked``, a folder where its owner
+    unpacked it already (the generic FMU host's parent), that folder is used and left alone.
+    """
 
     def __init__(
-        self, path: str | Path, *, name: str | None = None, budget: Budget | None = None
+        self,
+        path: str | Path,
+        *,
+        name: str | None = None,
+        budget: Budget | None = None,
+        unpacked: Path | None = None,
     ) -> None:
         self.path = Path(path)
         self._name = name
         self._budget = budget
+        self._given = unpacked
         self._md: ModelDescription | None = None
         self._unzipdir: str | None = None
         self._slave: Any = None
@@ -139,14 +148,11 @@ class FmuParticipant(Participant):
             raise ScenarioError(f"{self.path}: not a readable FMU: {exc}") from exc
         check_supported(md, self.path)
         self._layout = Layout.of(md, self.path)
-        unzipdir = tempfile.mkdtemp(prefix="coupler-fmu-")
-        try:
-            extract(self.path, Path(unzipdir), budget=self._budget)
-        except BaseException:
-            shutil.rmtree(unzipdir, ignore_errors=True)
-            raise
+        if self._given is None:
+            self._unzipdir = str(unpack(self.path, self._budget))
+        else:
+            self._unzipdir = str(self._given)
         self._md = md
-        self._unzipdir = unzipdir
         self._variables = self._layout.variables()
         self._elements = self._layout.element_index()
         settable = self._layout.arrays("input", "parameter", "structuralParameter")
@@ -156,11 +162,13 @@ class FmuParticipant(Participant):
         )
 
     async def close(self) -> None:
-        await self._free()
-        if self._unzipdir is not None:
-            shutil.rmtree(self._unzipdir, ignore_errors=True)
+        try:
+            await self._free()
+        finally:
+            if self._unzipdir is not None and self._given is None:
+                remove_scratch(Path(self._unzipdir))
             self._unzipdir = None
-        self._md = None
+            self._md = None
 
     @property
     def model_description(self) -> ModelDescription:
@@ -476,6 +484,18 @@ class FmuParticipant(Participant):
                 slave.freeInstance()
 
         await self._run("Terminate" if terminate else "FreeInstance", free)
+
+
+def unpack(fmu: Path, budget: Budget | None = None) -> Path:
+    """``fmu`` unpacked within ``budget`` into a new scratch folder (removed again if that
+    fails); the caller removes it (``coupler.archives.remove_scratch``)."""
+    folder = scratch_folder("coupler-fmu-")
+    try:
+        extract(fmu, folder, budget=budget)
+    except BaseException:
+        remove_scratch(folder)
+        raise
+    return folder
 
 
 async def in_daemon_thread(function: Callable[[], T], *, name: str) -> T:

@@ -8,7 +8,7 @@ from coupler_orchestrator.cli import main as cli_main
 
 
 def main() -> None:
-    sys.exit(cli_main())
+    sys.exit(cli_main(supervise=True))
 
 
 if __name__ == "__main__":

@@ -3,25 +3,35 @@
 A recording holds, for one component, every output at every one of its communication points,
 lossless and typed (Real as the float64 bits, Integer, Boolean, String, Binary with its message
 type), the time grid of the run and the participant's declared channels. ``coupler.replay``
-serves it again. docs/replay.md describes the file format (``.crec``), version 1::
+serves it again. docs/replay.md describes the file format (``.crec``), version 2::
 
-    b"CREC"  u16 version  u32 N  N bytes of UTF-8 JSON header
-    then per communication point j = 0, 1, ...:  u32 L  L bytes:
-        u64 j  f64 time  each output in header order:
-            Real f64 | Integer, Enumeration i64 | Boolean u8 | String, Binary u32 n + n bytes
+    b"CREC"  u16 version  u32 N  u32 crc32(header)  N bytes of UTF-8 JSON header
+    then blocks, each:  u32 L  u64 j0  u32 n  u32 crc32(payload)  u32 crc32(these 20 bytes)
+        and L bytes of payload: n records, each  u32 R  R bytes:
+            u64 j  f64 time  each output in header order:
+                Real f64 | Integer, Enumeration i64 | Boolean u8 | String, Binary u32 n + n bytes
+    then the seal, a block with L = 0, n = 0 and j0 = the number of points recorded.
 
 little-endian throughout; when the component asked to end the run, a last record with
-j = 2**64 - 1 holds the time and its reason (a String). Records are appended as the run goes:
-a run that is killed leaves every complete record readable (a trailing partial one is
-ignored).
+j = 2**64 - 1 holds the time and its reason (a String). Blocks (about ``BLOCK_BYTES``, or what
+one second of the run recorded) are appended whole as the run goes: a run that is killed
+leaves every complete block readable, and a block cut off at the end of a file without its seal
+is the only damage read as the end of the recording; any other mismatch (a checksum, a count,
+a gap) refuses the file, naming the block. Reading is streaming: ``read`` checks every block's
+checksums and keeps one small entry per block; ``Points`` decodes one block at a time, so
+memory is bounded by a block, never by the file. Version 1 files (no checksums) are refused,
+naming the version.
 """
 
 from __future__ import annotations
 
+import bisect
 import json
 import math
 import struct
-from collections.abc import Sequence
+import time as wallclock
+import zlib
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, BinaryIO
@@ -31,16 +41,31 @@ from coupler.errors import CouplerError, ScenarioError
 from coupler_orchestrator.observer import Observer, RunEnd, RunInfo
 
 MAGIC = b"CREC"
-VERSION = 1
+VERSION = 2
 SUFFIX = ".crec"
-_PREFIX = struct.Struct("<4sHI")
+_PREFIX = struct.Struct("<4sHII")
 _LENGTH = struct.Struct("<I")
+_BLOCK = struct.Struct("<IQII")
+"""Payload length, first point's j, records, crc32 of the payload; then the crc32 of these."""
+_BLOCK_HEAD = _BLOCK.size + _LENGTH.size
 _POINT = struct.Struct("<Qd")
 _REAL, _INT, _BOOL = struct.Struct("<d"), struct.Struct("<q"), struct.Struct("<B")
 END = 2**64 - 1
 """j of the record saying the component asked to end the run there (after the last point)."""
+BLOCK_BYTES = 256 * 1024
+"""A block is written once it holds this many bytes of records (or a second has passed)."""
+BLOCK_SECONDS = 1.0
+"""Longest time recorded points stay in memory before their block is written [s]."""
+MAX_BLOCK_BYTES = 256 * 1024 * 1024
+"""The largest block a reader accepts (a block holds at least one whole record)."""
+MAX_HEADER_BYTES = 16 * 1024 * 1024
+"""The largest JSON header a reader accepts."""
 _TOLERANCE = 1e-9
 """Relative tolerance when a run's times and steps are compared with the recorded grid."""
+
+
+class Damaged(ValueError):
+    """The file is not what the writer wrote (a checksum, a count or a gap)."""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -57,9 +82,22 @@ class Grid:
     """The step size the component received (its deltaTime, else h) [s]."""
 
 
+@dataclass(frozen=True)
+class Block:
+    """Where one block's records are: points ``first`` .. ``first + count - 1`` (and the end
+    record, in the last block) in ``length`` bytes at ``offset``."""
+
+    first: int
+    count: int
+    offset: int
+    length: int
+    crc: int
+
+
 @dataclass(frozen=True, kw_only=True)
 class Recording:
-    """A recording read back: header and every complete communication point."""
+    """A recording's header and the index of its blocks; the points are read back block by
+    block (``points``, ``rows``), never all at once."""
 
     path: Path
     component: str
@@ -69,29 +107,39 @@ class Recording:
     grid: Grid
     outputs: tuple[Channel, ...]
     """Recorded outputs, in record order."""
-    times: tuple[float, ...]
-    """t_j as the recorded run computed them."""
-    values: tuple[dict[str, Value], ...]
-    """Outputs at t_j, by channel name."""
+    blocks: tuple[Block, ...]
+    count: int
+    """Communication points recorded."""
+    end_time: float
+    """t_j of the last point, as the recorded run computed it."""
     run_id: str = ""
     request: str | None = None
     """The component asked to end the run at its last point, with this reason; else None."""
+    sealed: bool = True
+    """False when the recorded run was killed: the file ends without its seal."""
 
     @property
     def steps(self) -> int:
         """Component steps recorded (communication points - 1)."""
-        return len(self.times) - 1
+        return self.count - 1
 
-    @property
-    def end_time(self) -> float:
-        return self.times[-1]
+    def points(self) -> Points:
+        """A reader of the points, one block in memory at a time; close it when done."""
+        return Points(self)
+
+    def rows(self) -> Iterator[tuple[float, dict[str, Value]]]:
+        """(t_j, outputs) for j = 0, 1, ..., streamed block by block."""
+        with self.points() as points:
+            for block in self.blocks:
+                yield from points.block(block)
 
     def summary(self) -> str:
         """``recording P of C has t0=0 s, h=0.1 s, 600 steps to 60 s``, for messages."""
         grid = self.grid
+        cut = "" if self.sealed else " (where the recorded run was killed)"
         return (
             f"recording {self.path} of {self.component} has t0={grid.start_time:g} s, "
-            f"h={grid.component_step:g} s, {self.steps} steps to {self.end_time:g} s"
+            f"h={grid.component_step:g} s, {self.steps} steps to {self.end_time:g} s{cut}"
         )
 
     def grid_problem(self, start: float, step: float, stop: float | None) -> str | None:
@@ -127,6 +175,59 @@ class Recording:
                 f"which it does not have"
             )
         return j + 1
+
+
+class Points:
+    """The points of a recording by index, read and checked one block at a time (the block
+    of the last point asked for stays decoded: a replay asks for them in order)."""
+
+    def __init__(self, recording: Recording) -> None:
+        self.recording = recording
+        self._starts = [b.first for b in recording.blocks]
+        self._file: BinaryIO | None = None
+        self._cached: Block | None = None
+        self._rows: list[tuple[float, dict[str, Value]]] = []
+
+    def __enter__(self) -> Points:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def close(self) -> None:
+        if self._file is not None:
+            self._file.close()
+            self._file = None
+        self._cached, self._rows = None, []
+
+    def holds(self, j: int) -> bool:
+        """Whether point ``j`` is in the block decoded now (``at`` reads nothing)."""
+        block = self._cached
+        return block is not None and block.first <= j < block.first + block.count
+
+    def at(self, j: int) -> dict[str, Value]:
+        """The outputs at point ``j`` (0 <= j < count)."""
+        block = self.recording.blocks[bisect.bisect_right(self._starts, j) - 1]
+        if block is not self._cached:
+            self._rows = self.block(block)
+            self._cached = block
+        return self._rows[j - block.first][1]
+
+    def block(self, block: Block) -> list[tuple[float, dict[str, Value]]]:
+        """The points of ``block``, read again and checked; ScenarioError if the file changed."""
+        path = self.recording.path
+        try:
+            if self._file is None:
+                self._file = path.open("rb")
+            self._file.seek(block.offset)
+            payload = self._file.read(block.length)
+            if len(payload) != block.length or zlib.crc32(payload) != block.crc:
+                raise Damaged(f"{_where(block)} changed since the file was opened")
+            return _records(self.recording.outputs, payload, block)[0]
+        except OSError as exc:
+            raise ScenarioError(f"cannot read the recording {path}: {exc.strerror or exc}") from exc
+        except (Damaged, ValueError, struct.error) as exc:
+            raise _unreadable(path, exc) from exc
 
 
 def _same(a: float, b: float) -> bool:
@@ -196,7 +297,7 @@ def _runs_inside(path: Path) -> str:
 
 class Recorder(Observer):
     """Writes one component's outputs at each of its communication points to ``path``: every
-    output it describes, whatever the results select."""
+    output it describes, whatever the results select, in checksummed blocks."""
 
     def __init__(
         self, path: Path, description: Description, *, component: str, multiple: int, step: float
@@ -212,6 +313,12 @@ class Recorder(Observer):
         self._file: BinaryIO | None = None
         self._slots: list[int] = []
         self._count = 0
+        self._block = bytearray()
+        self._first = 0
+        """j of the first point in ``_block``."""
+        self._records = 0
+        """Records in ``_block``."""
+        self._written = 0.0
 
     def started(self, info: RunInfo) -> None:
         names = [c.name for c in info.columns]
@@ -234,11 +341,13 @@ class Recorder(Observer):
         data = json.dumps(header, indent=1).encode("utf-8")
         try:
             self.path.parent.mkdir(parents=True, exist_ok=True)
-            self._file = self.path.open("wb")
-            self._file.write(_PREFIX.pack(MAGIC, VERSION, len(data)) + data)
+            self._file = self.path.open("wb", buffering=0)  # a block is one write
+            self._file.write(_PREFIX.pack(MAGIC, VERSION, len(data), zlib.crc32(data)) + data)
         except OSError as exc:
             raise CouplerError(f"cannot write the recording {self.path}: {exc}") from exc
-        self._count = 0
+        self._count, self._first, self._records = 0, 0, 0
+        self._block.clear()
+        self._written = wallclock.monotonic()
 
     def stepped(self, time: float, row: Sequence[Value]) -> None:
         k, self._count = self._count, self._count + 1
@@ -247,53 +356,113 @@ class Recorder(Observer):
         parts = [_POINT.pack(k // self.multiple, time)]
         for channel, slot in zip(self.outputs, self._slots, strict=True):
             parts.append(_encode(channel.type, row[slot]))
-        record = b"".join(parts)
-        try:
-            self._file.write(_LENGTH.pack(len(record)) + record)
-        except OSError as exc:
-            raise CouplerError(f"cannot write the recording {self.path}: {exc}") from exc
+        self._add(b"".join(parts))
 
     def finished(self, end: RunEnd) -> None:
-        """Close the file; when this component ended the run, its request closes the records
-        (a record with j = ``END``: the end time and the reason, as a String)."""
+        """Write the last block and the seal; when this component ended the run, its request
+        closes the records (a record with j = ``END``: the end time and the reason, a String)."""
         if self._file is None:
             return
         try:
             if end.ended_by == self.component:
                 record = _POINT.pack(END, end.end_time) + _encode(ValueType.STRING, end.request)
-                self._file.write(_LENGTH.pack(len(record)) + record)
-        except OSError as exc:
-            raise CouplerError(f"cannot write the recording {self.path}: {exc}") from exc
+                self._add(record, end=True)
+            points = self._first + self._records
+            self._write_block()
+            self._write(_block_head(0, points, 0, zlib.crc32(b"")))  # the seal
         finally:
             self._file.close()
             self._file = None
 
+    def _add(self, record: bytes, *, end: bool = False) -> None:
+        if len(record) + _BLOCK_HEAD > MAX_BLOCK_BYTES:
+            raise CouplerError(
+                f"cannot write the recording {self.path}: one point of {self.component} takes "
+                f"{len(record)} bytes, more than a recording block may hold ({MAX_BLOCK_BYTES})"
+            )
+        self._block += _LENGTH.pack(len(record))
+        self._block += record
+        if not end:
+            self._records += 1
+        if len(self._block) >= BLOCK_BYTES or wallclock.monotonic() - self._written >= 1.0:
+            self._write_block()
+
+    def _write_block(self) -> None:
+        if not self._block:
+            return
+        payload = bytes(self._block)
+        self._write(_block_head(len(payload), self._first, self._records, zlib.crc32(payload)))
+        self._write(payload)
+        self._first += self._records
+        self._records = 0
+        self._block.clear()
+        self._written = wallclock.monotonic()
+
+    def _write(self, data: bytes) -> None:
+        assert self._file is not None
+        try:
+            self._file.write(data)
+        except OSError as exc:
+            raise CouplerError(f"cannot write the recording {self.path}: {exc}") from exc
+
+
+def _block_head(length: int, first: int, count: int, crc: int) -> bytes:
+    head = _BLOCK.pack(length, first, count, crc)
+    return head + _LENGTH.pack(zlib.crc32(head))
+
 
 def read(path: Path) -> Recording:
-    """The recording at ``path``; ScenarioError when it is not one this version can read."""
+    """The recording at ``path``, every block's checksums checked, reading one block at a
+    time; ScenarioError when it is not one this version can read, or is damaged."""
     try:
-        data = path.read_bytes()
+        with path.open("rb") as file:
+            return _index(path, file)
     except OSError as exc:
         raise ScenarioError(f"cannot read the recording {path}: {exc.strerror or exc}") from exc
-    try:
-        return _parse(path, data)
     except (ValueError, KeyError, TypeError, AttributeError, RecursionError, struct.error) as exc:
-        raise ScenarioError(
-            f"{path} is not a readable Coupler recording ({exc}); record it again with "
-            f"coupler run --record COMPONENT"
-        ) from exc
+        raise _unreadable(path, exc) from exc
 
 
-def _parse(path: Path, data: bytes) -> Recording:
-    if len(data) < _PREFIX.size:
+def _unreadable(path: Path, exc: Exception) -> ScenarioError:
+    if isinstance(exc, Damaged):
+        return ScenarioError(
+            f"{path} is damaged: {exc}; the file changed after it was recorded (a disk or a "
+            f"copy went wrong, or someone edited it) - use an intact copy or record it again "
+            f"with coupler run --record COMPONENT"
+        )
+    return ScenarioError(
+        f"{path} is not a readable Coupler recording ({exc}); record it again with "
+        f"coupler run --record COMPONENT"
+    )
+
+
+def _where(block: Block) -> str:
+    return f"the block of points {block.first}.. at byte {block.offset - _BLOCK_HEAD}"
+
+
+def _index(path: Path, file: BinaryIO) -> Recording:
+    """Read the header, then every block (checking its checksums), keeping only its place;
+    the first and last blocks are decoded too (the start values, the end and its request)."""
+    prefix = file.read(_PREFIX.size)
+    if len(prefix) < 6:
         raise ValueError("too short")
-    magic, version, size = _PREFIX.unpack_from(data)
+    magic, version = struct.unpack_from("<4sH", prefix)
     if magic != MAGIC:
         raise ValueError("no CREC signature")
     if version != VERSION:
-        raise ValueError(f"format version {version}, this Coupler reads version {VERSION}")
-    offset = _PREFIX.size + size
-    header: dict[str, Any] = json.loads(data[_PREFIX.size : offset].decode("utf-8"))
+        raise ValueError(
+            f"format version {version}; this Coupler reads version {VERSION} only (version 1, "
+            "without checksums, is no longer read)"
+        )
+    if len(prefix) < _PREFIX.size:
+        raise ValueError("too short")
+    _, _, size, crc = _PREFIX.unpack(prefix)
+    if size > MAX_HEADER_BYTES:
+        raise Damaged(f"its header claims {size} bytes, more than {MAX_HEADER_BYTES}")
+    data = file.read(size)
+    if len(data) != size or zlib.crc32(data) != crc:
+        raise Damaged("its header does not match its checksum")
+    header: dict[str, Any] = json.loads(data.decode("utf-8"))
     description = _description_from_json(header["description"])
     by_name = {c.name: c for c in description.channels}
     outputs = tuple(by_name[name] for name in header["outputs"])
@@ -304,45 +473,93 @@ def _parse(path: Path, data: bytes) -> Recording:
         multiple=int(g["multiple"]),
         component_step=float(g["component_step"]),
     )
-    times: list[float] = []
-    values: list[dict[str, Value]] = []
-    request: Value | None = None
-    while offset + _LENGTH.size <= len(data):
-        (length,) = _LENGTH.unpack_from(data, offset)
-        end = offset + _LENGTH.size + length
-        if end > len(data):
-            break  # the run was killed while writing this record
-        j, time = _POINT.unpack_from(data, offset + _LENGTH.size)
-        if j == END and times:
-            request, at = _decode(ValueType.STRING, data, offset + _LENGTH.size + _POINT.size)
-            if at != end:
-                raise ValueError("the end record has stray bytes")
-            offset = end
-            break
-        if j != len(times):
-            raise ValueError(f"communication point {j} where {len(times)} was expected")
-        at = offset + _LENGTH.size + _POINT.size
-        row: dict[str, Value] = {}
-        for channel in outputs:
-            row[channel.name], at = _decode(channel.type, data, at)
-        if at != end:
-            raise ValueError(f"record {j} has {end - at} stray bytes")
-        times.append(time)
-        values.append(row)
-        offset = end
-    if not times:
+    blocks, sealed = _blocks(file, _PREFIX.size + size)
+    with_points = [b for b in blocks if b.count]
+    if not with_points:
         raise ValueError("no communication point recorded")
+    request, end_time = None, None
+    for block in blocks[-2:]:  # the last points, and the end record (maybe a block of its own)
+        file.seek(block.offset)
+        rows, said = _records(outputs, file.read(block.length), block)
+        end_time = rows[-1][0] if rows else end_time
+        request = said or request
+    if end_time is None:
+        raise Damaged("its last blocks hold no point")
     return Recording(
         path=path,
         component=str(header["component"]),
         description=description,
         grid=grid,
         outputs=outputs,
-        times=tuple(times),
-        values=tuple(values),
+        blocks=tuple(with_points),
+        count=with_points[-1].first + with_points[-1].count,
+        end_time=end_time,
         run_id=str(header.get("run_id", "")),
-        request=None if request is None else str(request),
+        request=request,
+        sealed=sealed,
     )
+
+
+def _blocks(file: BinaryIO, offset: int) -> tuple[list[Block], bool]:
+    """Every block from ``offset`` on, its checksums checked; whether the seal ends them."""
+    blocks: list[Block] = []
+    expected = 0
+    while True:
+        head = file.read(_BLOCK_HEAD)
+        if len(head) < _BLOCK_HEAD:
+            return blocks, False  # the end of a file whose run was killed
+        length, first, count, crc = _BLOCK.unpack_from(head)
+        (check,) = _LENGTH.unpack_from(head, _BLOCK.size)
+        here = Block(first, count, offset + _BLOCK_HEAD, length, crc)
+        if zlib.crc32(head[: _BLOCK.size]) != check:
+            raise Damaged(f"the block header at byte {offset} does not match its checksum")
+        if first != expected:
+            raise Damaged(f"{_where(here)} follows point {expected - 1}: points are missing")
+        if length == 0 and count == 0:  # the seal
+            if file.read(1):
+                raise Damaged(f"bytes follow the seal at byte {offset}")
+            return blocks, True
+        if length > MAX_BLOCK_BYTES:
+            raise Damaged(f"{_where(here)} claims {length} bytes, more than {MAX_BLOCK_BYTES}")
+        payload = file.read(length)
+        if len(payload) < length:
+            return blocks, False  # cut off while it was written: the run was killed
+        if zlib.crc32(payload) != crc:
+            raise Damaged(f"{_where(here)} does not match its checksum")
+        blocks.append(here)
+        expected = first + count
+        offset += _BLOCK_HEAD + length
+
+
+def _records(
+    outputs: Sequence[Channel], payload: bytes, block: Block
+) -> tuple[list[tuple[float, dict[str, Value]]], str | None]:
+    """The points of one block, and the end record's reason when it holds one."""
+    rows: list[tuple[float, dict[str, Value]]] = []
+    request: Value | None = None
+    offset = 0
+    while offset < len(payload):
+        (length,) = _LENGTH.unpack_from(payload, offset)
+        end = offset + _LENGTH.size + length
+        if end > len(payload) or request is not None:
+            raise ValueError(f"{_where(block)} holds a record that runs past it")
+        j, time = _POINT.unpack_from(payload, offset + _LENGTH.size)
+        at = offset + _LENGTH.size + _POINT.size
+        if j == END:
+            request, at = _decode(ValueType.STRING, payload, at)
+        elif j != block.first + len(rows):
+            raise ValueError(f"point {j} where {block.first + len(rows)} was expected")
+        else:
+            row: dict[str, Value] = {}
+            for channel in outputs:
+                row[channel.name], at = _decode(channel.type, payload, at)
+            rows.append((time, row))
+        if at != end:
+            raise ValueError(f"the record of point {j} has {end - at} stray bytes")
+        offset = end
+    if len(rows) != block.count:
+        raise ValueError(f"{_where(block)} holds {len(rows)} points, its header {block.count}")
+    return rows, None if request is None else str(request)
 
 
 def _encode(kind: ValueType, value: Value) -> bytes:

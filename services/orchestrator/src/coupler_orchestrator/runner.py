@@ -8,8 +8,6 @@ loading, checking or running fails or the run is interrupted.
 from __future__ import annotations
 
 import asyncio
-import shutil
-import tempfile
 import threading
 from collections.abc import AsyncIterator, Callable, Mapping, Sequence
 from contextlib import asynccontextmanager
@@ -19,7 +17,7 @@ from typing import Any
 
 import structlog
 
-from coupler.archives import Budget
+from coupler.archives import Budget, remove_scratch, scratch_folder
 from coupler.channels import Description
 from coupler.errors import ScenarioError
 from coupler_orchestrator import ssp
@@ -69,7 +67,7 @@ async def loaded(path: Path, budget: Budget | None = None) -> AsyncIterator[ssp.
     if path.suffix.lower() == ".fmu":
         yield await asyncio.to_thread(ssp.scenario_of_fmu, path)
         return
-    workdir = Path(tempfile.mkdtemp(prefix="coupler-ssp-"))
+    workdir = scratch_folder("coupler-ssp-")
     stop = threading.Event()
     loop = asyncio.get_running_loop()
     reading = loop.run_in_executor(
@@ -86,7 +84,7 @@ async def loaded(path: Path, budget: Budget | None = None) -> AsyncIterator[ssp.
             log.warning("scenario_warning", detail=warning)
         yield scenario
     finally:
-        await asyncio.to_thread(shutil.rmtree, workdir, True)
+        await asyncio.to_thread(remove_scratch, workdir)
 
 
 async def validate_scenario(path: Path, options: RunOptions) -> Validation:

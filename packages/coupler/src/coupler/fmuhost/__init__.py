@@ -5,6 +5,11 @@ A segfault or a hang inside the FMU then is a participant fault — the run ends
 naming the FMU, the call and how the host died, every completed row kept — never a crash of
 the orchestrator. The host serves on a unix socket in a private folder (mode 0700) and requires
 a random bearer token, so no other process can drive it; it exits when its parent dies.
+
+This process unpacks the FMU into that folder, within the run's one unpack budget, before the
+host starts (a host that crashes or is killed leaves nothing of its own behind: ``close``
+removes the folder); a host that ends before it serves fails ``open`` at once with its own last
+words.
 """
 
 from __future__ import annotations
@@ -13,14 +18,14 @@ import asyncio
 import contextlib
 import os
 import secrets
-import shutil
 import signal
 import sys
-import tempfile
+from collections import deque
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
+from coupler.archives import Budget, extracted, remove_scratch, scratch_folder
 from coupler.channels import Description, RunSetup, Value
 from coupler.client import RemoteParticipant
 from coupler.errors import ParticipantError, ParticipantUnavailable, ScenarioError
@@ -32,17 +37,28 @@ START_TIMEOUT = 30.0
 
 
 class IsolatedFmu(Participant):
-    """An FMU run by the generic FMU host in a child process."""
+    """An FMU run by the generic FMU host in a child process; unpacked here within ``budget``."""
 
-    def __init__(self, path: str | Path, *, name: str, call_timeout: float = 30.0) -> None:
+    def __init__(
+        self,
+        path: str | Path,
+        *,
+        name: str,
+        call_timeout: float = 30.0,
+        budget: Budget | None = None,
+    ) -> None:
         self.path = Path(path)
         self.name = name
         self.call_timeout = call_timeout
+        self.budget = budget
         self.model_description: Any = None
         """The FMU's modelDescription (FMPy's), read in this process for its unit definitions."""
         self._dir: Path | None = None
         self._process: asyncio.subprocess.Process | None = None
         self._remote: RemoteParticipant | None = None
+        self._last_words: deque[str] = deque(maxlen=5)
+        """The host's last lines on stderr (passed on to ours as they come)."""
+        self._relay: asyncio.Task[None] | None = None
 
     async def open(self) -> None:
         if self._remote is not None:
@@ -57,7 +73,9 @@ class IsolatedFmu(Participant):
             )
         except Exception as exc:  # FMPy raises plain exceptions for any broken FMU
             raise ScenarioError(f"{self.path}: not a readable FMU: {exc}") from exc
-        self._dir = Path(tempfile.mkdtemp(prefix="coupler-fmuhost-"))  # mode 0700
+        self._dir = scratch_folder("coupler-fmuhost-")  # mode 0700
+        unpacked = self._dir / "fmu"
+        await extracted(self.path, unpacked, budget=self.budget)
         token = self._dir / "token"
         token.write_text(secrets.token_urlsafe(32))
         token.chmod(0o600)
@@ -69,13 +87,17 @@ class IsolatedFmu(Participant):
             str(self.path),
             "--name",
             self.name,
+            "--unpacked",
+            str(unpacked),
             "--socket",
             str(socket),
             "--token-file",
             str(token),
             stdin=asyncio.subprocess.DEVNULL,
+            stderr=asyncio.subprocess.PIPE,
             start_new_session=True,  # the terminal's Ctrl-C is the orchestrator's to handle
         )
+        self._relay = asyncio.create_task(self._relay_stderr(self._process))
         self._remote = RemoteParticipant(
             f"unix://{socket}",
             name=self.name,
@@ -83,7 +105,44 @@ class IsolatedFmu(Participant):
             call_timeout=self.call_timeout,
             security=ClientSecurity(token_file=token),
         )
-        await self._call("open", self._remote.open())
+        await self._started(self._remote.open())
+
+    async def _started(self, opening: Any) -> None:
+        """``opening`` (the host's first Describe), or at once the reason the host ended
+        before it served (not the connection's 30 s timeout)."""
+        assert self._process is not None
+        opened = asyncio.ensure_future(self._call("open", opening))
+        ended = asyncio.ensure_future(self._process.wait())
+        try:
+            await asyncio.wait({opened, ended}, return_when=asyncio.FIRST_COMPLETED)
+        finally:
+            ended.cancel()
+        if opened.done() or not ended.done():
+            await opened
+            return
+        opened.cancel()
+        with contextlib.suppress(BaseException):
+            await opened
+        if self._relay is not None:  # its last words are on the way
+            with contextlib.suppress(TimeoutError):
+                await asyncio.wait_for(asyncio.shield(self._relay), 1.0)
+        said = self._last_words[-1] if self._last_words else "nothing on stderr"
+        raise ParticipantUnavailable(
+            f"the FMU host process {await self._death()} before serving {self.path.name}: "
+            f"{said.removeprefix('coupler.fmuhost: ')}",
+            participant=self.name,
+            call="open",
+            status="UNAVAILABLE",
+        )
+
+    async def _relay_stderr(self, process: asyncio.subprocess.Process) -> None:
+        """Pass the host's stderr on to ours, line by line, keeping the last lines."""
+        assert process.stderr is not None
+        while line := await process.stderr.readline():
+            text = line.decode(errors="replace")
+            self._last_words.append(text.strip())
+            sys.stderr.write(text)
+            sys.stderr.flush()
 
     async def describe(self) -> Description:
         await self.open()
@@ -113,8 +172,11 @@ class IsolatedFmu(Participant):
                 with contextlib.suppress(ProcessLookupError):
                     process.kill()
                 await process.wait()
+        if self._relay is not None:
+            self._relay.cancel()
+            self._relay = None
         if self._dir is not None:
-            shutil.rmtree(self._dir, ignore_errors=True)
+            remove_scratch(self._dir)
             self._dir = None
 
     def _live(self) -> RemoteParticipant:

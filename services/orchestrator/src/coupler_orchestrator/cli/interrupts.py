@@ -96,6 +96,11 @@ class Signals:
 def end_abandoned(end: RunEnd) -> None:
     """End the process: a run was abandoned because the event loop's thread is stuck in a
     participant computing in-process (an FMU hanging in doStep), the one way out of a thread
-    stuck in C code. Its observers have written how it ended (``RunOptions.on_abandoned``)."""
+    stuck in C code. Its observers have written how it ended (``RunOptions.on_abandoned``);
+    the folders the run unpacked into are removed here, as no ``finally`` runs past
+    ``os._exit``."""
+    from coupler.archives import remove_all_scratch
+
     print(f"error: run {end.status}: {end.reason}", file=sys.stderr, flush=True)
+    remove_all_scratch()
     os._exit(EXIT_INTERRUPTED if end.status == "aborted" else EXIT_ERROR)

@@ -11,9 +11,19 @@ from coupler_orchestrator.cli.exits import EXIT_ERROR
 from coupler_orchestrator.cli.parser import parser
 
 
-def main(argv: Sequence[str] | None = None, *, stdout: TextIO | None = None) -> int:
+def main(
+    argv: Sequence[str] | None = None, *, stdout: TextIO | None = None, supervise: bool = False
+) -> int:
+    """Run one command. ``supervise`` (the ``coupler`` command itself, not a caller in
+    Python): a command that runs a scenario in this process runs in a child process this one
+    watches, so a crash inside it still ends with a sentence and a summary (``supervisor``)."""
     out = stdout or sys.stdout
     args = parser().parse_args(argv)
+    if supervise:
+        from coupler_orchestrator.cli.supervisor import SUPERVISED, supervised
+
+        if args.command in SUPERVISED and (code := supervised()) is not None:
+            return code
 
     import asyncio
 

@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import functools
 import sys
 from dataclasses import replace
+from pathlib import Path
 from typing import TYPE_CHECKING, TextIO
 
 from coupler import durations
@@ -22,6 +24,7 @@ from coupler_orchestrator.cli.parser import (
 from coupler_orchestrator.cli.session import Session
 
 if TYPE_CHECKING:
+    from coupler_orchestrator.cli.supervisor import Beacon
     from coupler_orchestrator.options import RunOptions
     from coupler_orchestrator.outputs.monitor import MonitorServer
 
@@ -90,14 +93,26 @@ async def execute(args: argparse.Namespace, out: TextIO, session: Session) -> in
     return await run(args, replace(options_of(args), on_waiting=session.waiting), out, session)
 
 
+def _results_in(session: Session, watched: Beacon | None, directory: Path) -> None:
+    """Where the run writes: the session (its messages) and a watching parent (a crash's
+    summary) are told before any participant starts."""
+    session.results_in(directory)
+    if watched is not None:
+        watched.results(directory)
+
+
 async def run(args: argparse.Namespace, options: RunOptions, out: TextIO, session: Session) -> int:
     """Run with a progress display and, when asked, the monitor page; say how it ended."""
+    from coupler_orchestrator.cli.supervisor import beacon
     from coupler_orchestrator.observer import Observer
     from coupler_orchestrator.outputs.monitor import MonitorServer
     from coupler_orchestrator.outputs.progress import ProgressBar, ProgressLines
     from coupler_orchestrator.runner import run_scenario
 
     observers: list[Observer] = [session]
+    watched = beacon()
+    if watched is not None:  # the parent process says what a crash of this one left
+        observers.append(watched)
     if not args.no_progress:
         observers.append(ProgressBar() if sys.stderr.isatty() else ProgressLines())
     async with contextlib.AsyncExitStack() as stack:
@@ -115,7 +130,7 @@ async def run(args: argparse.Namespace, options: RunOptions, out: TextIO, sessio
             base=getattr(args, "results_base", None),
             replace=args.force,
             observers=observers,
-            on_results=session.results_in,
+            on_results=functools.partial(_results_in, session, watched),
         )
     end = outcome.end
     print(

@@ -14,7 +14,7 @@ from contextlib import asynccontextmanager
 from functools import partial
 from pathlib import Path
 
-from coupler.archives import Budget
+from coupler.archives import Budget, declared_size
 from coupler.channels import Description
 from coupler.client import RemoteParticipant
 from coupler.errors import CouplerError, ScenarioError
@@ -48,7 +48,9 @@ def create(
     if component.type == ssp.FMU_TYPE:
         isolate = options.isolate_fmus if settings.isolate is None else settings.isolate
         if isolate:
-            return IsolatedFmu(component.source, name=component.name, call_timeout=call_timeout)
+            return IsolatedFmu(
+                component.source, name=component.name, call_timeout=call_timeout, budget=budget
+            )
         return FmuParticipant(Path(component.source), name=component.name, budget=budget)
     if component.type == ssp.GRPC_TYPE:
         own = ClientSecurity(
@@ -116,8 +118,8 @@ async def opened(
     scenario: ssp.Scenario, options: RunOptions, budget: Budget | None = None
 ) -> AsyncIterator[Roster]:
     """Create, open and describe every component's participant concurrently; close them all on
-    the way out, whatever happened. In-process FMUs unpack within ``budget`` (shared with the
-    scenario's archive)."""
+    the way out, whatever happened. FMUs, in-process and isolated, unpack within ``budget``
+    (shared with the scenario's archive) before any of them starts."""
     created: dict[str, Participant] = {}
     problems: list[str] = []
     known = [c.name for c in scenario.components]
@@ -132,6 +134,8 @@ async def opened(
         except CouplerError as exc:
             problems.append(str(exc))
     try:
+        if budget is not None:
+            await _check_budget(created, budget, Path(scenario.source).name)
         names = list(created)
         results = await asyncio.gather(
             *(_describe(created[n]) for n in names), return_exceptions=True
@@ -160,6 +164,16 @@ async def opened(
         yield Roster(candidates=candidates, problems=tuple(problems))
     finally:
         await close_all(list(created.values()))
+
+
+async def _check_budget(created: dict[str, Participant], budget: Budget, scenario: str) -> None:
+    """Refuse, before any is unpacked, FMUs that would unpack to more than the budget left."""
+    fmus = {n: p.path for n, p in created.items() if isinstance(p, FmuParticipant | IsolatedFmu)}
+    if fmus:
+        sizes = await asyncio.to_thread(
+            lambda: {f"component '{n}'": declared_size(p) for n, p in fmus.items()}
+        )
+        budget.check(sizes, f"{scenario}: the FMUs")
 
 
 async def _describe(participant: Participant) -> Description:

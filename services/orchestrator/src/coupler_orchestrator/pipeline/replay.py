@@ -20,7 +20,7 @@ from pathlib import Path
 from coupler.channels import Description, RunSetup, Value
 from coupler.errors import ScenarioError
 from coupler.participant import EndRun, Participant, Values
-from coupler_orchestrator.recording import Recording, locate, read
+from coupler_orchestrator.recording import Points, Recording, locate, read
 from coupler_orchestrator.ssp import REPLAY_SCHEME as SCHEME
 
 
@@ -46,6 +46,8 @@ class ReplayParticipant(Participant):
         self.name = name or component or ""
         """The component it stands in for (a directory's recording of that name is used)."""
         self._recording: Recording | None = None
+        self._points: Points | None = None
+        """The recorded points, read one block at a time."""
 
     @property
     def recording(self) -> Recording:
@@ -64,6 +66,13 @@ class ReplayParticipant(Participant):
                 f"write replay:{self.path}#{recording.component} or pick the right file"
             )
         self._recording = recording
+        self._points = recording.points()
+
+    async def close(self) -> None:
+        if self._points is not None:
+            self._points.close()
+            self._points = None
+        self._recording = None
 
     async def describe(self) -> Description:
         await self.open()
@@ -85,15 +94,24 @@ class ReplayParticipant(Participant):
         problem = self.grid_problem(setup.start_time, setup.step_size, setup.stop_time)
         if problem is not None:
             raise ScenarioError(problem)
-        return dict(self.recording.values[0])
+        return await self._outputs_at(0)
 
     async def do_step(self, time: float, step: float, inputs: Mapping[str, Value]) -> Values:
         recording = self.recording
         j = recording.point(time, step)
-        outputs = dict(recording.values[j])
+        outputs = await self._outputs_at(j)
         if j == recording.steps and recording.request is not None:
             raise EndRun(recording.request, outputs)  # as the recorded participant did
         return outputs
 
     async def terminate(self, reason: str = "") -> None:
         return None
+
+    async def _outputs_at(self, j: int) -> Values:
+        """The recorded outputs of point j; a new block is read off the event loop."""
+        points = self._points
+        if points is None:
+            raise ScenarioError(f"the recording {self.path} is not open")
+        if not points.holds(j):
+            await asyncio.to_thread(points.at, j)
+        return dict(points.at(j))

@@ -59,6 +59,30 @@ class Tree:
     graph: Graph = field(default_factory=Graph)
 
 
+class Names:
+    """Names that must be unique in one scope (a system's elements, a component's connectors):
+    a second one is a problem naming both lines, never a silent replacement of the first."""
+
+    def __init__(self, display: str, what: str, scope: str) -> None:
+        self.display = display
+        self.what = what
+        self.scope = scope
+        self.lines: dict[str, int] = {}
+
+    def first(self, name: str, element: Element, problems: list[str]) -> bool:
+        """Whether ``name`` is new here; a repeated one is added to ``problems``."""
+        line = line_of(element)
+        if name not in self.lines:
+            self.lines[name] = line
+            return True
+        earlier = self.lines[name]
+        problems.append(
+            f"{self.display} line {line}: {self.what} '{name}' {self.scope} is already defined "
+            f"at line {earlier}; names must be unique there - rename or remove one of the two"
+        )
+        return False
+
+
 class SystemReader:
     """Reads one SSD's system tree; problems and warnings are collected, not raised."""
 
@@ -86,8 +110,12 @@ class SystemReader:
         """Collect components, connectors, dictionaries, bindings and raw connections."""
         own = {}
         connectors = child(system, "Connectors")
+        system_name = ".".join(path) or system.get("name", "")
+        named = Names(self.display, "connector", f"of system '{system_name}'")
         for c in children(connectors, "Connector") if connectors is not None else ():
-            own[required(c, "name", self.display)] = c.get("kind", "")
+            name = required(c, "name", self.display)
+            if named.first(name, c, self.problems):
+                own[name] = c.get("kind", "")
         self.tree.systems[path] = own
         dictionaries = child(system, "SignalDictionaries")
         for d in children(dictionaries, "SignalDictionary") if dictionaries is not None else ():
@@ -95,9 +123,12 @@ class SystemReader:
         elements_ = child(system, "Elements")
         kinds: dict[str, str] = {}
         refs: dict[str, tuple[tuple[str, ...], Element]] = {}
+        unique = Names(self.display, "element", f"in system '{system_name}'")
         for element in elements(elements_) if elements_ is not None else ():
             kind = local(element)
             name = element.get("name", "")
+            if not unique.first(name, element, self.problems):
+                continue
             kinds[name] = kind
             if kind == "Component":
                 self.guard(self.read_component, element, (*path, name))
@@ -195,8 +226,11 @@ class SystemReader:
     def read_connectors(self, element: Element, owner: str) -> tuple[Connector, ...]:
         result = []
         connectors = child(element, "Connectors")
+        unique = Names(self.display, "connector", f"of component '{owner}'")
         for c in children(connectors, "Connector") if connectors is not None else ():
             name = required(c, "name", self.display)
+            if not unique.first(name, c, self.problems):
+                continue
             kind = required(c, "kind", self.display)
             if kind not in _KINDS:
                 raise ScenarioError(
