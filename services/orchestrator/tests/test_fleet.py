@@ -133,6 +133,13 @@ def children_of(pid: int) -> list[int]:
     return [int(p) for p in text.split()]
 
 
+def fleet_of(pid: int) -> int:
+    """The process that runs the fleet: ``coupler fleet`` forks once and watches its child
+    (``cli.supervisor``), which starts the services and holds the results folder."""
+    (child,) = children_of(pid)
+    return child
+
+
 def files_of(folder: Path) -> dict[str, tuple[bytes, int]]:
     return {
         str(p.relative_to(folder)): (p.read_bytes(), p.stat().st_mtime_ns)
@@ -159,7 +166,7 @@ def test_a_second_fleet_is_refused_and_the_first_is_untouched(
     first = Console(["fleet", "fleet.toml"], fleet_dir, env)
     consoles.append(first)
     first.wait_for(first.out, r"services stay up; Ctrl-C stops them")
-    (gain_pid,) = children_of(first.process.pid)
+    (gain_pid,) = children_of(fleet_of(first.process.pid))
     (log_folder,) = (fleet_dir / "build" / "logs").iterdir()
     assert (log_folder / "gain.log").exists()
     before = files_of(fleet_dir)
@@ -201,7 +208,7 @@ def test_results_directory_of_a_running_fleet_is_refused(
     moved = {**env, "GAIN_PORT": str(free_port())}  # free ports, same results directory
     second = coupler(["fleet", "fleet.toml"], fleet_dir, moved)
     assert second.returncode == 1
-    assert f"is being written by another fleet (pid {first.process.pid})" in second.stderr
+    assert f"is being written by another fleet (pid {fleet_of(first.process.pid)})" in second.stderr
     assert "--out" in second.stderr
 
 
