@@ -24,7 +24,7 @@ if TYPE_CHECKING:
     from coupler.participant import Participant
     from coupler_orchestrator import ssp
     from coupler_orchestrator.observer import RunEnd
-    from coupler_orchestrator.ssp.units import Affine
+    from coupler_orchestrator.ssp.units import Affine, OpenMcxUnits
 
 
 class Algorithm(StrEnum):
@@ -113,7 +113,7 @@ class Route:
     """The output (as the participant declares it) that drives the connection."""
     target: Channel
     """The input it drives."""
-    conversion: Affine | None = None
+    conversion: Affine | OpenMcxUnits | None = None
     """Unit conversion from the source's unit to the target's; None when there is none."""
     source_enum: ssp.Enumeration | None = None
     """The SSD enumeration of the start connector (Enumeration connectors)."""
@@ -135,6 +135,11 @@ class Checked:
     """Results record every ``record_every``-th communication point (``--output-interval``)."""
     warnings: tuple[str, ...]
     """The scenario's warnings and the checks' own (units nobody understands)."""
+    openmcx: bool = False
+    """The run has OpenMCx's semantics (the scenario asks for them, or the options do)."""
+    cut: frozenset[str] = frozenset()
+    """OpenMCx: the connections cut to break algebraic loops, by driven input
+    (``Component.connector``)."""
 
 
 Converter = Callable[[Value], Value]
