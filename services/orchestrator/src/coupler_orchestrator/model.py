@@ -168,6 +168,43 @@ class Link:
 
 
 @dataclass(frozen=True, kw_only=True)
+class Filtering:
+    """How the target of one connection reads it with OpenMCx's semantics (``master.filters``)."""
+
+    extrapolation: int = 0
+    """Order of the extrapolation over the source's committed points (0 holds the last)."""
+    interpolation: int | None = None
+    """Order of the interpolation between the points the source wrote; None: extrapolation
+    only."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class OpenMcx:
+    """What OpenMCx's semantics add to a plan (docs/openmcx.md)."""
+
+    sequential: bool
+    """stepType sequential: each member, in ``order``, reads what the members before it
+    committed in the same step (Gauss-Seidel); else all read the last step's (Jacobi)."""
+    order: tuple[str, ...]
+    """OpenMCx's evaluation order, loops cut: the order members initialize and step in."""
+    first_component: bool = False
+    """endType first_component: the run ends after the step in which a member finished; else a
+    finished member stops stepping and the others go on."""
+    eps: float
+    """OpenMCx's time comparison tolerance: relativeEps * h."""
+    filters: Mapping[tuple[str, str], Filtering] = field(default_factory=dict)
+    """Per connection, by (target, input)."""
+    initial: Mapping[tuple[str, str], Value] = field(default_factory=dict)
+    """The value a cut connection carries during initialization, by (target, input)."""
+    input_at_end: frozenset[str] = frozenset()
+    """Members that read their inputs at the end of each of their steps."""
+    sub_steps: Mapping[str, int] = field(default_factory=dict)
+    """Members stepped in sub-steps whose inputs are read again (the Integrator's)."""
+    outputs: Mapping[str, Mapping[str, Converter]] = field(default_factory=dict)
+    """What each member's OpenMCx output ports do to its outputs, by member and channel."""
+
+
+@dataclass(frozen=True, kw_only=True)
 class Plan:
     """Everything the master needs."""
 
@@ -192,3 +229,5 @@ class Plan:
     """Told when the run is abandoned, its thread stuck (``RunOptions.on_abandoned``)."""
     native: bool = False
     """Step in-process FMUs in C when the plan allows it (``master.native_fmu_step``)."""
+    openmcx: OpenMcx | None = None
+    """Run with OpenMCx's semantics (``master.openmcx``); None: Coupler's."""
