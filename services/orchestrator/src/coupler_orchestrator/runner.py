@@ -178,5 +178,6 @@ def _extra(checked: Checked, descriptions: dict[str, Any]) -> dict[str, Any]:
         "coupler_version": coupler_version(),
         "ssp": {"path": str(scenario.source), "sha256": scenario.sha256},
         "implementations": {n: d.implementation for n, d in descriptions.items()},
+        "semantics": "openmcx" if checked.openmcx else "coupler",
         "warnings": list(checked.warnings),
     }

@@ -62,7 +62,8 @@ class Tree:
 
 def _span(owner: str, names: list[str]) -> str:
     prefix = f"{owner}." if owner else ""
-    return f"{prefix}{names[0]}" if len(names) == 1 else f"{prefix}{names[0]} .. {names[-1]}"
+    first, last = f"{prefix}{names[0]}", f"{prefix}{names[-1]}"
+    return first if len(names) == 1 else f"{first} .. {last}"
 
 
 class SystemReader:
