@@ -37,4 +37,7 @@ async def execute(args: argparse.Namespace, out: TextIO, session: Session) -> in
         f"{len(scenario.connections)} connections)",
         file=out,
     )
+    reason = scenario.openmcx or ("--openmcx" if options.openmcx else "")
+    if reason:
+        print(f"runs with OpenMCx's semantics ({reason})", file=out)
     return EXIT_OK

@@ -295,9 +295,11 @@ class _Checker:
         end = self.scenario.connector(c.end_element, c.end_connector)
         ok = self.types(c, what, source.type, target.type)
         conversion: Affine | OpenMcxUnits | None = None
-        if self.openmcx:
+        if c.suppress_unit_conversion:
+            pass
+        elif self.openmcx:
             conversion = openmcx_units(self.scenario, start, end)
-        elif not c.suppress_unit_conversion:
+        else:
             conversion = self.units(c, what, start, end, source, target)
         if not ok:
             return None

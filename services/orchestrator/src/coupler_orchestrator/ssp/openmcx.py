@@ -347,7 +347,9 @@ def read_slices(
     return sides.get("Start"), sides.get("End")
 
 
-def read_inter_extrapolation(connection: Element, display: str) -> InterExtrapolation | None:
+def read_inter_extrapolation(
+    connection: Element, display: str, warnings: list[str]
+) -> InterExtrapolation | None:
     """A connection's inter/extrapolation settings, or None."""
     content = annotation(connection, INTER_EXTRAPOLATION)
     if content is None:

@@ -360,7 +360,9 @@ class SystemReader:
             decoupled=decoupled,
             decouple_type=decouple_type,
             decouple_priority=priority,
-            inter_extrapolation=openmcx.read_inter_extrapolation(element, self.display),
+            inter_extrapolation=openmcx.read_inter_extrapolation(
+                element, self.display, self.warnings
+            ),
             file=self.display,
             line=line_of(element),
             label=label,
