@@ -458,3 +458,22 @@ def test_a_loop_nothing_may_cut(coupler: Coupler, tmp_path: Path) -> None:
     path = tmp_path / "never.ssd"
     path.write_text(text)
     refused(coupler, path, "the loop Int -> Feed -> Int cannot be broken")
+
+
+def test_slow_readers_run_ahead_and_past_the_stop_time(coupler: Coupler, tmp_path: Path) -> None:
+    """
+        Source (0.01 s, r = 100 t) --r--> Step (0.05 s, zero/zero), Line (0.05 s, first/first)
+        sequential, stop 0.16 s
+
+    Line interpolates r at its own times and extrapolates past the source's last point;
+    Step reads "step right" at OpenMCx's summed time 0.1 + 0.05 = 0.15000000000000002, after
+    the point 0.15: the value of 0.16. Both step on to 0.2, past the stop time.
+    """
+    run_case(coupler, "multirate_slow_reader", tmp_path)
+    _, _, line = table(tmp_path / "Line_in.csv")
+    assert [float(r[1]) for r in line] == pytest.approx([0.0, 5.0, 10.0, 15.0, 20.0], rel=1e-12)
+    _, _, step = table(tmp_path / "Step_in.csv")
+    assert [float(r[1]) for r in step] == pytest.approx([0.0, 5.0, 10.0, 16.0, 16.0], rel=1e-12)
+    _, _, rows = table(tmp_path / "Step_res.csv")
+    assert [round(float(r[0]), 12) for r in rows] == [0.0, 0.05, 0.1, 0.15, 0.2]
+    assert column(tmp_path, "time")[-1] == 0.16  # results.csv ends at the stop time

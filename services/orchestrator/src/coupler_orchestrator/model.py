@@ -198,6 +198,9 @@ class OpenMcx:
     """The value a cut connection carries during initialization, by (target, input)."""
     input_at_end: frozenset[str] = frozenset()
     """Members that read their inputs at the end of each of their steps."""
+    own_time: frozenset[str] = frozenset()
+    """Members with their own step (``deltaTime``): OpenMCx keeps their time as a running sum,
+    and reads and writes their connections at that time."""
     sub_steps: Mapping[str, int] = field(default_factory=dict)
     """Members stepped in sub-steps whose inputs are read again (the Integrator's)."""
     outputs: Mapping[str, Mapping[str, Converter]] = field(default_factory=dict)

@@ -70,6 +70,10 @@ class OpenMcxMaster(Master):
             self.out_of[link.source].append((link, f))
         self.reached = {m.name: 0 for m in plan.members}
         """The base step each member's own time has reached."""
+        self.clock = {m.name: plan.grid.start for m in plan.members}
+        """Each member's time as OpenMCx keeps it: for a member with its own step a running
+        sum of its steps (its connections are read and written, its rows stamped, at that
+        time; it is still stepped at the exact t_k), else the synchronization point."""
         self.latest: dict[str, Values] = {}
         """Each member's latest outputs (through its output ports)."""
         self.ahead: dict[str, list[tuple[int, Values]]] = defaultdict(list)
@@ -108,7 +112,7 @@ class OpenMcxMaster(Master):
                     call="Initialize",
                     status="DEADLINE_EXCEEDED",
                 ) from exc
-            self._reached(m, outputs, "Initialize", 0)
+            self._reached(m, outputs, "Initialize", grid.start)
             self._store(m, self.latest[m.name], "Initialize", grid.start)
         for links in self.out_of.values():
             for link, f in links:
@@ -151,29 +155,33 @@ class OpenMcxMaster(Master):
         """One step of ``m`` from its own time by its own step."""
         grid = self.plan.grid
         start = self.reached[m.name]
-        begin, end = grid.time(start), grid.time(start + m.multiple)
+        begin = self.clock[m.name]
+        own = m.name in self.spec.own_time  # OpenMCx: time += deltaTime
+        end = begin + m.step if own else grid.time(start + m.multiple)
         read_at = end if m.name in self.spec.input_at_end else begin
         inputs = self._read(m, read_at)
         for watcher in self.watchers:
             watcher.component_inputs(m.name, read_at, {**m.start_inputs, **inputs})
         parts = self.spec.sub_steps.get(m.name, 1)
         step = m.step / parts
+        exact = grid.time(start)
         try:
-            outputs = await self._call(m, begin, step, inputs)
+            outputs = await self._call(m, exact, step, inputs)
+            at = begin
             for i in range(1, parts):  # OpenMCx's Integrator reads its input at each sub-step
-                at = begin + i * step
-                outputs = await self._call(m, at, step, self._read(m, at))
+                at += step
+                outputs = await self._call(m, exact + i * step, step, self._read(m, at))
         except EndRun as stop:
             self.finished.add(m.name)
             outputs = stop.outputs
         self.reached[m.name] = start + m.multiple
-        self._reached(m, outputs, "DoStep", start + m.multiple)
+        self.clock[m.name] = end
+        self._reached(m, outputs, "DoStep", end)
         self.ahead[m.name].append((start + m.multiple, self.latest[m.name]))
 
-    def _reached(self, m: Member, outputs: Values, call: str, k: int) -> None:
-        """``m``'s outputs at base step ``k``: through its output ports, written to its
-        connections, told to the component observers."""
-        time = self.plan.grid.time(k)
+    def _reached(self, m: Member, outputs: Values, call: str, time: float) -> None:
+        """``m``'s outputs at ``time``: through its output ports, written to its connections,
+        told to the component observers."""
         if outputs.keys() != self._output_names[m.name]:
             raise self._refused(m, outputs, call, time)
         ports = self.spec.outputs.get(m.name)
@@ -188,7 +196,7 @@ class OpenMcxMaster(Master):
     def _enter(self, m: Member, k: int) -> None:
         """``m`` enters the communication point t_k: its connections take what it wrote."""
         time = self.plan.grid.time(k)
-        own = self.plan.grid.time(self.reached[m.name])
+        own = self.clock[m.name]
         latest = self.latest[m.name]
         for link, f in self.out_of[m.name]:
             f.commit(time)
@@ -232,7 +240,7 @@ class OpenMcxMaster(Master):
         for m in self.order:
             if m.name in self.spec.input_at_end:
                 continue
-            time = self.plan.grid.time(self.reached[m.name])
+            time = self.clock[m.name]
             inputs = self._read(m, time)
             for watcher in self.watchers:
                 watcher.component_inputs(m.name, time, {**m.start_inputs, **inputs})

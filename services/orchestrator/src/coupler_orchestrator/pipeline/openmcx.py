@@ -65,6 +65,7 @@ def openmcx_of(checked: Checked, links: tuple[Link, ...]) -> OpenMcx | None:
         filters=filters,
         initial=initial,
         input_at_end=frozenset(c.name for c in scenario.components if c.input_at_end_time),
+        own_time=frozenset(c.name for c in scenario.components if c.delta_time is not None),
         sub_steps={
             c.name: c.builtin.sub_steps
             for c in scenario.components
