@@ -47,6 +47,7 @@ from coupler_orchestrator.options import RunOptions
 from coupler_orchestrator.pipeline import dependencies
 from coupler_orchestrator.pipeline.participants import where
 from coupler_orchestrator.pipeline.replay import ReplayParticipant
+from coupler_orchestrator.ssp.openmcx import port_input
 from coupler_orchestrator.ssp.units import (
     Affine,
     IncompatibleUnits,
@@ -677,54 +678,3 @@ def openmcx_edges(scenario: ssp.Scenario) -> list[dependencies.Edge]:
         )
         for c in scenario.connections
     ]
-
-
-def port_input(connector: ssp.Connector) -> Callable[[Value], Value]:
-    """What OpenMCx does to a value entering an input port: ``x * scale + offset`` (each only
-    when given and not 0), then clamped to [min, max]."""
-    return _port(connector, clamp_first=False)
-
-
-def port_output(connector: ssp.Connector) -> Callable[[Value], Value]:
-    """What OpenMCx does to a value leaving an output port: clamped to [min, max] first, then
-    ``x * scale + offset``."""
-    return _port(connector, clamp_first=True)
-
-
-def _port(connector: ssp.Connector, *, clamp_first: bool) -> Callable[[Value], Value]:
-    port = connector.port
-    if (
-        port is None
-        or not port.transforms
-        or connector.type
-        not in (
-            ValueType.REAL,
-            ValueType.INTEGER,
-        )
-    ):
-        return _same
-    number: Callable[[float], Value] = int if connector.type is ValueType.INTEGER else float
-    low, high = port.min, port.max
-    scale, offset = port.scale, port.offset
-
-    def clamp(value: Value) -> Value:
-        if low is not None and value <= low:
-            return number(low)
-        if high is not None and value >= high:
-            return number(high)
-        return value
-
-    def linear(value: Value) -> Value:
-        if scale:
-            value = value * number(scale)
-        if offset:
-            value = value + number(offset)
-        return value
-
-    if clamp_first:
-        return lambda value: linear(clamp(value))
-    return lambda value: clamp(linear(value))
-
-
-def _same(value: Value) -> Value:
-    return value

@@ -23,8 +23,9 @@ from coupler_orchestrator.model import (
     OpenMcx,
     Route,
 )
-from coupler_orchestrator.pipeline.checks import openmcx_edges, port_output
+from coupler_orchestrator.pipeline.checks import openmcx_edges
 from coupler_orchestrator.pipeline.dependencies import evaluation_order
+from coupler_orchestrator.ssp.openmcx import port_output
 
 _ZERO: dict[ValueType, Value] = {
     ValueType.REAL: 0.0,

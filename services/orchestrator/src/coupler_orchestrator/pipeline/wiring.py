@@ -13,7 +13,7 @@ from __future__ import annotations
 from coupler.channels import Value, ValueType
 from coupler_orchestrator import ssp
 from coupler_orchestrator.model import Checked, Converter, Link, Route
-from coupler_orchestrator.pipeline.checks import port_input
+from coupler_orchestrator.ssp.openmcx import port_input
 
 
 def wire(checked: Checked) -> tuple[Link, ...]:

@@ -20,6 +20,9 @@ runs with OpenMCx's semantics.
   output connector, in order), ``-integrator`` (``gain numSubSteps initialState``) and
   ``-vector-integrator`` (``initialState``).
 
+What a port does to the values through it (``port_input``, ``port_output``) is here too: inputs
+``x * scale + offset``, then clamped to [min, max]; outputs clamped first.
+
 Every attribute is checked against OpenMCx's schema: an unknown one, a missing required one or a
 value that does not fit is an error naming the file and line.
 """
@@ -308,6 +311,60 @@ def _list(
         raise ScenarioError(
             f'{where(display, element)}: <{local(element)} {name}="{text}">: {exc}'
         ) from exc
+
+
+# -- what ports do to values ------------------------------------------------------------------
+
+
+def port_input(connector: Connector) -> Callable[[Value], Value]:
+    """What OpenMCx does to a value entering an input port: ``x * scale + offset`` (each only
+    when given and not 0), then clamped to [min, max]."""
+    return _transform(connector, clamp_first=False)
+
+
+def port_output(connector: Connector) -> Callable[[Value], Value]:
+    """What OpenMCx does to a value leaving an output port: clamped to [min, max] first, then
+    ``x * scale + offset``."""
+    return _transform(connector, clamp_first=True)
+
+
+def _transform(connector: Connector, *, clamp_first: bool) -> Callable[[Value], Value]:
+    port = connector.port
+    if (
+        port is None
+        or not port.transforms
+        or connector.type
+        not in (
+            ValueType.REAL,
+            ValueType.INTEGER,
+        )
+    ):
+        return _same
+    number: Callable[[float], Value] = int if connector.type is ValueType.INTEGER else float
+    low, high = port.min, port.max
+    scale, offset = port.scale, port.offset
+
+    def clamp(value: Value) -> Value:
+        if low is not None and value <= low:
+            return number(low)
+        if high is not None and value >= high:
+            return number(high)
+        return value
+
+    def linear(value: Value) -> Value:
+        if scale:
+            value = value * number(scale)
+        if offset:
+            value = value + number(offset)
+        return value
+
+    if clamp_first:
+        return lambda value: linear(clamp(value))
+    return lambda value: clamp(linear(value))
+
+
+def _same(value: Value) -> Value:
+    return value
 
 
 # -- connections ------------------------------------------------------------------------------
