@@ -26,7 +26,7 @@ if TYPE_CHECKING:
     from coupler.participant import Participant
     from coupler_orchestrator import ssp
     from coupler_orchestrator.observer import RunEnd
-    from coupler_orchestrator.ssp.units import Affine
+    from coupler_orchestrator.ssp.units import Affine, OpenMcxUnits
 
 
 class Algorithm(StrEnum):
@@ -139,7 +139,7 @@ class Route:
     """The output (as the participant declares it) that drives the connection."""
     target: Channel
     """The input it drives."""
-    conversion: Affine | None = None
+    conversion: Affine | OpenMcxUnits | None = None
     """Unit conversion from the source's unit to the target's; None when there is none."""
     source_enum: ssp.Enumeration | None = None
     """The SSD enumeration of the start connector (Enumeration connectors)."""
@@ -161,6 +161,11 @@ class Checked:
     """Results record every ``record_every``-th communication point (``--output-interval``)."""
     warnings: tuple[str, ...]
     """The scenario's warnings and the checks' own (units nobody understands)."""
+    openmcx: bool = False
+    """The run has OpenMCx's semantics (the scenario asks for them, or the options do)."""
+    cut: frozenset[str] = frozenset()
+    """OpenMCx: the connections cut to break algebraic loops, by driven input
+    (``Component.connector``)."""
 
 
 Converter = Callable[[Value], Value]
@@ -186,6 +191,46 @@ class Link:
     @property
     def label(self) -> str:
         return f"{self.source}.{self.output} -> {self.target}.{self.input}"
+
+
+@dataclass(frozen=True, kw_only=True)
+class Filtering:
+    """How the target of one connection reads it with OpenMCx's semantics (``master.filters``)."""
+
+    extrapolation: int = 0
+    """Order of the extrapolation over the source's committed points (0 holds the last)."""
+    interpolation: int | None = None
+    """Order of the interpolation between the points the source wrote; None: extrapolation
+    only."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class OpenMcx:
+    """What OpenMCx's semantics add to a plan (docs/openmcx.md)."""
+
+    sequential: bool
+    """stepType sequential: each member, in ``order``, reads what the members before it
+    committed in the same step (Gauss-Seidel); else all read the last step's (Jacobi)."""
+    order: tuple[str, ...]
+    """OpenMCx's evaluation order, loops cut: the order members initialize and step in."""
+    first_component: bool = False
+    """endType first_component: the run ends after the step in which a member finished; else a
+    finished member stops stepping and the others go on."""
+    eps: float
+    """OpenMCx's time comparison tolerance: relativeEps * h."""
+    filters: Mapping[tuple[str, str], Filtering] = field(default_factory=dict)
+    """Per connection, by (target, input)."""
+    initial: Mapping[tuple[str, str], Value] = field(default_factory=dict)
+    """The value a cut connection carries during initialization, by (target, input)."""
+    input_at_end: frozenset[str] = frozenset()
+    """Members that read their inputs at the end of each of their steps."""
+    own_time: frozenset[str] = frozenset()
+    """Members with their own step (``deltaTime``): OpenMCx keeps their time as a running sum,
+    and reads and writes their connections at that time."""
+    sub_steps: Mapping[str, int] = field(default_factory=dict)
+    """Members stepped in sub-steps whose inputs are read again (the Integrator's)."""
+    outputs: Mapping[str, Mapping[str, Converter]] = field(default_factory=dict)
+    """What each member's OpenMCx output ports do to its outputs, by member and channel."""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -215,3 +260,5 @@ class Plan:
     """Told when the run is abandoned, its thread stuck (``RunOptions.on_abandoned``)."""
     native: bool = False
     """Step in-process FMUs in C when the plan allows it (``master.native_fmu_step``)."""
+    openmcx: OpenMcx | None = None
+    """Run with OpenMCx's semantics (``master.openmcx``); None: Coupler's."""

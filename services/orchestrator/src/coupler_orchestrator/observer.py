@@ -100,3 +100,15 @@ class Observer:
 
     def finished(self, end: RunEnd) -> None:
         """The run ended, however it ended."""
+
+
+class ComponentObserver(Observer):
+    """An observer that also sees each member's own steps, as a run with OpenMCx's semantics
+    makes them (a member with its own step is told at its own times only)."""
+
+    def component_inputs(self, component: str, time: float, values: Mapping[str, Value]) -> None:
+        """The inputs ``component`` read for its step from (or, reading at the end of its
+        steps, to) ``time``, by channel."""
+
+    def component_outputs(self, component: str, time: float, values: Mapping[str, Value]) -> None:
+        """Its outputs at ``time``, the end of a step (or the start time), by channel."""

@@ -50,6 +50,11 @@ class RunOptions:
     """Base communication step [s]; default the OpenMCx task deltaTime."""
     algorithm: Algorithm | None = None
     """Master algorithm; default from the OpenMCx task stepType, else Jacobi."""
+    openmcx: bool = False
+    """Run with OpenMCx's semantics even when the scenario uses nothing only OpenMCx defines
+    (docs/openmcx.md)."""
+    openmcx_results: bool = False
+    """Also write OpenMCx's result files (``<Component>_res.csv``, ``<Component>_in.csv``)."""
     realtime_factor: float | None = None
     """Pace the run (the command line takes at least ``cli.parser.MIN_REALTIME_FACTOR``); None
     runs as fast as possible."""

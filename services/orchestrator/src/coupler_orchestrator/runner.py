@@ -22,11 +22,13 @@ from coupler.channels import Description
 from coupler.errors import ScenarioError
 from coupler_orchestrator import ssp
 from coupler_orchestrator.master.loop import Master
+from coupler_orchestrator.master.openmcx import OpenMcxMaster
 from coupler_orchestrator.model import Checked, Plan
 from coupler_orchestrator.observer import Observer, RunEnd
 from coupler_orchestrator.options import RunOptions
 from coupler_orchestrator.outputs.csv import CsvRecorder, Selection
 from coupler_orchestrator.outputs.files import check_writable, claim, default_base, new_run_folder
+from coupler_orchestrator.outputs.openmcx import OpenMcxResults
 from coupler_orchestrator.outputs.parquet import ParquetRecorder, parquet_available
 from coupler_orchestrator.outputs.summary import SummaryWriter, coupler_version
 from coupler_orchestrator.pipeline.checks import check
@@ -50,6 +52,8 @@ class RunOutcome:
     summary_json: Path
     recordings: tuple[Path, ...] = ()
     """The ``--record`` files written."""
+    openmcx_files: tuple[Path, ...] = ()
+    """OpenMCx's result files written (``--openmcx-results``)."""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -147,14 +151,19 @@ async def run_scenario(
             if options.parquet:
                 recorders.append(ParquetRecorder(out_dir / "results.parquet", selection))
             recorders.extend(recordings)
+            openmcx = OpenMcxResults(out_dir, scenario) if options.openmcx_results else None
+            if openmcx is not None:
+                recorders.append(openmcx)
             recorders.extend(observers)
-            end = await Master(plan, recorders).run()
+            master = Master if plan.openmcx is None else OpenMcxMaster
+            end = await master(plan, recorders).run()
     return RunOutcome(
         end=end,
         summary=summary.summary,
         results_csv=csv_path,
         summary_json=summary_path,
         recordings=tuple(r.path for r in recordings),
+        openmcx_files=tuple(openmcx.paths) if openmcx else (),
     )
 
 
@@ -181,5 +190,6 @@ def _extra(checked: Checked, descriptions: dict[str, Any]) -> dict[str, Any]:
         "coupler_version": coupler_version(),
         "ssp": {"path": str(scenario.source), "sha256": scenario.sha256},
         "implementations": {n: d.implementation for n, d in descriptions.items()},
+        "semantics": "openmcx" if checked.openmcx else "coupler",
         "warnings": list(checked.warnings),
     }

@@ -98,6 +98,12 @@ def run_options(command: argparse.ArgumentParser) -> None:
         "gauss-seidel, else jacobi)",
     )
     command.add_argument(
+        "--openmcx",
+        action="store_true",
+        help="run with OpenMCx's semantics even when the SSD uses nothing only OpenMCx defines "
+        "(docs/openmcx.md)",
+    )
+    command.add_argument(
         "--param",
         action="append",
         default=[],
@@ -230,6 +236,8 @@ def options_of(args: argparse.Namespace) -> RunOptions:
         stop_time=args.stop_time,
         step_size=args.step,
         algorithm=Algorithm(args.algorithm) if args.algorithm else None,
+        openmcx=args.openmcx or getattr(args, "openmcx_results", False),
+        openmcx_results=getattr(args, "openmcx_results", False),
         realtime_factor=getattr(args, "realtime_factor", None) or None,
         parameters=parameters,
         connect_timeout=args.connect_timeout,

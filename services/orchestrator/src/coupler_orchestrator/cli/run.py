@@ -61,6 +61,12 @@ def arguments(run: argparse.ArgumentParser) -> None:
         action="store_true",
         help="also write results.parquet, typed columns (needs the pyarrow package)",
     )
+    run.add_argument(
+        "--openmcx-results",
+        action="store_true",
+        help="also write OpenMCx's result files, <Component>_res.csv and <Component>_in.csv "
+        "(implies --openmcx)",
+    )
     out_options(run)
     record_options(run)
     run.add_argument(
@@ -144,6 +150,9 @@ async def run(args: argparse.Namespace, options: RunOptions, out: TextIO, sessio
             print(f"stepped: {name}: {stepped.path} ({stepped.reason})", file=out)
     for recording in outcome.recordings:
         print(f"recording: {recording}", file=out)
+    if outcome.openmcx_files:
+        names = ", ".join(p.name for p in outcome.openmcx_files)
+        print(f"openmcx results: {names} in {outcome.openmcx_files[0].parent}", file=out)
     if end.status == "terminated":
         print(f"terminated early: {end.reason}", file=out)
         return EXIT_OK

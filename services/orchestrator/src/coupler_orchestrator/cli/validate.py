@@ -36,6 +36,9 @@ async def execute(args: argparse.Namespace, out: TextIO, session: Session) -> in
     components = count(scenario.components, "component")
     connections = count(scenario.connections, "connection")
     print(f"{args.ssp}: valid ({components}, {connections})", file=out)
+    reason = scenario.openmcx or ("--openmcx" if options.openmcx else "")
+    if reason:
+        print(f"runs with OpenMCx's semantics ({reason})", file=out)
     return EXIT_OK
 
 

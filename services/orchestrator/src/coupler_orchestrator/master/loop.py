@@ -138,6 +138,10 @@ class Master:
         self._paths: dict[str, StepPath] = {}
         """How each member steps, and why (after Initialize; summary.json tells it)."""
         self._watchdog: Watchdog | None = None
+        self._pending: dict[int, list[tuple[Member, Values]]] = defaultdict(list)
+        """Jacobi: outputs by the base step at whose end they are stored."""
+        self._held: dict[str, Values] = {}
+        """Gauss-Seidel: outputs of members with multiples, until the step they reach."""
         self._wall_start = 0.0
         self._abandoned = False
         """The watchdog ended the run from its thread: nothing more is told to observers."""
@@ -162,16 +166,9 @@ class Master:
             await self._initialize(initialized)
             self._watch_local_members()
             self._record(grid.start)
-            pending: dict[int, list[tuple[Member, Values]]] = defaultdict(list)
-            held: dict[str, Values] = {}
             yielded = wallclock.perf_counter()
             for k in range(grid.steps):
-                if self._kernel is not None:
-                    self._native_step(k)
-                elif plan.algorithm is Algorithm.JACOBI:
-                    await self._jacobi_step(k, pending)
-                else:
-                    await self._gauss_seidel_step(k, held)
+                await self._advance(k)
                 self.completed_steps = k + 1
                 self._record(grid.time(k + 1))
                 if self._ended is not None:
@@ -182,6 +179,7 @@ class Master:
                 elif wallclock.perf_counter() - yielded > YIELD_EVERY:
                     await _let_others_run()
                     yielded = wallclock.perf_counter()
+            await self._wind_up()
         except CouplerError as exc:
             status, reason = "failed", f"{exc} (the run had reached t={self._time_reached():g} s)"
             # an expected end, said by the outcome (the command line prints it once): info
@@ -213,6 +211,19 @@ class Master:
             )
             self._finish(end)
         return end
+
+    async def _advance(self, k: int) -> None:
+        """Base step k: from t_k to t_{k+1}, by the plan's algorithm."""
+        if self._kernel is not None:
+            self._native_step(k)
+        elif self.plan.algorithm is Algorithm.JACOBI:
+            await self._jacobi_step(k, self._pending)
+        else:
+            await self._gauss_seidel_step(k, self._held)
+
+    async def _wind_up(self) -> None:
+        """After the last step, before the members are terminated (a run that ends
+        ``completed`` or ``terminated``); nothing to do in Coupler's semantics."""
 
     def _requested(self, status: str) -> dict[str, str]:
         if status != "terminated":
@@ -476,22 +487,26 @@ class Master:
     def _store(self, m: Member, outputs: Values, call: str, time: float) -> None:
         """Keep a member's outputs; every output it describes must be there, and no other."""
         if outputs.keys() != self._output_names[m.name]:
-            missing = [c.name for c in m.outputs if c.name not in outputs]
-            extra = sorted(set(outputs) - {c.name for c in m.outputs})
-            what = []
-            if missing:
-                what.append(f"without its described outputs {', '.join(missing)}")
-            if extra:
-                what.append(f"with outputs it does not describe: {', '.join(extra)}")
-            raise ParticipantError(
-                f"answered {call} for t={time:g} s {' and '.join(what)}; a participant returns "
-                "every output it describes at every step",
-                participant=m.name,
-                call=call,
-            )
+            raise self._refused(m, outputs, call, time)
         store, keys = self.store, self._store_keys[m.name]
         for channel, value in outputs.items():
             store[keys[channel]] = value
+
+    def _refused(self, m: Member, outputs: Values, call: str, time: float) -> ParticipantError:
+        """Why ``outputs`` are not the outputs ``m`` describes."""
+        missing = [c.name for c in m.outputs if c.name not in outputs]
+        extra = sorted(set(outputs) - {c.name for c in m.outputs})
+        what = []
+        if missing:
+            what.append(f"without its described outputs {', '.join(missing)}")
+        if extra:
+            what.append(f"with outputs it does not describe: {', '.join(extra)}")
+        return ParticipantError(
+            f"answered {call} for t={time:g} s {' and '.join(what)}; a participant returns "
+            "every output it describes at every step",
+            participant=m.name,
+            call=call,
+        )
 
     def _record(self, time: float) -> None:
         if self._kernel is not None:

@@ -45,14 +45,23 @@ from coupler_orchestrator.model import (
     TimeGrid,
 )
 from coupler_orchestrator.options import RunOptions
+from coupler_orchestrator.pipeline import dependencies
 from coupler_orchestrator.pipeline.participants import where
 from coupler_orchestrator.pipeline.replay import ReplayParticipant
-from coupler_orchestrator.ssp.documents import STEP_ANNOTATION
-from coupler_orchestrator.ssp.units import Affine, IncompatibleUnits, affine, from_symbol
+from coupler_orchestrator.ssp.openmcx import port_input
+from coupler_orchestrator.ssp.units import (
+    Affine,
+    IncompatibleUnits,
+    OpenMcxUnits,
+    affine,
+    from_symbol,
+)
 
 T = TypeVar("T")
 MAX_STEPS = 10**10
 """More communication points than this is a unit mistake, not a run."""
+DEFAULT_STEP = 0.01
+"""The step when neither the command line nor the SSD gives one: OpenMCx's default."""
 
 #: Connected types that are compatible without a transformation: (output, input).
 _COMPATIBLE = {
@@ -83,6 +92,8 @@ class _Checker:
         self.options = options
         self.problems: list[str] = list(roster.problems)
         self.warnings: list[str] = list(scenario.warnings)
+        self.openmcx = bool(scenario.openmcx) or options.openmcx
+        """Whether the run has OpenMCx's semantics (docs/openmcx.md)."""
 
     def run(self) -> Checked:
         scenario = self.scenario
@@ -104,7 +115,10 @@ class _Checker:
                 if member is not None:
                     members.append(member)
         algorithm = self.options.algorithm or algorithm_of(scenario)
-        if algorithm is Algorithm.GAUSS_SEIDEL:
+        cut: frozenset[str] = frozenset()
+        if self.openmcx:
+            cut = self.openmcx_loops()
+        elif algorithm is Algorithm.GAUSS_SEIDEL:
             self.loops()
         record_every = self.recording(members, grid)
         if self.problems or grid is None:
@@ -117,6 +131,8 @@ class _Checker:
             routes=tuple(routes),
             record_every=record_every,
             warnings=tuple(dict.fromkeys(self.warnings)),
+            openmcx=self.openmcx,
+            cut=cut,
         )
 
     def recording(self, members: list[Member], grid: TimeGrid | None) -> int:
@@ -203,11 +219,16 @@ class _Checker:
         for connector in component.connectors:
             self.connector(candidate, connector, description)
         driven = {
-            c.end_connector for c in self.scenario.connections if c.end_element == component.name
+            channel_of(component, c.end_connector)
+            for c in self.scenario.connections
+            if c.end_element == component.name
+        }
+        defaulted = {
+            c.channel for c in component.connectors if c.port and c.port.default is not None
         }
         for channel in description.of(Causality.INPUT):
             if (
-                channel.name not in driven
+                channel.name not in driven | defaulted
                 and channel.start is None
                 and channel.name not in component.parameters
             ):
@@ -221,12 +242,13 @@ class _Checker:
     ) -> None:
         component = candidate.component
         what = f"{where(connector, component.file)}: connector '{component.name}.{connector.name}'"
-        channel = description.channel(connector.name)
+        channel = description.channel(connector.channel)
         if channel is None:
             names = ", ".join(c.name for c in description.channels) or "none"
+            named = f" (nameInModel '{connector.name_in_model}')" if connector.name_in_model else ""
             self.problems.append(
-                f"{what} does not exist on participant '{description.name}' (its channels: "
-                f"{names}); rename the connector or the channel"
+                f"{what}{named} does not exist on participant '{description.name}' (its "
+                f"channels: {names}); rename the connector or the channel"
             )
             return
         if connector.causality is not None and connector.causality is not channel.causality:
@@ -239,7 +261,7 @@ class _Checker:
                 f"{what} expects {connector.type}, but the participant declares {channel.type}; "
                 f"declare the connector <ssc:{channel.type}/>"
             )
-        if connector.unit and channel.unit and connector.unit != channel.unit:
+        if connector.unit and channel.unit and connector.unit != channel.unit and not self.openmcx:
             declared = self.scenario.units[connector.unit].base_unit
             own = candidate.units.get(channel.unit) or from_symbol(channel.unit)
             if own is None:
@@ -257,9 +279,12 @@ class _Checker:
     # -- connections against the participants ------------------------------------------------
 
     def channel(self, element: str, name: str) -> Channel | None:
+        """The channel SSD connector ``element.name`` stands for."""
         candidate = self.roster.candidates.get(element)
         description = candidate.description if candidate else None
-        return description.channel(name) if description else None
+        if description is None or candidate is None:
+            return None
+        return description.channel(channel_of(candidate.component, name))
 
     def route(self, c: ssp.Connection) -> Route | None:
         """The connection's channels, types and unit conversion, or None (problems noted)."""
@@ -271,8 +296,12 @@ class _Checker:
         start = self.scenario.connector(c.start_element, c.start_connector)
         end = self.scenario.connector(c.end_element, c.end_connector)
         ok = self.types(c, what, source.type, target.type)
-        conversion = None
-        if not c.suppress_unit_conversion:
+        conversion: Affine | OpenMcxUnits | None = None
+        if c.suppress_unit_conversion:
+            pass
+        elif self.openmcx:
+            conversion = openmcx_units(self.scenario, start, end)
+        else:
             conversion = self.units(c, what, start, end, source, target)
         if not ok:
             return None
@@ -447,10 +476,11 @@ class _Checker:
                 continue
             target = parameters if channel.causality is Causality.PARAMETER else start_inputs
             target[name] = typed
+        start_inputs |= self.defaults(component)
         multiple, step = 1, 0.0
         if grid is not None:
             try:
-                multiple = multiple_of(component, grid)
+                multiple = multiple_of(component, grid, whole_run=not self.openmcx)
                 step = grid.step if component.delta_time is None else component.delta_time
                 self.fixed_step(component, description, step)
                 if isinstance(candidate.participant, ReplayParticipant):
@@ -474,6 +504,18 @@ class _Checker:
             start_inputs=start_inputs,
         )
 
+    def defaults(self, component: ssp.Component) -> dict[str, Value]:
+        """OpenMCx port defaults of the inputs nothing drives, through the port's scale,
+        offset, min and max: the start values of those inputs."""
+        driven = {
+            c.end_connector for c in self.scenario.connections if c.end_element == component.name
+        }
+        return {
+            c.channel: port_input(c)(c.port.default)
+            for c in component.connectors
+            if c.kind == "input" and c.name not in driven and c.port and c.port.default is not None
+        }
+
     def fixed_step(self, component: ssp.Component, description: Description, step: float) -> None:
         fixed = description.capabilities.fixed_step_size
         if not fits_fixed_step(step, fixed):
@@ -482,6 +524,23 @@ class _Checker:
                 f"of {fixed:g} s, but its communication step is {step:g} s; choose --step "
                 f"(or its deltaTime) as a multiple of {fixed:g} s"
             )
+
+    # -- OpenMCx's loops --------------------------------------------------------------------
+
+    def openmcx_loops(self) -> frozenset[str]:
+        """The connections OpenMCx cuts to break algebraic loops (by driven input); a loop
+        nothing may be cut in is a problem."""
+        names = [c.name for c in self.scenario.components]
+        sequence = {c.name: c.trigger_sequence for c in self.scenario.components}
+        try:
+            return dependencies.cut_loops(names, openmcx_edges(self.scenario), sequence)
+        except dependencies.Uncuttable as exc:
+            self.problems.append(
+                f"the loop {exc} cannot be broken: every connection of it is marked "
+                "<mc:Never/> (or from a component with a lower triggerSequence); let one be "
+                "decoupled (<mc:IfNeeded/>, the default, or <mc:Always/>)"
+            )
+            return frozenset()
 
     # -- Gauss-Seidel ------------------------------------------------------------------------
 
@@ -543,10 +602,7 @@ def grid_of(scenario: ssp.Scenario, options: RunOptions) -> TimeGrid:
             f"{source}: no stop time; give --stop-time T or a DefaultExperiment stopTime in the SSD"
         )
     if step is None:
-        raise ScenarioError(
-            f"{source}: no step size; give --step H, or write it into the SSD's "
-            f"DefaultExperiment as {STEP_ANNOTATION.format(step='H')} (OpenMCx's task annotation)"
-        )
+        step, step_from = DEFAULT_STEP, "the default step (OpenMCx's)"
     for value, origin, what in (
         (start, start_from, "start time"),
         (stop, stop_from, "stop time"),
@@ -576,8 +632,9 @@ def grid_of(scenario: ssp.Scenario, options: RunOptions) -> TimeGrid:
     return TimeGrid(start=start, step=step, steps=steps)
 
 
-def multiple_of(component: ssp.Component, grid: TimeGrid) -> int:
-    """The component's step multiple m (its deltaTime = m h), checked against the run."""
+def multiple_of(component: ssp.Component, grid: TimeGrid, *, whole_run: bool = True) -> int:
+    """The component's step multiple m (its deltaTime = m h), checked against the run (with
+    OpenMCx's semantics a component may step past the stop time: ``whole_run=False``)."""
     delta = component.delta_time
     if delta is None:
         return 1
@@ -590,10 +647,43 @@ def multiple_of(component: ssp.Component, grid: TimeGrid) -> int:
         raise ScenarioError(
             f"{what} {delta:g} s is not a whole multiple of the step {grid.step:g} s"
         )
-    if grid.steps % multiple:
+    if whole_run and grid.steps % multiple:
         raise ScenarioError(
             f"{what} {delta:g} s does not divide the run {grid.start:g} .. {grid.stop:g} s "
             f"({grid.steps} steps of {grid.step:g} s); choose a stop time the component reaches "
             f"by whole steps of {delta:g} s"
         )
     return multiple
+
+
+def channel_of(component: ssp.Component, connector: str) -> str:
+    """The participant's channel the SSD connector ``connector`` stands for (its OpenMCx
+    ``nameInModel``, else its name)."""
+    found = component.connector(connector)
+    return found.channel if found is not None else connector
+
+
+def openmcx_units(
+    scenario: ssp.Scenario, start: ssp.Connector | None, end: ssp.Connector | None
+) -> OpenMcxUnits | None:
+    """OpenMCx's unit conversion: between the units the SSD gives both connectors (its
+    ``<Units>`` only, no dimension check); none when either has no unit or both the same."""
+    if start is None or end is None or not start.unit or not end.unit or start.unit == end.unit:
+        return None
+    return OpenMcxUnits(
+        source=scenario.units[start.unit].base_unit, target=scenario.units[end.unit].base_unit
+    )
+
+
+def openmcx_edges(scenario: ssp.Scenario) -> list[dependencies.Edge]:
+    """Every connection as OpenMCx's ordering sees it (``IfNeeded`` unless it says else)."""
+    return [
+        dependencies.Edge(
+            key=c.end,
+            source=c.start_element,
+            target=c.end_element,
+            decouple="always" if c.decoupled else (c.decouple_type or "if_needed"),
+            priority=c.decouple_priority or 0,
+        )
+        for c in scenario.connections
+    ]

@@ -26,6 +26,7 @@ from coupler_orchestrator import ssp
 from coupler_orchestrator.master.native_step_channel import NativeRemote, enabled
 from coupler_orchestrator.model import Candidate, Roster
 from coupler_orchestrator.options import RunOptions
+from coupler_orchestrator.pipeline.builtins import builtin_of
 from coupler_orchestrator.pipeline.replay import ReplayParticipant, parse_source
 
 
@@ -43,6 +44,9 @@ def create(
     replay = replay_of(component, options)
     if replay is not None:
         return replay
+    builtin = builtin_of(component)
+    if builtin is not None:
+        return builtin
     settings = component.settings
     call_timeout = settings.call_timeout or options.call_timeout
     if component.type == ssp.FMU_TYPE:

@@ -8,13 +8,18 @@ from coupler.errors import ScenarioError
 from coupler_orchestrator.master.native_step_channel import wanted
 from coupler_orchestrator.model import Checked, Link, Plan
 from coupler_orchestrator.options import RunOptions
+from coupler_orchestrator.pipeline.openmcx import openmcx_of
 from coupler_orchestrator.pipeline.ordering import execution_order
 
 
 def build_plan(checked: Checked, links: tuple[Link, ...], options: RunOptions) -> Plan:
     """The plan of a checked scenario and its links."""
     by_name = {m.name: m for m in checked.members}
-    order = execution_order(list(by_name), links, checked.algorithm)
+    openmcx = openmcx_of(checked, links)
+    if openmcx is not None:
+        order = openmcx.order
+    else:
+        order = execution_order(list(by_name), links, checked.algorithm)
     return Plan(
         members=checked.members,
         order=tuple(by_name[n] for n in order),
@@ -26,7 +31,8 @@ def build_plan(checked: Checked, links: tuple[Link, ...], options: RunOptions) -
         lease=lease_of(options, checked),
         realtime_factor=options.realtime_factor or None,
         on_abandoned=options.on_abandoned,
-        native=wanted(options.native_steps),
+        native=wanted(options.native_steps) and openmcx is None,
+        openmcx=openmcx,
     )
 
 

@@ -2,8 +2,10 @@
 master routes values through.
 
 Applied to every value that travels a connection, in this order: Integer -> Real widening (the
-only implicit type change), the unit conversion ``checks`` established (SSP BaseUnit algebra),
-then the connection's transformation. A connection with nothing to do gets no converter at all.
+only implicit type change), the unit conversion ``checks`` established (SSP BaseUnit algebra, or
+OpenMCx's), the connection's transformation, then what the target's OpenMCx port does to what
+enters it (scale, offset, min, max). A connection with nothing to do gets no converter at all.
+Links join the participants' channels (an SSD connector's OpenMCx ``nameInModel``).
 """
 
 from __future__ import annotations
@@ -11,6 +13,7 @@ from __future__ import annotations
 from coupler.channels import Value, ValueType
 from coupler_orchestrator import ssp
 from coupler_orchestrator.model import Checked, Converter, Link, Route
+from coupler_orchestrator.ssp.openmcx import port_input
 
 
 def wire(checked: Checked) -> tuple[Link, ...]:
@@ -18,17 +21,17 @@ def wire(checked: Checked) -> tuple[Link, ...]:
     return tuple(
         Link(
             source=r.connection.start_element,
-            output=r.connection.start_connector,
+            output=r.source.name,
             target=r.connection.end_element,
-            input=r.connection.end_connector,
-            convert=converter(r),
-            decoupled=r.connection.decoupled,
+            input=r.target.name,
+            convert=converter(r, checked),
+            decoupled=r.connection.decoupled or r.connection.end in checked.cut,
         )
         for r in checked.routes
     )
 
 
-def converter(route: Route) -> Converter | None:
+def converter(route: Route, checked: Checked | None = None) -> Converter | None:
     """The function a value of ``route.source`` goes through to fit ``route.target``."""
     steps: list[Converter] = []
     if route.source.type is ValueType.INTEGER and route.target.type is ValueType.REAL:
@@ -39,6 +42,10 @@ def converter(route: Route) -> Converter | None:
     transformation = route.connection.transformation
     if transformation is not None:
         steps.append(transformation_function(transformation, route))
+    c = route.connection
+    end = checked.scenario.connector(c.end_element, c.end_connector) if checked else None
+    if end is not None and end.port is not None and end.port.transforms:
+        steps.append(port_input(end))
     if not steps:
         return None
     if len(steps) == 1:

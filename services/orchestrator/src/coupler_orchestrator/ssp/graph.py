@@ -13,7 +13,7 @@ from __future__ import annotations
 from collections import defaultdict
 from dataclasses import dataclass, field
 
-from .model import Component, Connection, Transformation
+from .model import Component, Connection, InterExtrapolation, Transformation
 
 
 @dataclass(frozen=True)
@@ -37,6 +37,7 @@ class Edge:
     decoupled: bool
     decouple_type: str | None
     decouple_priority: int | None
+    inter_extrapolation: InterExtrapolation | None
     file: str
     line: int
     label: str
@@ -141,6 +142,7 @@ class Graph:
             )
             return None
         decouple = next((e for e in legs if e.decouple_type is not None), None)
+        filtered = next((e for e in legs if e.inter_extrapolation is not None), None)
         return Connection(
             start_element=".".join(start[1:-1]),
             start_connector=start[-1],
@@ -151,6 +153,7 @@ class Graph:
             decoupled=any(e.decoupled for e in legs),
             decouple_type=decouple.decouple_type if decouple else None,
             decouple_priority=decouple.decouple_priority if decouple else None,
+            inter_extrapolation=filtered.inter_extrapolation if filtered else None,
             file=first.file,
             line=first.line,
         )

@@ -20,7 +20,7 @@ from pathlib import Path
 from coupler.archives import Budget
 from coupler.errors import ScenarioError, ValidationError
 
-from . import archive
+from . import archive, openmcx
 from . import tool_annotations as notes
 from .documents import child, local, number, parse, required, validate
 from .files import Documents
@@ -113,6 +113,7 @@ def _load(
             f"{display}: SSP version '{version}' is neither 1.x nor 2.x; loaded as SSP 1.0"
         )
     warnings.extend(notes.unsupported(root, display))
+    problems.extend(notes.refused(root, display))
     units = read_units(child(root, "Units"), display)
     enumerations = read_enumerations(child(root, "Enumerations"), display)
     system = child(root, "System")
@@ -138,8 +139,11 @@ def _load(
     if experiment is not None:
         start = number(experiment, "startTime", display, None)
         stop = number(experiment, "stopTime", display, None)
-        task = notes.read_task(experiment, display, warnings)
-        results = notes.read_results(experiment, display, warnings)
+        try:
+            task = notes.read_task(experiment, display, warnings)
+            results = notes.read_results(experiment, display, warnings)
+        except ScenarioError as exc:
+            problems.append(str(exc))
     if problems:
         raise ValidationError(problems, subject=display)
     return Scenario(
@@ -160,4 +164,5 @@ def _load(
         results=results,
         warnings=tuple(warnings),
         resource_dir=resource_dir,
+        openmcx=openmcx.semantics_reason(root, display),
     )

@@ -19,7 +19,12 @@ V = TypeVar("V")
 
 FMU_TYPE = "application/x-fmu-sharedlibrary"
 GRPC_TYPE = "application/x-coupler-grpc"
-SUPPORTED_COMPONENT_TYPES = (FMU_TYPE, GRPC_TYPE)
+CONSTANT_TYPE = "application/avl-mcx-constant"
+INTEGRATOR_TYPE = "application/avl-mcx-integrator"
+VECTOR_INTEGRATOR_TYPE = "application/avl-mcx-vector-integrator"
+BUILTIN_TYPES = (CONSTANT_TYPE, INTEGRATOR_TYPE, VECTOR_INTEGRATOR_TYPE)
+"""OpenMCx's built-in components, run in the orchestrator's process (docs/openmcx.md)."""
+SUPPORTED_COMPONENT_TYPES = (FMU_TYPE, GRPC_TYPE, *BUILTIN_TYPES)
 REPLAY_SCHEME = "replay:"
 """A source ``replay:PATH#Component`` (either type): a recording stands in (docs/replay.md)."""
 
@@ -77,8 +82,37 @@ class Enumeration:
 
 
 @dataclass(frozen=True, kw_only=True)
+class Port:
+    """OpenMCx's settings of one port (annotation ``com.avl.model.connect.ssp.port``): of a
+    scalar connector, or of one element of a vector connector."""
+
+    default: Value | None = None
+    """An input's value when nothing is connected to it (through scale, offset, min, max)."""
+    initial: Value | None = None
+    """The value a decoupled connection carries during initialization (input's, else the
+    output's, else 0)."""
+    min: float | None = None
+    """Lower clamp (Real and Integer ports)."""
+    max: float | None = None
+    """Upper clamp."""
+    scale: float | None = None
+    """Inputs: ``x * scale + offset`` after unit conversion, then clamped; outputs: clamped,
+    then ``x * scale + offset``."""
+    offset: float | None = None
+    """See ``scale``."""
+    write_results: bool = True
+    """False: no column in the OpenMCx result files."""
+
+    @property
+    def transforms(self) -> bool:
+        """Whether values change on their way through the port."""
+        return any(v is not None for v in (self.min, self.max, self.scale, self.offset))
+
+
+@dataclass(frozen=True, kw_only=True)
 class Connector:
-    """A connector of a component, as declared in the SSD."""
+    """A connector of a component, as declared in the SSD (an OpenMCx vector connector is one
+    ``Connector`` per element, ``v[1]``, ``v[2]``, ...)."""
 
     name: str
     kind: str
@@ -91,7 +125,19 @@ class Connector:
     """Enumeration name (Enumeration connectors)."""
     mime_type: str | None = None
     """MIME type (Binary connectors)."""
+    name_in_model: str | None = None
+    """The participant's channel it stands for when it differs from ``name`` (OpenMCx
+    ``nameInModel``; for a vector element ``nameInModel[i]``)."""
+    port: Port | None = None
+    """OpenMCx port settings, when the SSD gives any."""
+    vector: str | None = None
+    """The OpenMCx vector connector this element belongs to (``v`` of ``v[2]``)."""
     line: int = 0
+
+    @property
+    def channel(self) -> str:
+        """The participant's channel this connector is."""
+        return self.name_in_model or self.name
 
     @property
     def causality(self) -> Causality | None:
@@ -136,13 +182,42 @@ class ComponentSettings:
 
 
 @dataclass(frozen=True, kw_only=True)
+class Constant:
+    """OpenMCx built-in Constant: one value per output element, in connector order."""
+
+    values: tuple[Value, ...]
+
+
+@dataclass(frozen=True, kw_only=True)
+class Integrator:
+    """OpenMCx built-in Integrator: explicit Euler, ``y += gain * u * h / sub_steps`` per
+    sub-step, the input read again at each sub-step's start."""
+
+    gain: float = 1.0
+    initial_state: float = 0.0
+    sub_steps: int = 1
+
+
+@dataclass(frozen=True, kw_only=True)
+class VectorIntegrator:
+    """OpenMCx built-in VectorIntegrator: input element i (all inputs flattened in connector
+    order) integrates into output element i, ``y_i += u_i * h``."""
+
+    initial_state: float = 0.0
+
+
+Builtin = Constant | Integrator | VectorIntegrator
+
+
+@dataclass(frozen=True, kw_only=True)
 class Component:
     """A component of the flattened system."""
 
     name: str
     """Name relative to the root system, nested names joined with '.' (``Sub.Gain``)."""
     type: str
-    """MIME type: ``application/x-fmu-sharedlibrary`` or ``application/x-coupler-grpc``."""
+    """MIME type: ``application/x-fmu-sharedlibrary``, ``application/x-coupler-grpc`` or one of
+    OpenMCx's built-ins (``BUILTIN_TYPES``)."""
     source: str
     """For FMUs an absolute path; for gRPC ``grpc://HOST:PORT`` with ``${VAR}`` expanded; for a
     replay ``replay:PATH#Component`` with PATH absolute."""
@@ -152,6 +227,14 @@ class Component:
     implementation: str = "any"
     delta_time: float | None = None
     """Per-component communication step (OpenMCx ``com.avl.model.connect.ssp.component``)."""
+    input_at_end_time: bool = False
+    """OpenMCx: inputs are read at the end of each of its steps (through the connections'
+    inter/extrapolation), not at the start."""
+    trigger_sequence: int = -1
+    """OpenMCx: in a loop, a connection from a component with a higher trigger sequence to
+    one with a lower is cut first."""
+    builtin: Builtin | None = None
+    """The specific data of an OpenMCx built-in component."""
     settings: ComponentSettings = field(default_factory=ComponentSettings)
     """Coupler's own settings (``org.coupler.component``)."""
     file: str = ""
@@ -191,6 +274,16 @@ class EnumerationMappingTransformation:
     mapping: Mapping[str, str]
 
 
+@dataclass(frozen=True, kw_only=True)
+class InterExtrapolation:
+    """OpenMCx ``com.avl.model.connect.ssp.connection.inter_extrapolation`` of a connection."""
+
+    extrapolation_order: int
+    """0 (``zero``) or 1 (``first``)."""
+    interpolation_order: int
+    """0 (``zero``) or 1 (``first``)."""
+
+
 Transformation = (
     LinearTransformation
     | BooleanMappingTransformation
@@ -215,6 +308,8 @@ class Connection:
     """OpenMCx decoupling: ``never``, ``always`` or ``if_needed``; None when not given."""
     decouple_priority: int | None = None
     """OpenMCx ``IfNeeded priority``."""
+    inter_extrapolation: InterExtrapolation | None = None
+    """OpenMCx inter/extrapolation of the values the target reads; None when not given."""
     file: str = ""
     line: int = 0
 
@@ -306,6 +401,9 @@ class Scenario:
     warnings: tuple[str, ...]
     resource_dir: Path
     """Where component sources and parameter files resolve."""
+    openmcx: str = ""
+    """Why the scenario runs with OpenMCx's semantics (``file line N: ...``, the first element
+    only OpenMCx defines); empty: Coupler's (docs/openmcx.md)."""
 
     def component(self, name: str) -> Component | None:
         """The component called ``name`` (flattened name), or None."""

@@ -13,12 +13,14 @@ from urllib.parse import urlsplit
 from coupler.channels import ValueType
 from coupler.errors import ScenarioError, ValidationError
 
+from . import openmcx
 from . import tool_annotations as notes
 from .documents import Element, boolean, child, children, elements, line_of, local, required, where
 from .expansion import expand
 from .files import Documents
 from .graph import Edge, Graph, Node
 from .model import (
+    BUILTIN_TYPES,
     FMU_TYPE,
     GRPC_TYPE,
     REPLAY_SCHEME,
@@ -81,6 +83,12 @@ class Names:
             f"at line {earlier}; names must be unique there - rename or remove one of the two"
         )
         return False
+
+
+def _span(owner: str, names: list[str]) -> str:
+    prefix = f"{owner}." if owner else ""
+    first, last = f"{prefix}{names[0]}", f"{prefix}{names[-1]}"
+    return first if len(names) == 1 else f"{first} .. {last}"
 
 
 class SystemReader:
@@ -161,13 +169,24 @@ class SystemReader:
         here = where(self.display, element)
         mime = element.get("type", FMU_TYPE)
         if mime not in SUPPORTED_COMPONENT_TYPES:
+            builtins = ", ".join(BUILTIN_TYPES)
             raise ScenarioError(
                 f"{here}: component '{name}' has type '{mime}', which is not supported; "
-                f"use {FMU_TYPE} or {GRPC_TYPE}"
+                f"use {FMU_TYPE} or {GRPC_TYPE} (or one of OpenMCx's built-ins: {builtins})"
             )
         what = f"{here}: component '{name}'"
         source = expand(required(element, "source", self.display), self.env, what=what)
-        if mime == FMU_TYPE and not source.startswith(REPLAY_SCHEME):
+        for other, kind in openmcx.SPECIFIC_DATA.items():
+            if other != mime and openmcx.annotation(element, kind) is not None:
+                raise ScenarioError(
+                    f"{here}: component '{name}' of type '{mime}' carries the annotation "
+                    f"'{kind}', which belongs to {other}; remove it or fix the type"
+                )
+        connectors = self.read_connectors(element, name)
+        builtin = None
+        if mime in BUILTIN_TYPES:
+            builtin = openmcx.read_builtin(element, mime, connectors, name, self.display)
+        elif mime == FMU_TYPE and not source.startswith(REPLAY_SCHEME):
             fmu = self.documents.resolve(source, element, self.display, what="FMU")
             if not fmu.is_file():
                 raise ScenarioError(
@@ -198,13 +217,19 @@ class SystemReader:
                 f"{here}: component '{name}' asks for implementation=\"ModelExchange\", which is "
                 "not supported; it runs as co-simulation"
             )
+        delta_time, input_at_end_time, trigger_sequence = notes.component_task(
+            element, self.display
+        )
         self.tree.components[path] = Component(
             name=name,
             type=mime,
             source=source,
-            connectors=self.read_connectors(element, name),
+            connectors=connectors,
             implementation=implementation,
-            delta_time=notes.component_delta_time(element, self.display, self.warnings),
+            delta_time=delta_time,
+            input_at_end_time=input_at_end_time,
+            trigger_sequence=trigger_sequence,
+            builtin=builtin,
             settings=notes.component_settings(
                 element,
                 self.display,
@@ -224,7 +249,7 @@ class SystemReader:
                 )
 
     def read_connectors(self, element: Element, owner: str) -> tuple[Connector, ...]:
-        result = []
+        result: list[Connector] = []
         connectors = child(element, "Connectors")
         unique = Names(self.display, "connector", f"of component '{owner}'")
         for c in children(connectors, "Connector") if connectors is not None else ():
@@ -273,16 +298,22 @@ class SystemReader:
                         )
                 if type_ is ValueType.BINARY:
                     mime = typed.get("mime-type", "application/octet-stream")
-            result.append(
-                Connector(
-                    name=name,
-                    kind=kind,
-                    type=type_,
-                    unit=unit,
-                    enumeration=enumeration,
-                    mime_type=mime,
-                    line=line_of(c),
-                )
+            connector = Connector(
+                name=name,
+                kind=kind,
+                type=type_,
+                unit=unit,
+                enumeration=enumeration,
+                mime_type=mime,
+                line=line_of(c),
+            )
+            result.extend(openmcx.read_ports(c, connector, owner, self.display))
+        names = [c.name for c in result]
+        twice = sorted({n for n in names if names.count(n) > 1})
+        if twice:
+            raise ScenarioError(
+                f"{where(self.display, element)}: component '{owner}' declares connector "
+                f"'{twice[0]}' more than once (a vector's elements count); rename one"
             )
         return tuple(result)
 
@@ -347,8 +378,14 @@ class SystemReader:
         start = f"{start_el}.{start_c}" if start_el else start_c
         label = f"{start} -> {f'{end_el}.{end_c}' if end_el else end_c}"
         what = f"{where(self.display, element)}: connection {label}"
-        a = self.endpoint(what, path, start_el, start_c, kinds, refs, start=True)
-        b = self.endpoint(what, path, end_el, end_c, kinds, refs, start=False)
+        starts = self.elements_of(what, path, start_el, start_c, "Start", element)
+        ends = self.elements_of(what, path, end_el, end_c, "End", element)
+        if len(starts) != len(ends):
+            raise ScenarioError(
+                f"{what}: {len(starts)} elements ({_span(start_el or '', starts)}) cannot drive "
+                f"{len(ends)} ({_span(end_el or '', ends)}); give ranges of the same length in "
+                "<mc:Connection>"
+            )
         decoupled, decouple_type, priority = notes.decoupling(element, self.display)
         edge = Edge(
             transformation=read_transformation(element, self.display),
@@ -358,11 +395,62 @@ class SystemReader:
             decoupled=decoupled,
             decouple_type=decouple_type,
             decouple_priority=priority,
+            inter_extrapolation=openmcx.read_inter_extrapolation(
+                element, self.display, self.warnings
+            ),
             file=self.display,
             line=line_of(element),
             label=label,
         )
-        self.tree.graph.add(a, b, edge)
+        for a_name, b_name in zip(starts, ends, strict=True):
+            a = self.endpoint(what, path, start_el, a_name, kinds, refs, start=True)
+            b = self.endpoint(what, path, end_el, b_name, kinds, refs, start=False)
+            self.tree.graph.add(a, b, edge)
+
+    def elements_of(
+        self,
+        what: str,
+        path: tuple[str, ...],
+        element: str | None,
+        connector: str,
+        side: str,
+        connection: Element,
+    ) -> list[str]:
+        """The connector names one end of a connection stands for: itself, or the elements of
+        an OpenMCx vector connector its ``mc:Connection`` slice names."""
+        ranges = openmcx.read_slices(connection, self.display)
+        span = ranges[0] if side == "Start" else ranges[1]
+        component = self.tree.components.get((*path, element)) if element else None
+        if component is None:  # a system connector, a dictionary entry or an unknown element
+            if span is not None:
+                raise ScenarioError(
+                    f"{what}: <mc:{side}> gives indices for '{connector}', which is not a "
+                    "component's vector connector"
+                )
+            return [connector]
+        vector = [c.name for c in component.connectors if c.vector == connector]
+        if span is None:
+            if vector:
+                raise ScenarioError(
+                    f"{what}: '{element}.{connector}' is a vector connector ({vector[0]} .. "
+                    f"{vector[-1]}); name the elements with <mc:Connection><mc:{side} "
+                    'startIndex="..." endIndex="..."/></mc:Connection>'
+                )
+            return [connector]
+        if not vector:
+            raise ScenarioError(
+                f"{what}: <mc:{side}> gives indices for '{element}.{connector}', which is a "
+                "scalar connector (OpenMCx allows indices on vector connectors only); remove "
+                f"<mc:{side}>"
+            )
+        first, last = span
+        names = [f"{connector}[{i}]" for i in range(first, last + 1)]
+        if names[0] not in vector or names[-1] not in vector:
+            raise ScenarioError(
+                f"{what}: the slice {element}.{connector}[{first}..{last}] is out of range: "
+                f"'{element}.{connector}' has the elements {vector[0]} .. {vector[-1]}"
+            )
+        return names
 
     def endpoint(
         self,

@@ -10,6 +10,12 @@ OpenMCx names (from its schemas in eclipse/openmcx ``scripts/SSP``):
   triggerSequence inputAtEndTime/>``
 - Connection, ``com.avl.model.connect.ssp.connection.decoupling``: ``<Decoupling>`` with one of
   ``<Never/>``, ``<Always/>``, ``<IfNeeded priority="N"/>``
+- ports, vector connectors, slices, inter/extrapolation and the built-ins' specific data:
+  ``openmcx``
+
+Attributes of OpenMCx's annotations are checked against its schemas: an unknown one is an error
+naming the file and line, and so is an OpenMCx annotation Coupler cannot apply and that would
+change values (``openmcx.REFUSED``) or does not know.
 
 Coupler's own: Connection, ``org.coupler.connection``: ``<coupler:Connection decoupled="true"/>``;
 Component, ``org.coupler.component``: ``<coupler:Component isolate="true" callTimeout="5"
@@ -26,6 +32,7 @@ from pathlib import Path
 from coupler import durations
 from coupler.errors import ScenarioError
 
+from . import openmcx
 from .documents import Element, boolean, child, children, elements, integer, local, number, where
 from .model import Backend, ComponentSettings, Results, Task
 
@@ -46,6 +53,10 @@ HANDLED = {
     ("Connection", DECOUPLING),
     ("Connection", COUPLER_CONNECTION),
     ("Component", COUPLER_COMPONENT),
+    ("Connector", openmcx.PORT),
+    ("Connection", openmcx.CONNECTION),
+    ("Connection", openmcx.INTER_EXTRAPOLATION),
+    *(("Component", kind) for kind in openmcx.SPECIFIC_DATA.values()),
 }
 
 STEP_TYPES = ("sequential", "parallel_single_thread", "parallel_one_step_size", "parallel_sync_all")
@@ -69,17 +80,28 @@ def read_task(experiment: Element, display: str, warnings: list[str]) -> Task | 
     if task is None:
         return None
     here = where(display, task)
-    step_type = task.get("stepType", "")
+    openmcx.attributes(
+        task,
+        (
+            "stepType",
+            "deltaTime",
+            "endType",
+            "sumTime",
+            "inputAtEndTime",
+            "relativeEps",
+            "timingOutput",
+        ),
+        display,
+    )
+    step_type = openmcx.required_attribute(task, "stepType", display)
     if step_type not in STEP_TYPES:
-        warnings.append(
-            f"{here}: OpenMCx stepType '{step_type}' is not one of {', '.join(STEP_TYPES)}; "
-            "Coupler's master algorithm setting applies"
+        raise ScenarioError(
+            f"{here}: OpenMCx stepType '{step_type}' is not one of {', '.join(STEP_TYPES)}"
         )
     end_type = task.get("endType", "end_time")
-    if end_type != "end_time":
-        warnings.append(
-            f"{here}: OpenMCx endType '{end_type}' is not supported (only end_time); "
-            "the run ends at the DefaultExperiment stopTime"
+    if end_type not in END_TYPES:
+        raise ScenarioError(
+            f"{here}: OpenMCx endType '{end_type}' is not one of {', '.join(END_TYPES)}"
         )
     result = Task(
         step_type=step_type,
@@ -90,15 +112,13 @@ def read_task(experiment: Element, display: str, warnings: list[str]) -> Task | 
         relative_eps=number(task, "relativeEps", display, 1e-10) or 0.0,
         timing_output=boolean(task, "timingOutput", display, False),
     )
-    for attr, set_ in (
-        ("sumTime", result.sum_time),
-        ("inputAtEndTime", result.input_at_end_time),
-        ("timingOutput", result.timing_output),
+    for attr, set_, meaning in (
+        ("sumTime", result.sum_time, "communication points are exact: t0 + k*h"),
+        ("inputAtEndTime", result.input_at_end_time, "OpenMCx itself reads it and does nothing"),
+        ("timingOutput", result.timing_output, "summary.json has each member's latency"),
     ):
         if set_:
-            warnings.append(
-                f'{here}: OpenMCx task attribute {attr}="true" is not supported; ignored'
-            )
+            warnings.append(f'{here}: OpenMCx task attribute {attr}="true" is ignored: {meaning}')
     return result
 
 
@@ -134,18 +154,19 @@ def read_results(experiment: Element, display: str, warnings: list[str]) -> Resu
     )
 
 
-def component_delta_time(component: Element, display: str, warnings: list[str]) -> float | None:
-    """Per-component deltaTime (OpenMCx component annotation)."""
+def component_task(component: Element, display: str) -> tuple[float | None, bool, int]:
+    """(deltaTime, inputAtEndTime, triggerSequence) of a component (OpenMCx component
+    annotation); (None, False, -1) without one."""
     settings = annotation(component, COMPONENT)
     if settings is None:
-        return None
-    for attr in ("triggerSequence", "inputAtEndTime"):
-        if settings.get(attr) is not None:
-            warnings.append(
-                f"{where(display, settings)}: OpenMCx component attribute '{attr}' is not "
-                "supported; ignored"
-            )
-    return number(settings, "deltaTime", display, None)
+        return None, False, -1
+    openmcx.attributes(settings, ("deltaTime", "inputAtEndTime", "triggerSequence"), display)
+    sequence = integer(settings, "triggerSequence", display, -1)
+    return (
+        number(settings, "deltaTime", display, None),
+        boolean(settings, "inputAtEndTime", display, False),
+        -1 if sequence is None else sequence,
+    )
 
 
 def component_settings(
@@ -186,30 +207,65 @@ def decoupling(connection: Element, display: str) -> tuple[bool, str | None, int
     theirs = annotation(connection, DECOUPLING)
     if theirs is None:
         return False, None, None
-    for item in elements(theirs):
-        name = local(item)
-        if name == "Never":
-            return False, "never", None
-        if name == "Always":
-            return True, "always", None
-        if name == "IfNeeded":
-            return False, "if_needed", integer(item, "priority", display, None)
-    return False, None, None
+    openmcx.attributes(theirs, (), display)
+    choice = list(elements(theirs))
+    if len(choice) != 1 or local(choice[0]) not in ("Never", "Always", "IfNeeded"):
+        raise ScenarioError(
+            f"{where(display, theirs)}: <mc:Decoupling> holds exactly one of <mc:Never/>, "
+            '<mc:Always/>, <mc:IfNeeded priority="N"/>'
+        )
+    item = choice[0]
+    name = local(item)
+    openmcx.attributes(item, ("priority",) if name == "IfNeeded" else (), display)
+    if name == "Never":
+        return False, "never", None
+    if name == "Always":
+        return True, "always", None
+    priority = integer(item, "priority", display, 0)
+    if priority is not None and priority < 0:
+        raise ScenarioError(f'{where(display, item)}: priority="{priority}" must not be negative')
+    return False, "if_needed", priority
 
 
 def unsupported(root: Element, display: str) -> Iterator[str]:
-    """A warning for every annotation in the document the loader does not apply."""
-    for item in root.iter("{*}Annotation"):
-        annotations = item.getparent()
-        owner = annotations.getparent() if annotations is not None else None
-        if owner is None:
-            continue
-        kind = item.get("type", "")
-        if (local(owner), kind) in HANDLED:
+    """A warning for every annotation in the document the loader does not apply (OpenMCx's
+    that change no value among them; ``refused`` names those it cannot)."""
+    for item, owner, kind in _annotations(root):
+        if (local(owner), kind) in HANDLED or _openmcx_refusal(kind):
             continue
         label = owner.get("name") or owner.get("startConnector") or ""
         name = f" '{label}'" if label else ""
+        why = openmcx.IGNORED.get(kind, "")
         yield (
             f"{where(display, item)}: annotation '{kind}' on <{local(owner)}>{name} "
-            "is not supported; ignored"
+            f"is not supported; ignored{f' ({why})' if why else ''}"
         )
+
+
+def refused(root: Element, display: str) -> Iterator[str]:
+    """A problem for every OpenMCx annotation Coupler cannot apply where it would change
+    values, and for every one OpenMCx does not define."""
+    for item, owner, kind in _annotations(root):
+        if (local(owner), kind) in HANDLED:
+            continue
+        reason = _openmcx_refusal(kind)
+        if reason:
+            yield f"{where(display, item)}: annotation '{kind}' on <{local(owner)}>: {reason}"
+
+
+def _openmcx_refusal(kind: str) -> str:
+    if not kind.startswith(openmcx.PREFIX) or kind in openmcx.IGNORED:
+        return ""
+    known = {TASK, RESULTS, COMPONENT, DECOUPLING, openmcx.PORT, openmcx.CONNECTION}
+    known |= {openmcx.INTER_EXTRAPOLATION, *openmcx.SPECIFIC_DATA.values()}
+    if kind in known:
+        return "OpenMCx reads it only on another element; move it"
+    return openmcx.REFUSED.get(kind, "OpenMCx defines no such annotation; fix its type")
+
+
+def _annotations(root: Element) -> Iterator[tuple[Element, Element, str]]:
+    for item in root.iter("{*}Annotation"):
+        annotations = item.getparent()
+        owner = annotations.getparent() if annotations is not None else None
+        if owner is not None:
+            yield item, owner, item.get("type", "")

@@ -69,6 +69,20 @@ class Affine:
         return self.factor * value + self.offset
 
 
+@dataclass(frozen=True)
+class OpenMcxUnits:
+    """OpenMCx's unit conversion between two SSD units, in its own arithmetic:
+    ``((x + source.offset) * source.factor) / target.factor - target.offset``, with no check of
+    the dimensions (its ``core/Conversion.c``)."""
+
+    source: BaseUnit
+    target: BaseUnit
+
+    def __call__(self, value: float) -> float:
+        base = (value + self.source.offset) * self.source.factor
+        return base / self.target.factor - self.target.offset
+
+
 class IncompatibleUnits(ScenarioError):
     """Two units of different dimension."""
 
