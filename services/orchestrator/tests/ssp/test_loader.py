@@ -274,8 +274,8 @@ def test_unknown_connector(tmp_path: Path) -> None:
     with pytest.raises(ValidationError) as info:
         load_ssp(path)
     assert (
-        "scenario.ssd line 10: connection Integrator.y -> Gain.real_in: connector "
-        "'Gain.real_in' does not exist in component 'Gain' (connectors: real_in2)"
+        "scenario.ssd line 10: connection Integrator.y -> Gain.real_in: component 'Gain' "
+        "declares no connector 'real_in' (its connectors: real_in2); did you mean 'real_in2'?"
     ) in str(info.value)
 
 
