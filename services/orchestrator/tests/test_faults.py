@@ -63,6 +63,11 @@ SSD = """<?xml version="1.0" encoding="UTF-8"?>
   <ssd:DefaultExperiment startTime="0" stopTime="20"/>
 </ssd:SystemStructureDescription>
 """
+FMU_RUN_LEAKS = pytest.mark.known_leak(
+    temp=("coupler-fmu-*", "coupler-ssp-*"),
+    reason="issue #25 item 4: a failing FMU run leaves its unpacked FMU and scenario behind",
+)
+"""A known bug of the product, not of these tests (coupler_dev.hygiene, docs/testing.md)."""
 RUN = ("--step", "0.1")
 PACED = ("--realtime-factor", "5")
 """200 steps in 4 s: the first rows reach the disk after 1 s (results.csv is flushed once a
@@ -99,6 +104,7 @@ class Gain:
 
     def stop(self) -> None:
         end_group(self.process, grace=1)
+        self.log.unlink(missing_ok=True)
 
 
 @contextmanager
@@ -423,6 +429,7 @@ def faulty_ssd(
     return path
 
 
+@FMU_RUN_LEAKS
 def test_an_isolated_fmu_that_crashes_fails_the_run_naming_how(
     coupler: Coupler, faulty_ssd: Path, tmp_path: Path
 ) -> None:
@@ -438,6 +445,7 @@ def test_an_isolated_fmu_that_crashes_fails_the_run_naming_how(
     assert len(assert_rows_kept(out)) == 11
 
 
+@FMU_RUN_LEAKS
 def test_an_isolated_fmu_that_hangs_fails_within_the_deadline(
     coupler: Coupler, faulty_ssd: Path, tmp_path: Path
 ) -> None:
@@ -455,6 +463,7 @@ def test_an_isolated_fmu_that_hangs_fails_within_the_deadline(
     assert took < 15  # start-up, the 1 s deadline, Terminate's 3 s, killing the host
 
 
+@FMU_RUN_LEAKS
 @pytest.mark.usefixtures("fmu_path")
 def test_an_fmu_hanging_in_process_ends_the_run_at_its_deadline(
     faulty_ssd: Path, tmp_path: Path
@@ -475,6 +484,7 @@ def test_an_fmu_hanging_in_process_ends_the_run_at_its_deadline(
     assert "error: run failed: Faulty.DoStep [DEADLINE_EXCEEDED]" in err
 
 
+@FMU_RUN_LEAKS
 @pytest.mark.usefixtures("fmu_path")
 def test_an_interrupt_reaches_an_orchestrator_blocked_in_an_fmu(
     faulty_ssd: Path, tmp_path: Path
@@ -524,6 +534,7 @@ def test_an_interrupt_reaches_a_run_of_fast_in_process_fmus(
     assert 1000 <= len(assert_rows_kept(out)) < 100_000_001
 
 
+@FMU_RUN_LEAKS
 def test_an_fmu_crashing_in_process_leaves_the_summary_and_the_flushed_rows(
     faulty_ssd: Path, tmp_path: Path
 ) -> None:

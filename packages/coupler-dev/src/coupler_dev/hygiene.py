@@ -73,9 +73,10 @@ SHARED_HELPERS = (
 )
 
 MARKER = (
-    "known_leak(temp=GLOB, process=GLOB, port=GLOB, reason=TEXT): the test leaves what the "
-    "globs match behind because of a known bug named in reason (coupler_dev.hygiene removes it "
-    "and lists it at the end of the run instead of failing the test)"
+    "known_leak(temp=GLOBS, process=GLOBS, port=GLOBS, reason=TEXT): the test leaves what the "
+    "globs (one or a tuple) match behind because of a known bug named in reason "
+    "(coupler_dev.hygiene removes it and lists it at the end of the run instead of failing "
+    "the test)"
 )
 
 
@@ -492,8 +493,9 @@ def temp_leftover(path: Path) -> Leftover:
 def known_leak(item: pytest.Item, leftover: Leftover) -> pytest.Mark | None:
     """The ``known_leak`` marker of ``item`` whose glob matches ``leftover``, if any."""
     for mark in item.iter_markers("known_leak"):
-        pattern = mark.kwargs.get(leftover.kind)
-        if pattern is not None and fnmatch.fnmatchcase(leftover.name, pattern):
+        patterns = mark.kwargs.get(leftover.kind, ())
+        patterns = (patterns,) if isinstance(patterns, str) else tuple(patterns)
+        if any(fnmatch.fnmatchcase(leftover.name, pattern) for pattern in patterns):
             return mark
     return None
 
