@@ -4,6 +4,7 @@ started, whichever way the test leaves the block."""
 
 from __future__ import annotations
 
+import os
 import socket
 import subprocess
 import sys
@@ -91,6 +92,20 @@ def test_a_process_group_ends_with_its_grandchildren_however_the_block_is_left(
     assert parent.returncode is not None
     wait_until(lambda: not alive(grandchild), 5, what=f"grandchild {grandchild} to end")
     assert parent.stdout is not None and parent.stdout.closed
+
+
+def test_a_process_group_ends_with_what_it_started_in_sessions_of_their_own() -> None:
+    """As ``coupler fleet`` starts each service: a session of its own, outside the group."""
+    command = [
+        sys.executable,
+        "-c",
+        SPAWNS_A_GRANDCHILD.replace("])", "], start_new_session=True)"),
+    ]
+    with process_group(command, stdout=subprocess.PIPE, text=True, grace=1) as parent:
+        assert parent.stdout is not None
+        grandchild = int(parent.stdout.readline())
+        assert os.getsid(grandchild) == grandchild != os.getsid(parent.pid)
+    wait_until(lambda: not alive(grandchild), 5, what=f"grandchild {grandchild} to end")
 
 
 def test_wait_until_gives_what_the_condition_gave_or_says_what_it_waited_for() -> None:

@@ -147,15 +147,18 @@ def drive(
     env: dict[str, str] | None = None,
     timeout: float = 120.0,
 ) -> tuple[dict[str, Any], str]:
-    """Run the FMUs under FMPy in a child process: (its JSON answer, everything it printed)."""
+    """Run the FMUs under FMPy in a child process: (its JSON answer, everything it printed).
+    FMPy unpacks into the test's folder: it leaves its unpacked FMU behind when a run fails."""
     spec = tmp_path / f"spec-{time.monotonic_ns()}.json"
     spec.write_text(json.dumps({"runs": runs}))
+    scratch = tmp_path / "fmpy-temp"
+    scratch.mkdir(exist_ok=True)
     done = subprocess.run(
         [sys.executable, str(DRIVER), str(spec)],
         capture_output=True,
         text=True,
         timeout=timeout,
-        env={**os.environ, **(env or {})},
+        env={**os.environ, "TMPDIR": str(scratch), **(env or {})},
         check=False,
     )
     printed = done.stdout + done.stderr

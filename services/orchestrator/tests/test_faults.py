@@ -106,6 +106,7 @@ class Gain:
 
     def stop(self) -> None:
         end_group(self.process, grace=1)
+        self.log.unlink(missing_ok=True)
 
 
 @contextmanager

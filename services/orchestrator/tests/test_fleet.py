@@ -257,8 +257,10 @@ def test_waiting_for_a_participant_is_said_at_once(
     assert run.err[-1] == "interrupted before the run started; nothing was recorded"
 
 
-def test_a_participant_not_running_ends_with_how_to_start_it(env: dict[str, str]) -> None:
-    out = Path(env.get("TMPDIR", "/tmp")) / f"coupler-hint-{os.getpid()}"
+def test_a_participant_not_running_ends_with_how_to_start_it(
+    env: dict[str, str], tmp_path: Path
+) -> None:
+    out = tmp_path / "coupler-hint"
     result = coupler(
         ["run", "examples/ramp-gain/SystemStructure.ssd", "--out", str(out), "--connect-timeout",
          "0.5"],

@@ -12,6 +12,7 @@ The child prints every communication point it completes, so the tests see where 
 from __future__ import annotations
 
 import json
+import os
 import signal
 import subprocess
 import sys
@@ -37,12 +38,14 @@ print("y", *result["y"], flush=True)
 """
 
 
-def _simulate(fmu: Path, start_values: Mapping[str, float]) -> subprocess.Popen[str]:
+def _simulate(fmu: Path, start_values: Mapping[str, float], scratch: Path) -> subprocess.Popen[str]:
+    """FMPy unpacks into ``scratch``: a crashed or killed child cannot remove what it unpacked."""
     return subprocess.Popen(
         [sys.executable, "-c", CHILD, str(fmu), json.dumps(start_values)],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
+        env={**os.environ, "TMPDIR": str(scratch)},
     )
 
 
@@ -54,26 +57,26 @@ def _finish(child: subprocess.Popen[str]) -> tuple[int, list[str]]:
     return child.returncode, out.split("\n")[:-1]
 
 
-def test_no_fault(faulty_fmus: Mapping[str, Path]) -> None:
-    code, lines = _finish(_simulate(faulty_fmus["Faulty2"], {"u": 1.5}))
+def test_no_fault(faulty_fmus: Mapping[str, Path], tmp_path: Path) -> None:
+    code, lines = _finish(_simulate(faulty_fmus["Faulty2"], {"u": 1.5}, tmp_path))
     assert code == 0
     assert lines == ["0.25", "0.5", "0.75", "1.0", "y 1.5 1.5 1.5 1.5 1.5"]
 
 
-def test_crash_at_segfaults_in_do_step(faulty_fmus: Mapping[str, Path]) -> None:
-    code, lines = _finish(_simulate(faulty_fmus["Faulty2"], {"crash_at": 0.5}))
+def test_crash_at_segfaults_in_do_step(faulty_fmus: Mapping[str, Path], tmp_path: Path) -> None:
+    code, lines = _finish(_simulate(faulty_fmus["Faulty2"], {"crash_at": 0.5}, tmp_path))
     assert code == -signal.SIGSEGV
     assert lines == ["0.25", "0.5"]
 
 
-def test_crash_in_instantiate(faulty_fmus: Mapping[str, Path]) -> None:
-    code, lines = _finish(_simulate(faulty_fmus["CrashOnInstantiate2"], {}))
+def test_crash_in_instantiate(faulty_fmus: Mapping[str, Path], tmp_path: Path) -> None:
+    code, lines = _finish(_simulate(faulty_fmus["CrashOnInstantiate2"], {}, tmp_path))
     assert code == -signal.SIGSEGV
     assert lines == []
 
 
-def test_hang_at_blocks_in_do_step(faulty_fmus: Mapping[str, Path]) -> None:
-    child = _simulate(faulty_fmus["Faulty2"], {"hang_at": 0.5})
+def test_hang_at_blocks_in_do_step(faulty_fmus: Mapping[str, Path], tmp_path: Path) -> None:
+    child = _simulate(faulty_fmus["Faulty2"], {"hang_at": 0.5}, tmp_path)
     try:
         assert child.stdout is not None
         assert [child.stdout.readline(), child.stdout.readline()] == ["0.25\n", "0.5\n"]

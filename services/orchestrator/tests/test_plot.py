@@ -9,8 +9,6 @@ from __future__ import annotations
 
 import json
 import re
-import shutil
-import tempfile
 from pathlib import Path
 from typing import Any
 
@@ -111,7 +109,6 @@ async def test_html_renders_in_chromium(runs: tuple[Path, Path], tmp_path: Path)
             assert all(u.startswith(("file://", "data:")) for u in requests), requests
             ARTIFACT.parent.mkdir(parents=True, exist_ok=True)
             await page.screenshot(path=str(ARTIFACT), full_page=True)
-            shutil.copyfile(ARTIFACT, Path(tempfile.gettempdir()) / "plot.png")
         finally:
             await browser.close()
 

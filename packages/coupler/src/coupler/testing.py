@@ -181,8 +181,11 @@ def process_group(
 
 def end_group(process: subprocess.Popen[Any], *, grace: float = 5.0, close: bool = True) -> None:
     """End ``process``'s process group (SIGTERM, then SIGKILL after ``grace`` s) and reap it;
-    ``close``: its pipes too (not while threads of the caller still read them)."""
+    ``close``: its pipes too (not while threads of the caller still read them). What it had
+    started in sessions of their own (as ``coupler fleet`` starts its services) and what is
+    still running once the group has gone gets SIGKILL too (where /proc lists children)."""
     group = process.pid  # a session leader's group id is its pid
+    started = _descendants(process.pid)
     with contextlib.suppress(ProcessLookupError, PermissionError):
         os.killpg(group, signal.SIGTERM)
     with contextlib.suppress(subprocess.TimeoutExpired):
@@ -191,7 +194,36 @@ def end_group(process: subprocess.Popen[Any], *, grace: float = 5.0, close: bool
         os.killpg(group, signal.SIGKILL)  # whatever is left of the group, grandchildren too
     with contextlib.suppress(subprocess.TimeoutExpired):
         process.wait(10)
+    for pid in started:  # left the group (a session of its own) and outlived its parent
+        if _running(pid):
+            with contextlib.suppress(ProcessLookupError, PermissionError):
+                os.kill(pid, signal.SIGKILL)
     for stream in (process.stdin, process.stdout, process.stderr):
         if close and stream is not None:
             with contextlib.suppress(OSError):
                 stream.close()
+
+
+def _descendants(pid: int) -> list[int]:
+    """The processes below ``pid`` now, as /proc lists them (none without /proc)."""
+    found: list[int] = []
+    todo = [pid]
+    while todo:
+        parent = todo.pop()
+        with contextlib.suppress(OSError):
+            for task in os.listdir(f"/proc/{parent}/task"):
+                with contextlib.suppress(OSError, ValueError):
+                    with open(f"/proc/{parent}/task/{task}/children") as children:
+                        below = [int(child) for child in children.read().split()]
+                    found += below
+                    todo += below
+    return found
+
+
+def _running(pid: int) -> bool:
+    """Whether ``pid`` runs (ended and waiting for its parent counts as ended)."""
+    try:
+        with open(f"/proc/{pid}/stat") as stat:
+            return stat.read().rsplit(")", 1)[1].split()[0] not in ("Z", "X")
+    except (OSError, IndexError):
+        return False
