@@ -808,9 +808,9 @@ async def interleaved(
 async def suite(sizes: Sizes, log: Callable[[str], None]) -> tuple[list[Row], dict[str, Any]]:
     rows: list[Row] = []
     extra: dict[str, Any] = {}
-    work = Path(tempfile.mkdtemp(prefix="coupler-bench-"))
-    for section in (cli_start, watched_run, chains, remotes, proxy_fmu, scale, frames, memory):
-        await section(sizes, log, work, rows, extra)
+    with tempfile.TemporaryDirectory(prefix="coupler-bench-") as folder:
+        for section in (cli_start, watched_run, chains, remotes, proxy_fmu, scale, frames, memory):
+            await section(sizes, log, Path(folder), rows, extra)
     return rows, extra
 
 
@@ -1118,14 +1118,15 @@ def render_rate(positions: int) -> tuple[float, float, float]:
 
 
 async def only(case: str, steps: int) -> float:
-    work = Path(tempfile.mkdtemp(prefix="coupler-bench-"))
     n = int(case.removeprefix("chain").removeprefix("remote"))
-    if case.startswith("chain"):
-        return (await coupler_run(chain_ssd(work, n), steps, work / "out")).rate
-    ports = free_ports(n)
-    with processes(gains(ports)):
-        await serving(ports)
-        return (await coupler_run(ring_ssd(work, ports), steps, work / "out")).rate
+    with tempfile.TemporaryDirectory(prefix="coupler-bench-") as folder:
+        work = Path(folder)
+        if case.startswith("chain"):
+            return (await coupler_run(chain_ssd(work, n), steps, work / "out")).rate
+        ports = free_ports(n)
+        with processes(gains(ports)):
+            await serving(ports)
+            return (await coupler_run(ring_ssd(work, ports), steps, work / "out")).rate
 
 
 def rss_verdict(row: Row) -> str:
