@@ -8,9 +8,10 @@ services as real local processes, the map in Chromium, the detections scored.
 
 The fleet file is the scenario's own (scenarios/railway/perception-fleet.toml: its services,
 commands and health checks), run for the first 40 s only and paced at real time, so the map
-can be watched while the train passes the first two balise groups (120 m and 320 m). Then
-`python -m coupler_railway.scoring` scores the run against TrackBalises: every balise passed
-was seen before it was passed, within a metre, and nothing else was seen.
+can be watched while the train passes the first two balise groups (120 m and 320 m). The run
+scores itself against TrackBalises (summary.json `reports.perception`, perception-report.json),
+as `python -m coupler_railway.scoring` does: every balise passed was seen before it was passed,
+within a metre, and nothing else was seen.
 """
 
 from __future__ import annotations
@@ -171,7 +172,11 @@ def test_the_perception_variant_end_to_end(tmp_path: Path) -> None:
             assert ((r > 150) & (g > 110) & (b < 100)).any(), box  # yellow, after JPEG
             assert 5.0 < box["distance_ahead_m"] <= 40.0
 
-    # scored against TrackBalises: both groups seen before they were passed
+    # the run scored itself (coupler-railway's `coupler.reports` entry point): both groups seen
+    # before they were passed; the scoring command gives the same report
+    scored_by_run = summary["reports"]["perception"]
+    assert scored_by_run["recall"] == 1.0 and scored_by_run["missed"] == []
+    assert json.loads((out / "perception-report.json").read_text())["recall"] == 1.0
     scored = subprocess.run(
         [sys.executable, "-m", "coupler_railway.scoring", str(out)],
         capture_output=True,
@@ -183,6 +188,9 @@ def test_the_perception_variant_end_to_end(tmp_path: Path) -> None:
     passed = [b["balise_id"] for b in report["balises"]]
     assert passed == [1000, 1001, 1010, 1011, 1012]
     assert report["recall"] == 1.0 and report["precision"] == 1.0
+    assert {k: report[k] for k in scored_by_run if k in report} == {
+        k: v for k, v in scored_by_run.items() if k in report
+    }
     assert report["max_abs_error_m"] < 1.0
     for balise in report["balises"]:
         assert balise["first_detected_at_s"] < balise["passed_at_s"]
