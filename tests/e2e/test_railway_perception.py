@@ -17,6 +17,7 @@ within a metre, and nothing else was seen.
 from __future__ import annotations
 
 import asyncio
+import base64
 import csv
 import io
 import json
@@ -59,15 +60,28 @@ def free_ports(names: tuple[str, ...]) -> dict[str, str]:
             s.close()
 
 
+SHOWN = """() => {
+  const c = window.coupler;
+  if (!(c && c.camera && c.camera.judged && c.frameLoaded === c.camera.frame &&
+        c.camera.detections.some((d) => d.distance_ahead_m < 25))) return null;
+  const img = document.getElementById('camera-frame');
+  const canvas = document.createElement('canvas');
+  canvas.width = img.naturalWidth;
+  canvas.height = img.naturalHeight;
+  canvas.getContext('2d').drawImage(img, 0, 0);
+  return {camera: c.camera, width: img.naturalWidth, png: canvas.toDataURL('image/png'),
+          boxes: document.querySelectorAll('#camera-boxes rect.detection').length};
+}"""
+"""The map once it shows a frame with a balise detected within 25 m, at one instant: camera
+state, frame width, its pixels (PNG), boxes; null until then."""
+
+
 def short_fleet(folder: Path, out: Path) -> Path:
     """The scenario's fleet file, its run stopped at STOP_TIME and written to ``out``; the
     services, commands and health checks as they are."""
     text = FLEET.read_text()
     services = text[text.index("[[service]]") :]
-    args = [
-        "--stop-time", STOP_TIME, "--output-variables", "Driver.*", "OpenRails.distance",
-        "OpenRails.speed", "OpenRails.train_state", "TrackBalises.*", "Perception.*",
-    ]  # fmt: skip
+    args = ["--stop-time", STOP_TIME]  # every channel recorded: frames are left out by default
     path = folder / "fleet.toml"
     path.write_text(
         f'[scenario]\nssp = "scenarios/railway/Perception.ssd"\nout = "{out}"\n'
@@ -103,25 +117,18 @@ async def watch(url: str) -> dict[str, Any]:
             errors: list[str] = []
             page.on("pageerror", lambda exc: errors.append(str(exc)))
             await page.goto(url)
-            await page.wait_for_function(
-                "window.coupler && window.coupler.camera && window.coupler.camera.judged && "
-                "window.coupler.camera.detections.some(d => d.distance_ahead_m < 25) && "
-                "window.coupler.frameLoaded === window.coupler.camera.frame",
-                timeout=240_000,
-            )
-            camera = await page.evaluate("window.coupler.camera")
-            shown = await page.evaluate("document.getElementById('camera-frame').naturalWidth")
-            boxes = await page.locator("#camera-boxes rect.detection").count()
+            # one evaluation: the camera state, its boxes and the very picture shown with them
+            # (the map keeps only its last few frames: fetched later, another one may come)
+            shown_now = await page.wait_for_function(SHOWN, timeout=240_000)
+            seen = await shown_now.json_value()
             ARTIFACT.parent.mkdir(parents=True, exist_ok=True)
             await page.screenshot(path=str(ARTIFACT))
             assert errors == []
         finally:
             await browser.close()
-    async with (
-        aiohttp.ClientSession() as session,
-        session.get(f"{url}api/frame.jpg?n={camera['frame']}") as response,
-    ):
-        picture = np.asarray(Image.open(io.BytesIO(await response.read())))
+    camera, shown, boxes = seen["camera"], seen["width"], seen["boxes"]
+    png = base64.b64decode(seen["png"].split(",", 1)[1])
+    picture = np.asarray(Image.open(io.BytesIO(png)).convert("RGB"))
     return {"camera": camera, "natural_width": shown, "boxes": boxes, "picture": picture}
 
 
@@ -151,6 +158,7 @@ def test_the_perception_variant_end_to_end(tmp_path: Path) -> None:
             if process.poll() is None:
                 process.terminate()
     assert process.returncode == 0, output[-3000:]
+    out = out / "latest"  # a fleet file's `out` is a base: each run has a folder of its own
 
     # the run, and the frames kept out of results.csv
     summary = json.loads((out / "summary.json").read_text())

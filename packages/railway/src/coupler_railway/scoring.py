@@ -230,7 +230,7 @@ def score_results(
             if missing:
                 raise ScoringError(
                     f"{path} has no column {missing[0]!r}: record it (coupler run "
-                    f"--output-variables '{perception}.*' '{balises}.*')"
+                    f"--output-variables '{perception}.*,{balises}.*')"
                 )
             rows = [(float(r["time"]), r[detections], r[passed]) for r in reader]
     except OSError as exc:
