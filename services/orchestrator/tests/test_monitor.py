@@ -181,7 +181,7 @@ def test_state_before_the_run_says_what_it_waits_for() -> None:
         "reason": "",
         "waiting_for": {"Gain": "grpc://127.0.0.1:1 (connection refused)"},
     }
-    assert frame["layout"] == {"members": [], "channels": []}
+    assert frame["layout"] == {"members": [], "channels": [], "frames": []}
 
 
 @pytest.mark.parametrize("text", ["host:port", "70000", ""])

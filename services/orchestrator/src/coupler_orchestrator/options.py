@@ -15,6 +15,7 @@ from pathlib import Path
 from coupler.archives import DEFAULT_BUDGET_BYTES
 from coupler.errors import ScenarioError
 from coupler.security import ClientSecurity
+from coupler.values import MAX_MESSAGE_BYTES
 from coupler.wire import MAX_SECRET, MIN_SECRET, SECRET_BYTES
 from coupler_orchestrator.model import Algorithm
 from coupler_orchestrator.observer import RunEnd
@@ -86,6 +87,10 @@ class RunOptions:
     interrupt), after every observer was told how it ended. The command line ends the process
     there, the only way out of a thread stuck in C; a library caller that gives nothing keeps
     its process and is told the run failed (or was aborted)."""
+    max_message_bytes: int = MAX_MESSAGE_BYTES
+    """The Binary and String values of one message to or from a remote participant may have
+    this many bytes together; more fails the run naming the channel (docs/protocol.md
+    "Message size")."""
     unpack_limit: int = DEFAULT_BUDGET_BYTES
     """Bytes an .ssp and the FMUs it runs may unpack to, together (zip bombs)."""
     isolate_fmus: bool = False

@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING
 
 from coupler import durations
 from coupler.errors import CouplerError
+from coupler.values import MAX_MESSAGE_BYTES
 from coupler_orchestrator.model import Algorithm
 
 if TYPE_CHECKING:
@@ -25,6 +26,23 @@ if TYPE_CHECKING:
 MIN_REALTIME_FACTOR = 1e-3
 """The slowest pacing: one simulated second per 1000 s of wall time (slower would wait for
 days between steps; 1e-300 never ended)."""
+
+MAX_MESSAGE_MIB = 1024
+"""The largest --max-message-size: gRPC and protobuf stop short of 2 GiB per message."""
+
+
+def _message_size(text: str) -> float:
+    """``--max-message-size``: MiB, above 0 and at most ``MAX_MESSAGE_MIB``."""
+    try:
+        size = float(text)
+    except ValueError:
+        size = math.nan
+    if not 0 < size <= MAX_MESSAGE_MIB:
+        raise argparse.ArgumentTypeError(
+            f"{text!r} is not a size in MiB above 0 and at most {MAX_MESSAGE_MIB}"
+        )
+    return size
+
 
 COMMANDS = {
     "run": "run",
@@ -129,6 +147,15 @@ def run_options(command: argparse.ArgumentParser) -> None:
         type=durations.argument(durations.MAX_TIMEOUT),
         default=30.0,
         help="[s] deadline of every call to a participant (default 30; at most 86400 = 24 h)",
+    )
+    command.add_argument(
+        "--max-message-size",
+        type=_message_size,
+        default=MAX_MESSAGE_BYTES // 2**20,
+        metavar="MiB",
+        help="the Binary and String values of one message to or from a participant may have "
+        f"this many MiB together (default {MAX_MESSAGE_BYTES // 2**20}; at most "
+        f"{MAX_MESSAGE_MIB}); a larger message fails the run naming its channel",
     )
     command.add_argument(
         "--unpack-limit",
@@ -245,6 +272,7 @@ def options_of(args: argparse.Namespace) -> RunOptions:
         isolate_fmus=args.isolate_fmus,
         native_steps=args.native_steps,
         unpack_limit=args.unpack_limit * 1024 * 1024,
+        max_message_bytes=round(args.max_message_size * 2**20),
         lease=args.lease,
         security=security_of(args),
         on_abandoned=end_abandoned,

@@ -69,6 +69,7 @@ def create(
             name=component.name,
             connect_timeout=options.connect_timeout,
             call_timeout=call_timeout,
+            max_message_bytes=options.max_message_bytes,
             security=options.security.override(own),
             on_waiting=(
                 partial(options.on_waiting, component.name, component.source)
