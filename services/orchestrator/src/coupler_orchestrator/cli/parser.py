@@ -53,6 +53,7 @@ COMMANDS = {
     "replay": "replay",
     "export-fmu": "export_fmu",
     "describe": "describe",
+    "new": "new",
 }
 """Each command and its module in ``coupler_orchestrator.cli``, in the order ``--help`` lists
 them. A module has ``HELP`` (and may have ``DESCRIPTION``), ``arguments(parser)`` and
