@@ -2,6 +2,7 @@
 
     make bench                  # quick (under 5 min on two cores)
     make bench ARGS=--full      # more steps, 100 participants longer
+    suite.py --sections sockets # some sections only
 
 Cases (steps/s, median of the repetitions; Coupler and its reference interleaved):
 
@@ -15,6 +16,9 @@ Cases (steps/s, median of the repetitions; Coupler and its reference interleaved
   grpc.aio path instead); against raw grpc.aio round trips to N trivial servers (processes
   answering the same messages: unary DoStep and the bidi StepStream) and, for N = 1, mosaik 3
   with one remote simulator over its TCP API (a local source and sink around it);
+- remote x1 over UDS: remote x1 with the gain participant on a unix socket (``--socket``, as
+  ``coupler fleet`` serves local participants) against the same over TCP, and against a raw
+  grpc.aio StepStream to a trivial server on a unix socket;
 - proxy FMU x1: the gain participant exported by `coupler export-fmu` (FMI 2, its C++ binary
   calling the participant over its StepStream) run in-process by Coupler and by a hand-written
   FMPy loop, against `coupler run` driving the same participant directly (its stream);
@@ -140,12 +144,13 @@ def chain_ssd(folder: Path, n: int) -> Path:
     return _ssd(folder / f"chain{n}.ssd", elements, connections)
 
 
-def ring_ssd(folder: Path, ports: Sequence[int]) -> Path:
-    """Gain participants at ``ports``, Gain_k.y -> Gain_k+1.u, the last one's y -> the first's u."""
+def ring_ssd(folder: Path, ports: Sequence[int | str], name: str = "ring") -> Path:
+    """Gain participants at ``ports`` (a port on loopback, or an address), Gain_k.y ->
+    Gain_k+1.u, the last one's y -> the first's u."""
     n = len(ports)
     elements = [
         f'<ssd:Component name="Gain{k}" type="application/x-coupler-grpc" '
-        f'source="grpc://127.0.0.1:{port}"><ssd:Connectors>{GAIN}</ssd:Connectors>'
+        f'source="{address_of(port)}"><ssd:Connectors>{GAIN}</ssd:Connectors>'
         "</ssd:Component>"
         for k, port in enumerate(ports, start=1)
     ]
@@ -154,7 +159,12 @@ def ring_ssd(folder: Path, ports: Sequence[int]) -> Path:
         f'endElement="Gain{k % n + 1}" endConnector="u"/>'
         for k in range(1, n + 1)
     ]
-    return _ssd(folder / f"ring{n}.ssd", elements, connections)
+    return _ssd(folder / f"{name}{n}.ssd", elements, connections)
+
+
+def address_of(server: int | str) -> str:
+    """A participant's address: ``grpc://127.0.0.1:PORT`` for a port, else as given."""
+    return f"grpc://127.0.0.1:{server}" if isinstance(server, int) else server
 
 
 def _ssd(path: Path, elements: Sequence[str], connections: Sequence[str]) -> Path:
@@ -384,15 +394,15 @@ def free_ports(count: int) -> list[int]:
     return [free_port() for _ in range(count)]
 
 
-async def serving(ports: Sequence[int], within: float = 180.0) -> None:
+async def serving(ports: Sequence[int | str], within: float = 180.0) -> None:
     from coupler.errors import CouplerError
     from coupler.health import probe
 
-    async def one(port: int) -> None:
+    async def one(port: int | str) -> None:
         deadline = time.monotonic() + within
         while True:
             try:
-                await probe(f"grpc://127.0.0.1:{port}", connect_timeout=2.0)
+                await probe(address_of(port), connect_timeout=2.0)
                 return
             except CouplerError:
                 if time.monotonic() > deadline:
@@ -453,9 +463,10 @@ def _frame_messages(direction: str) -> tuple[Any, Any]:
     return request, response
 
 
-async def raw_server(port: int, frames: str = "") -> None:
-    """A trivial GRPCComponentService: every step answered with the same outputs (``frames``
-    ``out``: a camera frame; ``in``: nothing, its requests carry one)."""
+async def raw_server(where: str, frames: str = "") -> None:
+    """A trivial GRPCComponentService on a port (``where`` a number) or a unix socket (``where``
+    ``unix:PATH``): every step answered with the same outputs (``frames`` ``out``: a camera
+    frame; ``in``: nothing, its requests carry one)."""
     import grpc
 
     from coupler.v1 import component_pb2_grpc as rpc
@@ -472,19 +483,21 @@ async def raw_server(port: int, frames: str = "") -> None:
 
     server = grpc.aio.server(options=FRAME_GRPC_OPTIONS)
     rpc.add_GRPCComponentServiceServicer_to_server(Trivial(), server)
-    server.add_insecure_port(f"127.0.0.1:{port}")
+    server.add_insecure_port(f"127.0.0.1:{where}" if where.isdigit() else where)
     await server.start()
     await server.wait_for_termination()
 
 
-async def raw_floor(ports: Sequence[int], steps: int, *, stream: bool) -> float:
-    """Steps/s of bare grpc.aio round trips to every server per step (gathered)."""
+async def raw_floor(servers: Sequence[int | str], steps: int, *, stream: bool) -> float:
+    """Steps/s of bare grpc.aio round trips to every server (a port, or ``unix:PATH``) per
+    step (gathered)."""
     import grpc
 
     from coupler.v1 import component_pb2_grpc as rpc
 
     request, _ = _raw_messages()
-    channels = [grpc.aio.insecure_channel(f"127.0.0.1:{p}") for p in ports]
+    targets = [f"127.0.0.1:{s}" if isinstance(s, int) else s for s in servers]
+    channels = [grpc.aio.insecure_channel(t) for t in targets]
     try:
         for channel in channels:
             await asyncio.wait_for(channel.channel_ready(), 30)
@@ -805,12 +818,15 @@ async def interleaved(
     return [median_of(s) if s else None for s in samples]
 
 
-async def suite(sizes: Sizes, log: Callable[[str], None]) -> tuple[list[Row], dict[str, Any]]:
+async def suite(
+    sizes: Sizes, log: Callable[[str], None], only: Sequence[str] = ()
+) -> tuple[list[Row], dict[str, Any]]:
     rows: list[Row] = []
     extra: dict[str, Any] = {}
-    work = Path(tempfile.mkdtemp(prefix="coupler-bench-"))
-    for section in (cli_start, watched_run, chains, remotes, proxy_fmu, scale, frames, memory):
-        await section(sizes, log, work, rows, extra)
+    with tempfile.TemporaryDirectory(prefix="coupler-bench-") as folder:
+        for section in SECTIONS:
+            if not only or section.__name__ in only:
+                await section(sizes, log, Path(folder), rows, extra)
     return rows, extra
 
 
@@ -928,6 +944,40 @@ async def remotes(
             [mosaik_figure] = await interleaved(sizes.repeats, mosaik_once)
             if mosaik_figure is not None:
                 rows.append(Row("remote x1", coupler, "mosaik 3 (TCP)", mosaik_figure, 1.25))
+
+
+async def sockets(
+    sizes: Sizes, log: Callable[[str], None], work: Path, rows: list[Row], extra: dict[str, Any]
+) -> None:
+    """remote x1 with the gain participant on a unix socket (as ``coupler fleet`` serves local
+    participants) against the same on TCP, and against a bare grpc.aio stream over a socket."""
+    log("remote x1 over a unix socket, over TCP, and a raw grpc.aio stream over a unix socket")
+    folder = Path(tempfile.mkdtemp(prefix="cb-", dir="/tmp"))  # a socket path has 107 bytes
+    gain_socket, raw_socket = folder / "gain.sock", folder / "raw.sock"
+    [port] = free_ports(1)
+    on_socket = [sys.executable, "-m", "coupler.examples", "gain", "--socket", str(gain_socket)]
+    raw = [sys.executable, __file__, "--raw-server", f"unix:{raw_socket}"]
+    with processes([*gains([port]), on_socket, raw]):
+        await serving([port, f"unix://{gain_socket}"])
+        tcp_ssd = ring_ssd(work, [port])
+        unix_ssd = ring_ssd(work, [f"unix://{gain_socket}"], name="ring-unix")
+        steps = sizes.remote_steps
+
+        async def over_unix() -> float:
+            return (await coupler_run(unix_ssd, steps, work / "out")).rate
+
+        async def over_tcp() -> float:
+            return (await coupler_run(tcp_ssd, steps, work / "out")).rate
+
+        async def stream() -> float:
+            return await raw_floor([f"unix:{raw_socket}"], steps, stream=True)
+
+        unix, tcp, floor = await interleaved(sizes.repeats, over_unix, over_tcp, stream)
+    assert unix is not None and tcp is not None and floor is not None
+    rows.append(Row("remote x1 over UDS", unix, "remote x1 over TCP", tcp, 1.2))
+    rows.append(Row("remote x1 over UDS", unix, "raw grpc.aio stream x1 UDS", floor, 0.8))
+    with contextlib.suppress(OSError):
+        os.rmdir(folder)
 
 
 async def proxy_fmu(
@@ -1095,6 +1145,20 @@ OPENRAILS_STEP_S = 0.2
 """OpenRails' lockstep step: the time a frame pair may take."""
 
 
+SECTIONS = (
+    cli_start,
+    watched_run,
+    chains,
+    remotes,
+    sockets,
+    proxy_fmu,
+    scale,
+    frames,
+    memory,
+)
+"""The suite's sections, in the order they run (``--sections`` picks some)."""
+
+
 def render_rate(positions: int) -> tuple[float, float, float]:
     """Frame pairs per second of one core (800 x 600 RGB + 200 x 150 depth, as the mock serves
     them) over ``positions`` places 250 m apart, and the median and worst milliseconds of a
@@ -1118,14 +1182,15 @@ def render_rate(positions: int) -> tuple[float, float, float]:
 
 
 async def only(case: str, steps: int) -> float:
-    work = Path(tempfile.mkdtemp(prefix="coupler-bench-"))
-    n = int(case.removeprefix("chain").removeprefix("remote"))
-    if case.startswith("chain"):
-        return (await coupler_run(chain_ssd(work, n), steps, work / "out")).rate
-    ports = free_ports(n)
-    with processes(gains(ports)):
-        await serving(ports)
-        return (await coupler_run(ring_ssd(work, ports), steps, work / "out")).rate
+    with tempfile.TemporaryDirectory(prefix="coupler-bench-") as folder:
+        work = Path(folder)
+        n = int(case.removeprefix("chain").removeprefix("remote"))
+        if case.startswith("chain"):
+            return (await coupler_run(chain_ssd(work, n), steps, work / "out")).rate
+        ports = free_ports(n)
+        with processes(gains(ports)):
+            await serving(ports)
+            return (await coupler_run(ring_ssd(work, ports), steps, work / "out")).rate
 
 
 def rss_verdict(row: Row) -> str:
@@ -1174,7 +1239,13 @@ def main() -> int:
         "benchmarks/suite.py --only chain10",
     )
     parser.add_argument("--steps", type=int, default=20000, help="steps of --only")
-    parser.add_argument("--raw-server", type=int, help=argparse.SUPPRESS)
+    parser.add_argument(
+        "--sections",
+        type=lambda text: [t.strip() for t in text.split(",") if t.strip()],
+        default=[],
+        help="run only these sections, comma-separated: " + ", ".join(s.__name__ for s in SECTIONS),
+    )
+    parser.add_argument("--raw-server", help=argparse.SUPPRESS)
     parser.add_argument("--frames", choices=["in", "out"], default="", help=argparse.SUPPRESS)
     parser.add_argument("--rss-probe", nargs=2, type=int, help=argparse.SUPPRESS)
     parser.add_argument("--replay-probe", nargs=2, help=argparse.SUPPRESS)
@@ -1185,6 +1256,9 @@ def main() -> int:
     if args.raw_server:
         asyncio.run(raw_server(args.raw_server, args.frames))
         return 0
+    unknown = sorted(set(args.sections) - {s.__name__ for s in SECTIONS})
+    if unknown:
+        parser.error(f"--sections: no section {', '.join(unknown)}")
     if args.rss_probe:
         port, steps = args.rss_probe
         print(json.dumps(asyncio.run(rss_probe(port, steps, 10_000))))
@@ -1213,7 +1287,7 @@ def main() -> int:
 
     channel = "native step channel" if steps.enabled() else "grpc.aio"
     fmu_steps = "in C" if steps.wanted() and kernel.library() is not None else "through Python"
-    rows, extra = asyncio.run(suite(sizes, log))
+    rows, extra = asyncio.run(suite(sizes, log, args.sections))
     extra["remote_steps"] = channel
     extra["fmu_steps"] = fmu_steps
     print()
@@ -1224,8 +1298,9 @@ def main() -> int:
         f"stepped {fmu_steps})"
     )
     print(table(rows))
-    print(f"time from run start to first step [s]: {extra['time_to_first_step_s']}")
-    print(f"100 participants: {extra['scale_100']}")
+    if "time_to_first_step_s" in extra:
+        print(f"time from run start to first step [s]: {extra['time_to_first_step_s']}")
+        print(f"100 participants: {extra['scale_100']}")
     print(f"took {time.perf_counter() - started:.0f} s")
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(

@@ -163,7 +163,7 @@ def test_a_second_fleet_is_refused_and_the_first_is_untouched(
     fleet_dir: Path, env: dict[str, str], consoles: list[Console]
 ) -> None:
     port = int(env["GAIN_PORT"])
-    first = Console(["fleet", "fleet.toml"], fleet_dir, env)
+    first = Console(["fleet", "fleet.toml", "--tcp"], fleet_dir, env)  # on TCP ports
     consoles.append(first)
     first.wait_for(first.out, r"services stay up; Ctrl-C stops them")
     (gain_pid,) = children_of(fleet_of(first.process.pid))
@@ -173,7 +173,7 @@ def test_a_second_fleet_is_refused_and_the_first_is_untouched(
     latest = fleet_dir / "out" / "latest"
     assert json.loads((latest / "summary.json").read_text())["status"] == "completed"
 
-    second = coupler(["fleet", "fleet.toml"], fleet_dir, env)
+    second = coupler(["fleet", "fleet.toml", "--tcp"], fleet_dir, env)
     assert second.returncode == 1
     assert "Traceback" not in second.stderr
     assert f"port {port} (gain) is in use by pid {gain_pid} (" in second.stderr
@@ -205,6 +205,12 @@ def test_results_directory_of_a_running_fleet_is_refused(
     first = Console(["fleet", "fleet.toml"], fleet_dir, env)
     consoles.append(first)
     first.wait_for(first.out, r"services stay up")
+    # on a unix socket in a private folder: its TCP port stays free
+    line = first.wait_for(first.out, r"^participants on unix sockets in ")
+    sockets = Path(line.split()[5])
+    assert (sockets / "gain.sock").is_socket()
+    assert sockets.stat().st_mode & 0o777 == 0o700
+    assert port_is_free(int(env["GAIN_PORT"]))
     moved = {**env, "GAIN_PORT": str(free_port())}  # free ports, same results directory
     second = coupler(["fleet", "fleet.toml"], fleet_dir, moved)
     assert second.returncode == 1
