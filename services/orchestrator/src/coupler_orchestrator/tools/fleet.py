@@ -298,7 +298,7 @@ class Fleet:
         the process already there)."""
         taken = []
         for service in self.spec.services:
-            for port in self._ports_of(service):
+            for port in self.ports_of(service):
                 if port_is_free(port):
                     continue
                 holders = holders_of(port)
@@ -318,7 +318,7 @@ class Fleet:
                 "its terminal, or kill the pid)"
             )
 
-    def _ports_of(self, service: ServiceSpec) -> tuple[int, ...]:
+    def ports_of(self, service: ServiceSpec) -> tuple[int, ...]:
         """The TCP ports ``service`` will listen on: its gRPC port not, on a socket."""
         ports = service.needed_ports()
         if self.on_socket(service):
@@ -407,6 +407,11 @@ class Fleet:
             lines = path.read_text(errors="replace").splitlines()[-15:]
         except OSError:
             lines = ["(no log)"]
+        if self.on_socket(service):  # a program of the user's may not know --socket
+            what += (
+                " (started with --socket PATH, to serve on a unix socket: a program without that "
+                "option needs socket = false in its [[service]], or run coupler fleet --tcp)"
+            )
         return f"service '{service.name}' {what}; last lines of {path}:\n" + "\n".join(lines)
 
     async def stop(self, grace: float = 10.0) -> None:
