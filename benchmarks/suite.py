@@ -56,6 +56,7 @@ import contextlib
 import json
 import os
 import platform
+import shutil
 import statistics
 import subprocess
 import sys
@@ -250,7 +251,6 @@ def openmcx_rate(binary: str, ssd: Path, steps: int) -> float:
     done.": its stepping loop with its result files, not reading, unpacking and initializing;
     as Coupler's first to last communication point). Results in ``results/`` beside the SSD."""
     import re
-    import shutil
 
     for made in ("results", "temp"):  # OpenMCx refuses to unpack into an existing folder
         shutil.rmtree(ssd.parent / made, ignore_errors=True)
@@ -1149,8 +1149,7 @@ async def sockets(
     assert unix is not None and tcp is not None and floor is not None
     rows.append(Row("remote x1 over UDS", unix, "remote x1 over TCP", tcp, 1.2))
     rows.append(Row("remote x1 over UDS", unix, "raw grpc.aio stream x1 UDS", floor, 0.8))
-    with contextlib.suppress(OSError):
-        os.rmdir(folder)
+    await asyncio.to_thread(shutil.rmtree, folder, True)  # the raw server leaves its socket
 
 
 async def proxy_fmu(
