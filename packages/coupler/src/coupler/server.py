@@ -27,6 +27,7 @@ from __future__ import annotations
 import asyncio
 import hmac
 import math
+import os
 import signal
 import time
 from collections.abc import AsyncIterator, Awaitable, Callable, Coroutine
@@ -405,7 +406,7 @@ class ParticipantServer:
         self.max_message_bytes = max_message_bytes
         """The values of one message, Binary and String together, may have this many bytes;
         more fails the call as RESOURCE_EXHAUSTED naming the channel (docs/protocol.md)."""
-        self.unix_socket = unix_socket
+        self.unix_socket = Path(os.path.abspath(unix_socket)) if unix_socket else None
         self.host = host
         self.requested_port = port
         self.reflection = reflection
@@ -451,11 +452,7 @@ class ParticipantServer:
                 (SERVICE_NAME, health.SERVICE_NAME, reflection.SERVICE_NAME), server
             )
         if self.unix_socket is not None:
-            bind = f"unix:{self.unix_socket}"
-            if credentials is None:
-                self.port = server.add_insecure_port(bind)
-            else:
-                self.port = server.add_secure_port(bind, credentials)
+            ports.add_grpc_socket(server, self.unix_socket, credentials, "the participant")
         else:
             self.port = ports.add_grpc_port(
                 server, self.host, self.requested_port, credentials, "the participant"
@@ -544,8 +541,10 @@ async def serve(
     security: ServerSecurity | None = None,
     on_started: Callable[[ParticipantServer], None] | None = None,
     max_message_bytes: int = MAX_MESSAGE_BYTES,
+    unix_socket: Path | None = None,
 ) -> None:
-    """Serve ``participant`` until SIGTERM or SIGINT, then shut down gracefully."""
+    """Serve ``participant`` until SIGTERM or SIGINT, then shut down gracefully; on
+    ``unix_socket`` (``unix:///PATH``, same host only) instead of ``host:port`` when given."""
     server = ParticipantServer(
         participant,
         host=host,
@@ -553,6 +552,7 @@ async def serve(
         reflection=reflection,
         security=security,
         max_message_bytes=max_message_bytes,
+        unix_socket=unix_socket,
     )
     stop = asyncio.Event()
     loop = asyncio.get_running_loop()

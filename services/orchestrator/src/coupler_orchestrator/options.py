@@ -107,6 +107,10 @@ class RunOptions:
     directory (docs/replay.md)."""
     replays: Mapping[str, Path] = field(default_factory=dict)
     """Component -> recording (a .crec file or a results directory) served in its place."""
+    addresses: Mapping[str, str] = field(default_factory=dict)
+    """Where remote participants really are: a component's name, or an address as the SSD's
+    sources expand to (``grpc://127.0.0.1:50061``), -> the address to use instead
+    (``unix:///PATH``: ``coupler fleet`` serves its local participants on unix sockets)."""
     security: ClientSecurity = field(default_factory=ClientSecurity.from_environment)
     """TLS trust, client certificate and token for every remote participant (default: the
     ``COUPLER_TLS_*`` and ``COUPLER_TOKEN_FILE`` environment variables)."""

@@ -130,6 +130,14 @@ def run_options(command: argparse.ArgumentParser) -> None:
         help="override a parameter or input start value (repeatable; a single FMU's "
         "parameters may be given as NAME=VALUE)",
     )
+    command.add_argument(
+        "--address",
+        action="append",
+        default=[],
+        metavar="COMPONENT=ADDRESS",
+        help="reach COMPONENT's participant at ADDRESS instead of its SSD source, e.g. "
+        "Gain=unix:///tmp/gain.sock (repeatable)",
+    )
     command.add_argument("--run-id", help="run id sent to participants (default: a random UUID)")
     command.add_argument(
         "--lease",
@@ -282,6 +290,7 @@ def options_of(args: argparse.Namespace) -> RunOptions:
         parquet=getattr(args, "parquet", False),
         record=_listed(getattr(args, "record", ())),
         replays=_replays_of(getattr(args, "replay", ())),
+        addresses=_addresses_of(args.address),
         **({"run_id": args.run_id} if args.run_id else {}),
     )
 
@@ -299,3 +308,13 @@ def _replays_of(items: Sequence[str]) -> dict[str, Path]:
             raise CouplerError(f"--replay {item!r}: write COMPONENT=RECORDING")
         replays[component] = Path(path)
     return replays
+
+
+def _addresses_of(items: Sequence[str]) -> dict[str, str]:
+    addresses = {}
+    for item in items:
+        component, sep, address = item.partition("=")
+        if not sep or not component or not address:
+            raise CouplerError(f"--address {item!r}: write COMPONENT=ADDRESS")
+        addresses[component] = address
+    return addresses

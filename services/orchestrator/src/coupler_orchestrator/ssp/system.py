@@ -201,16 +201,7 @@ class SystemReader:
                 recording = self.documents.resolve(raw, element, self.display, what="recording")
             source = f"{REPLAY_SCHEME}{recording if raw else ''}{sep}{recorded}"
         else:
-            parts = urlsplit(source)
-            try:
-                port = parts.port
-            except ValueError:
-                port = None
-            if parts.scheme not in ("grpc", "grpcs") or not parts.hostname or port is None:
-                raise ScenarioError(
-                    f"{what}: source '{source}' is not of the form grpc://HOST:PORT (or "
-                    f"grpcs:// for TLS); fix it"
-                )
+            _check_address(source, what)
         implementation = element.get("implementation", "any")
         if implementation == "ModelExchange":
             self.warnings.append(
@@ -575,3 +566,20 @@ def _undeclared(flat: str, connector: str, component: Component, *, start: bool)
         f'kind="{kind}"/> to its <ssd:Connectors> (`coupler describe` lists the '
         f"participant's channels)"
     )
+
+
+def _check_address(source: str, what: str) -> None:
+    """A remote component's source: ``grpc://HOST:PORT``, ``grpcs://HOST:PORT`` or
+    ``unix:///ABSOLUTE/PATH`` (a participant on this host, over its unix socket)."""
+    parts = urlsplit(source)
+    if parts.scheme == "unix" and not parts.netloc and parts.path.startswith("/"):
+        return
+    try:
+        port = parts.port
+    except ValueError:
+        port = None
+    if parts.scheme not in ("grpc", "grpcs") or not parts.hostname or port is None:
+        raise ScenarioError(
+            f"{what}: source '{source}' is not of the form grpc://HOST:PORT (grpcs:// for TLS, "
+            f"unix:///ABSOLUTE/PATH for a unix socket on this host); fix it"
+        )
