@@ -20,6 +20,7 @@ from pathlib import Path
 import pytest
 
 from coupler.testing import process_group, wait_until
+from coupler_dev.engine import Engine
 from coupler_dev.hygiene import SESSION_VARIABLE
 
 INI = """\
@@ -146,6 +147,44 @@ def test_a_forgotten_temp_folder_fails_its_test_named_and_is_removed(tmp_path: P
     assert "2 passed, 1 error" in out
     assert not Path(made).exists()
     assert not Path(made).parent.exists()  # the session's temp folder ends with it
+
+
+ENGINE = Engine.find()
+
+
+@pytest.mark.skipif(ENGINE is None, reason="no container engine runs on this machine")
+def test_a_forgotten_network_and_volume_fail_their_test_named(tmp_path: Path) -> None:
+    """With an engine running, what a test leaves in it is named (never removed: the engine is
+    the machine's); what the test removes again is not."""
+    tag = f"coupler-hygiene-{uuid.uuid4().hex[:8]}"
+    try:
+        code, out = pytest_on(
+            tmp_path,
+            f"""
+            import subprocess
+
+            def docker(*args):
+                subprocess.run(["docker", *args], check=True, capture_output=True)
+
+            def test_forgets():
+                docker("network", "create", "{tag}-net")
+                docker("volume", "create", "{tag}-vol")
+
+            def test_cleans_up():
+                docker("network", "create", "{tag}-tidy")
+                docker("network", "rm", "{tag}-tidy")
+            """,
+        )
+        assert code == 1, out
+        assert re.search(rf"^  network {tag}-net \(driver bridge\)$", out, re.MULTILINE), out
+        assert re.search(rf"^  volume {tag}-vol \(at \S+\)$", out, re.MULTILINE), out
+        assert "ERROR at teardown of test_forgets" in out
+        assert "the engine's objects left as they are" in out
+        assert "2 passed, 1 error" in out
+        assert f"{tag}-tidy" not in out
+    finally:
+        for kind in ("network", "volume"):
+            subprocess.run(["docker", kind, "rm", f"{tag}-{kind[:3]}"], capture_output=True)
 
 
 def test_what_a_test_owns_passes_and_wider_fixtures_are_checked_when_torn_down(

@@ -13,6 +13,9 @@ after the teardown it fails the test, naming what the test left behind:
 - an **entry of the session's temp folder**: the session gets a ``TMPDIR`` of its own (pytest's
   ``tmp_path`` folders stay where pytest keeps them), so whatever a test or the code it runs
   makes with ``tempfile`` and does not remove is seen.
+- a **container, network or volume** of the machine's container engine, when one runs
+  (``coupler_dev.engine``): one that appeared during the test and is still there. It is named,
+  never removed: the engine is the machine's, shared with whatever else runs on it.
 
 What is left is then ended (SIGTERM, then SIGKILL) or removed, so that the next test starts
 clean. Processes of other sessions on the machine are never counted nor touched.
@@ -47,6 +50,7 @@ from typing import Any
 
 import pytest
 
+from coupler_dev.engine import Engine, EngineObject
 from coupler_dev.leftovers import (
     ProcessInfo,
     environment_value,
@@ -84,8 +88,8 @@ def shared_temp(name: str) -> bool:
 
 
 MARKER = (
-    "known_leak(temp=GLOBS, process=GLOBS, port=GLOBS, reason=TEXT): the test leaves what the "
-    "globs (one or a tuple) match behind because of a known bug named in reason "
+    "known_leak(temp=GLOBS, process=GLOBS, port=GLOBS, engine=GLOBS, reason=TEXT): the test "
+    "leaves what the globs (one or a tuple) match behind because of a known bug named in reason "
     "(coupler_dev.hygiene removes it and lists it at the end of the run instead of failing "
     "the test)"
 )
@@ -98,16 +102,18 @@ class Census:
     pids: frozenset[int]
     sockets: dict[int, str]
     entries: frozenset[str]
+    engine: frozenset[EngineObject] = frozenset()
 
 
 @dataclass(frozen=True)
 class Leftover:
     """One thing left behind, described for a person."""
 
-    kind: str  # "process", "port", "temp"
+    kind: str  # "process", "port", "temp", "engine"
     name: str  # what a known_leak glob is matched against
     text: str
     pid: int = 0  # a process's
+    thing: EngineObject | None = None  # a container's, network's or volume's
 
 
 @dataclass
@@ -118,6 +124,7 @@ class Holding:
     pids: set[int] = field(default_factory=set)
     sockets: dict[int, str] = field(default_factory=dict)
     entries: set[str] = field(default_factory=set)
+    engine: set[EngineObject] = field(default_factory=set)
 
 
 def pytest_configure(config: pytest.Config) -> None:
@@ -137,6 +144,8 @@ class Hygiene:
         self.saved_environment: dict[str, str | None] = {}
         self.saved_tempdir: str | None = None
         self.before: Census | None = None
+        self.engine: Engine | None = None
+        self.engine_at_start: frozenset[EngineObject] = frozenset()
         self.holdings: dict[Any, Holding] = {}
         self.reported_sockets: set[int] = set()
         self.found: list[str] = []  # what failed, for the summary at the end
@@ -162,6 +171,9 @@ class Hygiene:
             }
         )
         self.saved_tempdir, tempfile.tempdir = tempfile.tempdir, str(self.root)
+        self.engine = Engine.find()
+        if self.engine is not None:
+            self.engine_at_start = self.engine.objects()
         self.started = time.monotonic()
 
     def _set_environment(self, values: dict[str, str]) -> None:
@@ -228,7 +240,8 @@ class Hygiene:
 
     def _census(self) -> Census:
         entries = frozenset(os.listdir(self.root)) if self.root is not None else frozenset()
-        return Census(frozenset(process_ids()), listening_sockets(), entries)
+        engine = self.engine.objects() if self.engine is not None else frozenset()
+        return Census(frozenset(process_ids()), listening_sockets(), entries, engine)
 
     def _leftovers(self, before: Census) -> list[Leftover]:
         """What is new since ``before`` and this session's; what runs is given ``SETTLE_S`` to
@@ -246,7 +259,15 @@ class Hygiene:
         left = [process_leftover(info) for info in processes.values()]
         left += [port_leftover(address, holder) for address, holder in sockets.values()]
         left += self._new_entries(before)
+        left += self._new_engine_objects(before.engine)
         return left
+
+    def _new_engine_objects(self, before: frozenset[EngineObject]) -> list[Leftover]:
+        if self.engine is None:
+            return []
+        owned = {thing for holding in self.holdings.values() for thing in holding.engine}
+        new = self.engine.objects() - before - owned
+        return [engine_leftover(thing) for thing in sorted(new, key=lambda t: (t.kind, t.name))]
 
     def _new_processes(self, before: Census) -> dict[int, ProcessInfo]:
         return self._claim(process_ids() - before.pids)
@@ -336,6 +357,7 @@ class Hygiene:
         for leftover in left:
             if leftover.kind == "temp" and self.root is not None:
                 remove(self.root / leftover.name)
+
         self.waited += time.perf_counter() - began
 
     def _allow_known(self, item: pytest.Item, left: list[Leftover]) -> list[Leftover]:
@@ -382,6 +404,8 @@ class Hygiene:
             holding.pids = set(processes)
             held = self._held(self._new_sockets(before), processes)
             holding.sockets = {inode: address for inode, (address, _) in held.items()}
+            if self.engine is not None:
+                holding.engine = set(self.engine.objects() - before.engine)
             if self.root is not None:
                 holding.entries = {
                     name
@@ -428,6 +452,8 @@ class Hygiene:
                 for name in sorted(holding.entries)
                 if os.path.lexists(self.root / name)
             ]
+        if self.engine is not None and holding.engine:
+            left += [engine_leftover(t) for t in holding.engine & self.engine.objects()]
         return left
 
     # -- the end of the session -------------------------------------------------------------------
@@ -443,6 +469,7 @@ class Hygiene:
             for inode, address in listening_sockets().items()
             if inode in mine
         ]
+        left += self._new_engine_objects(self.engine_at_start)
         if self.root is not None:
             left += [
                 temp_leftover(self.root / name)
@@ -479,6 +506,14 @@ def describe(left: list[Leftover]) -> str:
     done = [
         *(["the processes were ended"] if "process" in kinds else []),
         *(["the temp entries removed"] if "temp" in kinds else []),
+        *(
+            [
+                "the engine's objects left as they are: remove them (docker rm -f / network rm / "
+                "volume rm)"
+            ]
+            if "engine" in kinds
+            else []
+        ),
     ]
     return "\n".join(
         [
@@ -502,6 +537,12 @@ def process_leftover(info: ProcessInfo) -> Leftover:
 
 def port_leftover(address: str, holder: str) -> Leftover:
     return Leftover("port", address, f"port {address} listening, {holder}")
+
+
+def engine_leftover(thing: EngineObject) -> Leftover:
+    return Leftover(
+        "engine", thing.name, f"{thing.kind} {thing.name} ({thing.detail})", thing=thing
+    )
 
 
 def temp_leftover(path: Path) -> Leftover:
