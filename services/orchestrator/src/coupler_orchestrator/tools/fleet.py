@@ -53,7 +53,7 @@ from coupler.errors import CouplerError, ScenarioError
 from coupler.health import probe
 from coupler.ports import holders_of, port_is_free
 from coupler_orchestrator.outputs.files import default_base
-from coupler_orchestrator.ssp.expansion import expand
+from coupler_orchestrator.ssp.expansion import expand, variables_in
 
 log = structlog.get_logger("coupler.fleet")
 
@@ -154,6 +154,13 @@ def _service(path: Path, raw: Mapping[str, Any], env: Mapping[str, str]) -> Serv
     what = f"{path} service '{raw['name']}'"
     command = tuple(expand(str(c), env, what=what) for c in raw["command"])
     health = expand(raw["health"], env, what=what)
+    if not _health_url(health):
+        used = variables_in(raw["health"])
+        given = f" (with {', '.join(used)} from the environment)" if used else ""
+        raise ScenarioError(
+            f"{what}: health '{raw['health']}'{given} is not grpc://HOST:PORT, grpcs://HOST:PORT "
+            "or an http URL; fix it" + (" or the variables" if used else "")
+        )
     variables: dict[int, str] = {}
     for text, value in [*zip(raw["command"], command, strict=True), (raw["health"], health)]:
         for match in _VARIABLE.finditer(str(text)):
@@ -169,6 +176,17 @@ def _service(path: Path, raw: Mapping[str, Any], env: Mapping[str, str]) -> Serv
         ports=tuple(int(p) for p in raw.get("ports", ())),
         port_variables=variables,
     )
+
+
+def _health_url(text: str) -> bool:
+    try:
+        parts = urlsplit(text)
+        port = parts.port
+    except ValueError:
+        return False
+    if parts.scheme in ("http", "https"):
+        return bool(parts.hostname)
+    return parts.scheme in ("grpc", "grpcs") and bool(parts.hostname) and port is not None
 
 
 def port_variables(path: Path) -> tuple[str, ...]:
