@@ -2,6 +2,7 @@
 
     make bench                  # quick (under 5 min on two cores)
     make bench ARGS=--full      # more steps, 100 participants longer
+    suite.py --sections sockets # some sections only
 
 Cases (steps/s, median of the repetitions; Coupler and its reference interleaved):
 
@@ -10,11 +11,19 @@ Cases (steps/s, median of the repetitions; Coupler and its reference interleaved
   COUPLER_NATIVE_STEPS=0 through Python, one ctypes call per FMI call); against a
   hand-written FMPy FMU2Slave loop over the same FMUs (every output read each step) and
   libcosim (libcosimpy, C++) with the same connections;
+- in-process FMU chain x2 and x10 against OpenMCx (C; the binary named by $OPENMCX, else the
+  rows are skipped, saying so): the same chains with OpenMCx's task annotation (Jacobi,
+  ``parallel_single_thread``), OpenMCx's simulation phase timed as it reports it; and a check:
+  every value of OpenMCx's result files equals Coupler's results.csv within 1e-9 of the
+  column's largest magnitude (a row whose results differ FAILs);
 - remote xN: N example gain participants, each its own process, chained y -> u in a ring,
   Jacobi, over the native step channel when it is built (COUPLER_NATIVE_STEPS=0 measures the
   grpc.aio path instead); against raw grpc.aio round trips to N trivial servers (processes
   answering the same messages: unary DoStep and the bidi StepStream) and, for N = 1, mosaik 3
   with one remote simulator over its TCP API (a local source and sink around it);
+- remote x1 over UDS: remote x1 with the gain participant on a unix socket (``--socket``, as
+  ``coupler fleet`` serves local participants) against the same over TCP, and against a raw
+  grpc.aio StepStream to a trivial server on a unix socket;
 - proxy FMU x1: the gain participant exported by `coupler export-fmu` (FMI 2, its C++ binary
   calling the participant over its StepStream) run in-process by Coupler and by a hand-written
   FMPy loop, against `coupler run` driving the same participant directly (its stream);
@@ -47,6 +56,7 @@ import contextlib
 import json
 import os
 import platform
+import shutil
 import statistics
 import subprocess
 import sys
@@ -73,6 +83,8 @@ class Row:
     target: float | None = None
     """Minimum ratio coupler / reference."""
     note: str = ""
+    equal: bool | None = None
+    """Whether both computed the same results, where the row checks that (a FAIL if not)."""
 
     @property
     def ratio(self) -> float | None:
@@ -80,6 +92,8 @@ class Row:
 
     @property
     def verdict(self) -> str:
+        if self.equal is False:
+            return "FAIL"
         if self.target is None or self.ratio is None:
             return ""
         return "PASS" if self.ratio >= self.target else "FAIL"
@@ -140,12 +154,13 @@ def chain_ssd(folder: Path, n: int) -> Path:
     return _ssd(folder / f"chain{n}.ssd", elements, connections)
 
 
-def ring_ssd(folder: Path, ports: Sequence[int]) -> Path:
-    """Gain participants at ``ports``, Gain_k.y -> Gain_k+1.u, the last one's y -> the first's u."""
+def ring_ssd(folder: Path, ports: Sequence[int | str], name: str = "ring") -> Path:
+    """Gain participants at ``ports`` (a port on loopback, or an address), Gain_k.y ->
+    Gain_k+1.u, the last one's y -> the first's u."""
     n = len(ports)
     elements = [
         f'<ssd:Component name="Gain{k}" type="application/x-coupler-grpc" '
-        f'source="grpc://127.0.0.1:{port}"><ssd:Connectors>{GAIN}</ssd:Connectors>'
+        f'source="{address_of(port)}"><ssd:Connectors>{GAIN}</ssd:Connectors>'
         "</ssd:Component>"
         for k, port in enumerate(ports, start=1)
     ]
@@ -154,7 +169,12 @@ def ring_ssd(folder: Path, ports: Sequence[int]) -> Path:
         f'endElement="Gain{k % n + 1}" endConnector="u"/>'
         for k in range(1, n + 1)
     ]
-    return _ssd(folder / f"ring{n}.ssd", elements, connections)
+    return _ssd(folder / f"{name}{n}.ssd", elements, connections)
+
+
+def address_of(server: int | str) -> str:
+    """A participant's address: ``grpc://127.0.0.1:PORT`` for a port, else as given."""
+    return f"grpc://127.0.0.1:{server}" if isinstance(server, int) else server
 
 
 def _ssd(path: Path, elements: Sequence[str], connections: Sequence[str]) -> Path:
@@ -177,6 +197,126 @@ def _ssd(path: Path, elements: Sequence[str], connections: Sequence[str]) -> Pat
         encoding="utf-8",
     )
     return path
+
+
+# ------------------------------------------------------------------------------ OpenMCx
+
+OPENMCX_STEPS = 20000
+"""The most steps the OpenMCx rows run (200 s simulated): OpenMCx's summed time drifts from the
+exact grid as it goes, past 1e-9 of the Source's sine amplitude by t = 335 s (a 600 s run: 1.0e-9
+at a zero crossing), where the check could no longer tell a wrong result from the drift."""
+
+OPENMCX_TOLERANCE = 1e-9
+"""Largest difference between OpenMCx's value and Coupler's, relative to the column's largest
+magnitude: OpenMCx gives its FMUs a summed time (t + h + h ...), Coupler the exact grid, which
+shows only where a value crosses zero (docs/openmcx.md)."""
+
+
+def openmcx_missing(binary: str) -> str:
+    """Why ``$OPENMCX`` cannot run; empty when it can."""
+    if not binary:
+        return (
+            "OPENMCX is not set (the path of an openmcx binary; docs/performance.md says how to "
+            "build one)"
+        )
+    if not (Path(binary).is_file() and os.access(binary, os.X_OK)):
+        return f"OPENMCX={binary} is not an executable file"
+    return ""
+
+
+def openmcx_chain_ssd(folder: Path, n: int, steps: int) -> Path:
+    """``chain_ssd``'s chain for ``steps`` steps, with OpenMCx's task annotation: its Jacobi
+    scheme (``parallel_single_thread``, Coupler's default; OpenMCx's own default runs a thread
+    per component) and the step. In a folder of its own: OpenMCx writes beside it."""
+    own = folder / f"openmcx-chain{n}"
+    own.mkdir(exist_ok=True)
+    task = (
+        '<ssd:Annotations><ssc:Annotation type="com.avl.model.connect.ssp.task" '
+        'xmlns:mc="com.avl.model.connect.ssp.task"><mc:Task stepType="parallel_single_thread" '
+        f'deltaTime="{STEP}" endType="end_time"/></ssc:Annotation></ssd:Annotations>'
+    )
+    text = chain_ssd(own, n).read_text(encoding="utf-8")
+    text = text.replace(
+        '<ssd:DefaultExperiment startTime="0.0" stopTime="1.0"/>',
+        f'<ssd:DefaultExperiment startTime="0.0" stopTime="{steps * STEP:.2f}">{task}'
+        "</ssd:DefaultExperiment>",
+    )
+    path = own / "chain.ssd"
+    path.write_text(text, encoding="utf-8")
+    return path
+
+
+def openmcx_rate(binary: str, ssd: Path, steps: int) -> float:
+    """Steps/s of OpenMCx's simulation phase (the wall time it reports after "Simulation
+    done.": its stepping loop with its result files, not reading, unpacking and initializing;
+    as Coupler's first to last communication point). Results in ``results/`` beside the SSD."""
+    import re
+
+    for made in ("results", "temp"):  # OpenMCx refuses to unpack into an existing folder
+        shutil.rmtree(ssd.parent / made, ignore_errors=True)
+    done = subprocess.run(
+        [binary, "-r", "results", "-t", "temp", "-L", "openmcx.log", ssd.name],
+        cwd=ssd.parent,
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    found = re.search(r"Simulation done\.[^\n]*\n[^\n]*\n[^\n]*Wall-Time:\s*([\d.]+)s", done.stdout)
+    if done.returncode != 0 or found is None:
+        raise RuntimeError(f"OpenMCx failed on {ssd} ({done.returncode}): {done.stdout[-1500:]}")
+    return steps / float(found.group(1))
+
+
+def openmcx_differences(results: Path, coupler_csv: Path) -> tuple[list[str], float]:
+    """Where OpenMCx's result files (``<Component>_res.csv``) and Coupler's results.csv differ
+    by more than OPENMCX_TOLERANCE, and the largest difference seen (of the column's scale)."""
+    import csv
+
+    with coupler_csv.open(newline="") as file:
+        ours = list(csv.DictReader(file))
+    problems: list[str] = []
+    worst = 0.0
+    for path in sorted(results.glob("*_res.csv")):
+        component = path.name.removesuffix("_res.csv")
+        with path.open(newline="") as file:
+            lines = list(csv.reader(file))
+        header, theirs = [h.strip() for h in lines[1]], lines[3:]
+        if len(theirs) != len(ours):
+            problems.append(f"{path.name}: {len(theirs)} rows, Coupler's {len(ours)}")
+            continue
+        for j, name in enumerate(header[1:], start=1):
+            column = f"{component}.{name}"
+            if column not in ours[0]:
+                problems.append(f"{path.name}: {name}, which Coupler's results.csv has not")
+                continue
+            pairs = [
+                (_value(r[j]), _value(row[column])) for r, row in zip(theirs, ours, strict=True)
+            ]
+            scale = max((abs(a) for a, _ in pairs if isinstance(a, float)), default=0.0) or 1.0
+            for (a, b), r in zip(pairs, theirs, strict=True):
+                if isinstance(a, float) and isinstance(b, float):
+                    error = abs(a - b) / scale
+                    worst = max(worst, error)
+                    if error <= OPENMCX_TOLERANCE:
+                        continue
+                elif a == b:
+                    continue
+                problems.append(f"{column} at t={r[0].strip()}: Coupler {b!r}, OpenMCx {a!r}")
+                break
+    if not any(results.glob("*_res.csv")):
+        problems.append(f"OpenMCx wrote no result files into {results}")
+    return problems, worst
+
+
+def _value(text: str) -> float | str:
+    """A result file's value: a number (booleans as 1 and 0), else the text."""
+    text = text.strip().strip('"')
+    if text.lower() in ("true", "false"):
+        return float(text.lower() == "true")
+    try:
+        return float(text)
+    except ValueError:
+        return text
 
 
 # ------------------------------------------------------------------------------ Coupler
@@ -384,15 +524,15 @@ def free_ports(count: int) -> list[int]:
     return [free_port() for _ in range(count)]
 
 
-async def serving(ports: Sequence[int], within: float = 180.0) -> None:
+async def serving(ports: Sequence[int | str], within: float = 180.0) -> None:
     from coupler.errors import CouplerError
     from coupler.health import probe
 
-    async def one(port: int) -> None:
+    async def one(port: int | str) -> None:
         deadline = time.monotonic() + within
         while True:
             try:
-                await probe(f"grpc://127.0.0.1:{port}", connect_timeout=2.0)
+                await probe(address_of(port), connect_timeout=2.0)
                 return
             except CouplerError:
                 if time.monotonic() > deadline:
@@ -453,9 +593,10 @@ def _frame_messages(direction: str) -> tuple[Any, Any]:
     return request, response
 
 
-async def raw_server(port: int, frames: str = "") -> None:
-    """A trivial GRPCComponentService: every step answered with the same outputs (``frames``
-    ``out``: a camera frame; ``in``: nothing, its requests carry one)."""
+async def raw_server(where: str, frames: str = "") -> None:
+    """A trivial GRPCComponentService on a port (``where`` a number) or a unix socket (``where``
+    ``unix:PATH``): every step answered with the same outputs (``frames`` ``out``: a camera
+    frame; ``in``: nothing, its requests carry one)."""
     import grpc
 
     from coupler.v1 import component_pb2_grpc as rpc
@@ -472,19 +613,21 @@ async def raw_server(port: int, frames: str = "") -> None:
 
     server = grpc.aio.server(options=FRAME_GRPC_OPTIONS)
     rpc.add_GRPCComponentServiceServicer_to_server(Trivial(), server)
-    server.add_insecure_port(f"127.0.0.1:{port}")
+    server.add_insecure_port(f"127.0.0.1:{where}" if where.isdigit() else where)
     await server.start()
     await server.wait_for_termination()
 
 
-async def raw_floor(ports: Sequence[int], steps: int, *, stream: bool) -> float:
-    """Steps/s of bare grpc.aio round trips to every server per step (gathered)."""
+async def raw_floor(servers: Sequence[int | str], steps: int, *, stream: bool) -> float:
+    """Steps/s of bare grpc.aio round trips to every server (a port, or ``unix:PATH``) per
+    step (gathered)."""
     import grpc
 
     from coupler.v1 import component_pb2_grpc as rpc
 
     request, _ = _raw_messages()
-    channels = [grpc.aio.insecure_channel(f"127.0.0.1:{p}") for p in ports]
+    targets = [f"127.0.0.1:{s}" if isinstance(s, int) else s for s in servers]
+    channels = [grpc.aio.insecure_channel(t) for t in targets]
     try:
         for channel in channels:
             await asyncio.wait_for(channel.channel_ready(), 30)
@@ -805,12 +948,15 @@ async def interleaved(
     return [median_of(s) if s else None for s in samples]
 
 
-async def suite(sizes: Sizes, log: Callable[[str], None]) -> tuple[list[Row], dict[str, Any]]:
+async def suite(
+    sizes: Sizes, log: Callable[[str], None], only: Sequence[str] = ()
+) -> tuple[list[Row], dict[str, Any]]:
     rows: list[Row] = []
     extra: dict[str, Any] = {}
-    work = Path(tempfile.mkdtemp(prefix="coupler-bench-"))
-    for section in (cli_start, watched_run, chains, remotes, proxy_fmu, scale, frames, memory):
-        await section(sizes, log, work, rows, extra)
+    with tempfile.TemporaryDirectory(prefix="coupler-bench-") as folder:
+        for section in SECTIONS:
+            if not only or section.__name__ in only:
+                await section(sizes, log, Path(folder), rows, extra)
     return rows, extra
 
 
@@ -892,6 +1038,49 @@ async def chains(
                             note="stretch target"))  # fmt: skip
 
 
+async def openmcx(
+    sizes: Sizes, log: Callable[[str], None], work: Path, rows: list[Row], extra: dict[str, Any]
+) -> None:
+    """The FMU chains against OpenMCx (the binary ``$OPENMCX``) on the same SSD, and a check
+    that both computed the same results."""
+    binary = os.environ.get("OPENMCX", "")
+    why = openmcx_missing(binary)
+    if why:
+        log(f"OpenMCx rows skipped: {why}")
+        extra.setdefault("skipped", []).append(f"chain x2 and x10 vs OpenMCx: skipped, {why}")
+        return
+    for n in (2, 10):
+        log(f"in-process FMU chain x{n} against OpenMCx ({binary})")
+        steps = min(sizes.chain_steps, OPENMCX_STEPS) // (1 if n == 2 else 2)
+        ssd = openmcx_chain_ssd(work, n, steps)
+        out = work / f"openmcx-coupler{n}"
+
+        async def coupler_chain(ssd: Path = ssd, steps: int = steps, out: Path = out) -> float:
+            return (await coupler_run(ssd, steps, out)).rate
+
+        async def openmcx_chain(ssd: Path = ssd, steps: int = steps) -> float:
+            return await asyncio.to_thread(openmcx_rate, binary, ssd, steps)
+
+        coupler, reference = await interleaved(sizes.repeats, coupler_chain, openmcx_chain)
+        assert coupler is not None and reference is not None
+        problems, worst = openmcx_differences(ssd.parent / "results", out / "results.csv")
+        rows.append(
+            Row(
+                f"in-process FMU chain x{n}",
+                coupler,
+                "OpenMCx (C)",
+                reference,
+                1.2,
+                note=(
+                    f"results equal, worst {worst:.1e} of the column's scale"
+                    if not problems
+                    else f"RESULTS DIFFER: {'; '.join(problems[:3])}"
+                ),
+                equal=not problems,
+            )
+        )
+
+
 async def remotes(
     sizes: Sizes, log: Callable[[str], None], work: Path, rows: list[Row], extra: dict[str, Any]
 ) -> None:
@@ -928,6 +1117,39 @@ async def remotes(
             [mosaik_figure] = await interleaved(sizes.repeats, mosaik_once)
             if mosaik_figure is not None:
                 rows.append(Row("remote x1", coupler, "mosaik 3 (TCP)", mosaik_figure, 1.25))
+
+
+async def sockets(
+    sizes: Sizes, log: Callable[[str], None], work: Path, rows: list[Row], extra: dict[str, Any]
+) -> None:
+    """remote x1 with the gain participant on a unix socket (as ``coupler fleet`` serves local
+    participants) against the same on TCP, and against a bare grpc.aio stream over a socket."""
+    log("remote x1 over a unix socket, over TCP, and a raw grpc.aio stream over a unix socket")
+    folder = Path(tempfile.mkdtemp(prefix="cb-", dir="/tmp"))  # a socket path has 107 bytes
+    gain_socket, raw_socket = folder / "gain.sock", folder / "raw.sock"
+    [port] = free_ports(1)
+    on_socket = [sys.executable, "-m", "coupler.examples", "gain", "--socket", str(gain_socket)]
+    raw = [sys.executable, __file__, "--raw-server", f"unix:{raw_socket}"]
+    with processes([*gains([port]), on_socket, raw]):
+        await serving([port, f"unix://{gain_socket}"])
+        tcp_ssd = ring_ssd(work, [port])
+        unix_ssd = ring_ssd(work, [f"unix://{gain_socket}"], name="ring-unix")
+        steps = sizes.remote_steps
+
+        async def over_unix() -> float:
+            return (await coupler_run(unix_ssd, steps, work / "out")).rate
+
+        async def over_tcp() -> float:
+            return (await coupler_run(tcp_ssd, steps, work / "out")).rate
+
+        async def stream() -> float:
+            return await raw_floor([f"unix:{raw_socket}"], steps, stream=True)
+
+        unix, tcp, floor = await interleaved(sizes.repeats, over_unix, over_tcp, stream)
+    assert unix is not None and tcp is not None and floor is not None
+    rows.append(Row("remote x1 over UDS", unix, "remote x1 over TCP", tcp, 1.2))
+    rows.append(Row("remote x1 over UDS", unix, "raw grpc.aio stream x1 UDS", floor, 0.8))
+    await asyncio.to_thread(shutil.rmtree, folder, True)  # the raw server leaves its socket
 
 
 async def proxy_fmu(
@@ -1095,6 +1317,21 @@ OPENRAILS_STEP_S = 0.2
 """OpenRails' lockstep step: the time a frame pair may take."""
 
 
+SECTIONS = (
+    cli_start,
+    watched_run,
+    chains,
+    openmcx,
+    remotes,
+    sockets,
+    proxy_fmu,
+    scale,
+    frames,
+    memory,
+)
+"""The suite's sections, in the order they run (``--sections`` picks some)."""
+
+
 def render_rate(positions: int) -> tuple[float, float, float]:
     """Frame pairs per second of one core (800 x 600 RGB + 200 x 150 depth, as the mock serves
     them) over ``positions`` places 250 m apart, and the median and worst milliseconds of a
@@ -1118,14 +1355,15 @@ def render_rate(positions: int) -> tuple[float, float, float]:
 
 
 async def only(case: str, steps: int) -> float:
-    work = Path(tempfile.mkdtemp(prefix="coupler-bench-"))
-    n = int(case.removeprefix("chain").removeprefix("remote"))
-    if case.startswith("chain"):
-        return (await coupler_run(chain_ssd(work, n), steps, work / "out")).rate
-    ports = free_ports(n)
-    with processes(gains(ports)):
-        await serving(ports)
-        return (await coupler_run(ring_ssd(work, ports), steps, work / "out")).rate
+    with tempfile.TemporaryDirectory(prefix="coupler-bench-") as folder:
+        work = Path(folder)
+        n = int(case.removeprefix("chain").removeprefix("remote"))
+        if case.startswith("chain"):
+            return (await coupler_run(chain_ssd(work, n), steps, work / "out")).rate
+        ports = free_ports(n)
+        with processes(gains(ports)):
+            await serving(ports)
+            return (await coupler_run(ring_ssd(work, ports), steps, work / "out")).rate
 
 
 def rss_verdict(row: Row) -> str:
@@ -1174,7 +1412,13 @@ def main() -> int:
         "benchmarks/suite.py --only chain10",
     )
     parser.add_argument("--steps", type=int, default=20000, help="steps of --only")
-    parser.add_argument("--raw-server", type=int, help=argparse.SUPPRESS)
+    parser.add_argument(
+        "--sections",
+        type=lambda text: [t.strip() for t in text.split(",") if t.strip()],
+        default=[],
+        help="run only these sections, comma-separated: " + ", ".join(s.__name__ for s in SECTIONS),
+    )
+    parser.add_argument("--raw-server", help=argparse.SUPPRESS)
     parser.add_argument("--frames", choices=["in", "out"], default="", help=argparse.SUPPRESS)
     parser.add_argument("--rss-probe", nargs=2, type=int, help=argparse.SUPPRESS)
     parser.add_argument("--replay-probe", nargs=2, help=argparse.SUPPRESS)
@@ -1185,6 +1429,9 @@ def main() -> int:
     if args.raw_server:
         asyncio.run(raw_server(args.raw_server, args.frames))
         return 0
+    unknown = sorted(set(args.sections) - {s.__name__ for s in SECTIONS})
+    if unknown:
+        parser.error(f"--sections: no section {', '.join(unknown)}")
     if args.rss_probe:
         port, steps = args.rss_probe
         print(json.dumps(asyncio.run(rss_probe(port, steps, 10_000))))
@@ -1213,7 +1460,7 @@ def main() -> int:
 
     channel = "native step channel" if steps.enabled() else "grpc.aio"
     fmu_steps = "in C" if steps.wanted() and kernel.library() is not None else "through Python"
-    rows, extra = asyncio.run(suite(sizes, log))
+    rows, extra = asyncio.run(suite(sizes, log, args.sections))
     extra["remote_steps"] = channel
     extra["fmu_steps"] = fmu_steps
     print()
@@ -1224,8 +1471,11 @@ def main() -> int:
         f"stepped {fmu_steps})"
     )
     print(table(rows))
-    print(f"time from run start to first step [s]: {extra['time_to_first_step_s']}")
-    print(f"100 participants: {extra['scale_100']}")
+    for sentence in extra.get("skipped", []):
+        print(sentence)
+    if "time_to_first_step_s" in extra:
+        print(f"time from run start to first step [s]: {extra['time_to_first_step_s']}")
+        print(f"100 participants: {extra['scale_100']}")
     print(f"took {time.perf_counter() - started:.0f} s")
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(

@@ -3,6 +3,7 @@ steps (no figure is checked: speed is the benchmark's business, never a test's).
 
 from __future__ import annotations
 
+import os
 import re
 import subprocess
 import sys
@@ -24,3 +25,21 @@ def test_a_bench_case_runs(case: str) -> None:
     )
     assert done.returncode == 0, done.stderr[-2000:]
     assert re.search(rf"^{case}: [\d,]+ steps/s$", done.stdout, re.MULTILINE), done.stdout
+
+
+def test_the_openmcx_rows_say_why_they_are_skipped(tmp_path: Path) -> None:
+    """Without ``OPENMCX`` (or with a path that is no program) the rows are skipped, saying so."""
+    env = {k: v for k, v in os.environ.items() if k != "OPENMCX"}
+    for value, said in [
+        (None, "chain x2 and x10 vs OpenMCx: skipped, OPENMCX is not set"),
+        (str(tmp_path), f"OPENMCX={tmp_path} is not an executable file"),
+    ]:
+        done = subprocess.run(
+            [sys.executable, str(ROOT / "benchmarks" / "suite.py"), "--sections", "openmcx",
+             "--out", str(tmp_path / "bench.json")],
+            capture_output=True, text=True, timeout=120, cwd=ROOT,
+            env=env if value is None else {**env, "OPENMCX": value},
+        )  # fmt: skip
+        assert done.returncode == 0, done.stderr[-2000:]
+        assert said in done.stdout, done.stdout
+        assert "OpenMCx (C)" not in done.stdout

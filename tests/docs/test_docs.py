@@ -7,16 +7,23 @@ unless the line before it says why it cannot::
 
     <!-- docs-test: skip (needs a Docker engine) -->
 
+A block of another language becomes a file the page's shell blocks use when the line before it
+names the file (the page tells the reader to save it under that name)::
+
+    <!-- docs-test: file controller.py -->
+
 How a block runs:
 
 - in a sandbox: a temporary folder with the repository's top-level entries linked in (the
   workspace ``.venv`` included) and a ``build/`` of its own holding a copy of ``build/fmus``
-  and ``build/routes`` (the railway's OpenRails route), so what a block writes (results, logs, certificates, FMUs) stays out of the checkout;
+  and ``build/routes`` (the railway's OpenRails route), so what a block writes (results, logs,
+  certificates, FMUs) stays out of the checkout; the page's files (above) are written there
+  before each of its shell blocks runs;
 - with PATH as a new user has it after ``make setup``: no virtual environment, no uv on it, so
   every command must name ``.venv/bin/...`` or a make target;
-- with the well-known ports (2150, 8080, 50051, 50061, 50062, 50063, 50071, 50443) replaced by
-  free ones in the block's text and in the variables the SSDs and fleet files read (MOCK_PORT,
-  GAIN_PORT, ...): blocks may start servers without colliding with a demo, another test or
+- with the well-known ports (2150, 8080, 50051, 50061, 50062, 50063, 50071, 50080, 50082,
+  50443) replaced by free ones in the block's text, the page's files and the variables the SSDs
+  and fleet files read (MOCK_PORT, GAIN_PORT, ...): blocks may start servers without colliding with a demo, another test or
   another block, and the docs keep showing the ports a person uses;
 - with a deadline; the processes it started (found by a marker in their environment) must be
   gone when it ends — a block that starts a server stops it (``kill %1``) — and are killed
@@ -55,6 +62,8 @@ PORT_VARIABLES = {
     8080: "MAP_HTTP_PORT",
     8090: "MONITOR_PORT",
     50051: "GAIN_PORT",
+    50080: "",
+    50082: "CONTROLLER_PORT",
     50061: "BRIDGE_PORT",
     50062: "BALISE_PORT",
     50063: "PERCEPTION_PORT",
@@ -63,6 +72,7 @@ PORT_VARIABLES = {
 }
 """Well-known ports of the docs and the environment variable that moves each (SSDs, fleets)."""
 SKIP = re.compile(r"^\s*<!--\s*docs-test:\s*skip\s*\((?P<reason>[^)]+)\)\s*-->\s*$")
+FILE = re.compile(r"^\s*<!--\s*docs-test:\s*file\s+(?P<name>[\w.-]+)\s*-->\s*$")
 FENCE = re.compile(r"^(?P<indent>\s*)```(?P<lang>[\w-]*)\s*$")
 COMMAND_START = re.compile(r"^\s*(\.venv/bin/|python3? |make |coupler |uv |docker |npm )")
 BARE_UV = re.compile(r"(?<![\w/.-])uv run\b")
@@ -83,6 +93,9 @@ class Block:
     text: str
     skip: str | None
     """The reason given in the skip marker, None when the block runs."""
+    file: str | None = None
+    """The name the file marker gives the block: written into the sandbox for the page's
+    shell blocks."""
 
     @property
     def where(self) -> str:
@@ -102,10 +115,11 @@ def blocks_of(doc: Path) -> list[Block]:
         body = []
         i += 1
         while i < len(lines) and lines[i].strip() != "```":
-            body.append(lines[i][indent:] if lines[i][:indent].isspace() else lines[i].lstrip())
+            kept = not indent or lines[i][:indent].isspace()  # "".isspace() is False
+            body.append(lines[i][indent:] if kept else lines[i].lstrip())
             i += 1
         before = next((lines[j] for j in range(start - 1, -1, -1) if lines[j].strip()), "")
-        marker = SKIP.match(before)
+        marker, file = SKIP.match(before), FILE.match(before)
         found.append(
             Block(
                 doc=doc,
@@ -113,6 +127,7 @@ def blocks_of(doc: Path) -> list[Block]:
                 lang=fence["lang"],
                 text="\n".join(body) + "\n",
                 skip=marker["reason"].strip() if marker else None,
+                file=file["name"] if file else None,
             )
         )
         i += 1
@@ -121,6 +136,7 @@ def blocks_of(doc: Path) -> list[Block]:
 
 ALL_BLOCKS = [block for doc in DOCS for block in blocks_of(doc)]
 RUNNABLE = [b for b in ALL_BLOCKS if b.lang == "sh" and b.skip is None]
+FILES = [b for b in ALL_BLOCKS if b.file is not None]
 
 
 def test_the_docs_follow_the_convention() -> None:
@@ -135,6 +151,12 @@ def test_the_docs_follow_the_convention() -> None:
             problems.append(f"{block.where}: commands in an unlabelled block; label it ```sh")
         if block.skip is not None and block.lang != "sh":
             problems.append(f"{block.where}: a docs-test skip marker before a non-sh block")
+        if block.file is not None and block.lang == "sh":
+            problems.append(f"{block.where}: a docs-test file marker before a shell block")
+    named: dict[str, Block] = {}
+    for block in FILES:
+        if (first := named.setdefault(str(block.file), block)) is not block:
+            problems.append(f"{block.where}: file {block.file} is also {first.where}'s")
     for doc in DOCS:
         for number, line in enumerate(doc.read_text(encoding="utf-8").splitlines(), 1):
             if BARE_UV.search(line):
@@ -145,6 +167,10 @@ def test_the_docs_follow_the_convention() -> None:
             if "docs-test" in line and "skip" in line and not SKIP.match(line):
                 problems.append(
                     f"{doc.relative_to(ROOT)}:{number}: write <!-- docs-test: skip (REASON) -->"
+                )
+            if "docs-test" in line and "file" in line and not FILE.match(line):
+                problems.append(
+                    f"{doc.relative_to(ROOT)}:{number}: write <!-- docs-test: file NAME -->"
                 )
     assert not problems, "\n".join(problems)
     assert len(RUNNABLE) >= 8, "the docs lost their runnable examples"
@@ -221,6 +247,9 @@ def test_shell_block_runs(block: Block, sandbox: Path) -> None:
     ports = {well_known: free_port() for well_known in PORT_VARIABLES}
     marker = uuid.uuid4().hex
     script = "set -euo pipefail\n" + remap(block.text, ports)
+    for file in FILES:
+        if file.doc == block.doc:
+            (sandbox / str(file.file)).write_text(remap(file.text, ports), encoding="utf-8")
     log = sandbox / f"block-{marker}.log"
     with log.open("w") as output:  # a file, not a pipe: a leftover server must not block us
         process = subprocess.Popen(

@@ -8,14 +8,16 @@ services as real local processes, the map in Chromium, the detections scored.
 
 The fleet file is the scenario's own (scenarios/railway/perception-fleet.toml: its services,
 commands and health checks), run for the first 40 s only and paced at real time, so the map
-can be watched while the train passes the first two balise groups (120 m and 320 m). Then
-`python -m coupler_railway.scoring` scores the run against TrackBalises: every balise passed
-was seen before it was passed, within a metre, and nothing else was seen.
+can be watched while the train passes the first two balise groups (120 m and 320 m). The run
+scores itself against TrackBalises (summary.json `reports.perception`, perception-report.json),
+as `python -m coupler_railway.scoring` does: every balise passed was seen before it was passed,
+within a metre, and nothing else was seen.
 """
 
 from __future__ import annotations
 
 import asyncio
+import base64
 import csv
 import io
 import json
@@ -58,15 +60,28 @@ def free_ports(names: tuple[str, ...]) -> dict[str, str]:
             s.close()
 
 
+SHOWN = """() => {
+  const c = window.coupler;
+  if (!(c && c.camera && c.camera.judged && c.frameLoaded === c.camera.frame &&
+        c.camera.detections.some((d) => d.distance_ahead_m < 25))) return null;
+  const img = document.getElementById('camera-frame');
+  const canvas = document.createElement('canvas');
+  canvas.width = img.naturalWidth;
+  canvas.height = img.naturalHeight;
+  canvas.getContext('2d').drawImage(img, 0, 0);
+  return {camera: c.camera, width: img.naturalWidth, png: canvas.toDataURL('image/png'),
+          boxes: document.querySelectorAll('#camera-boxes rect.detection').length};
+}"""
+"""The map once it shows a frame with a balise detected within 25 m, at one instant: camera
+state, frame width, its pixels (PNG), boxes; null until then."""
+
+
 def short_fleet(folder: Path, out: Path) -> Path:
     """The scenario's fleet file, its run stopped at STOP_TIME and written to ``out``; the
     services, commands and health checks as they are."""
     text = FLEET.read_text()
     services = text[text.index("[[service]]") :]
-    args = [
-        "--stop-time", STOP_TIME, "--output-variables", "Driver.*", "OpenRails.distance",
-        "OpenRails.speed", "OpenRails.train_state", "TrackBalises.*", "Perception.*",
-    ]  # fmt: skip
+    args = ["--stop-time", STOP_TIME]  # every channel recorded: frames are left out by default
     path = folder / "fleet.toml"
     path.write_text(
         f'[scenario]\nssp = "scenarios/railway/Perception.ssd"\nout = "{out}"\n'
@@ -102,25 +117,18 @@ async def watch(url: str) -> dict[str, Any]:
             errors: list[str] = []
             page.on("pageerror", lambda exc: errors.append(str(exc)))
             await page.goto(url)
-            await page.wait_for_function(
-                "window.coupler && window.coupler.camera && window.coupler.camera.judged && "
-                "window.coupler.camera.detections.some(d => d.distance_ahead_m < 25) && "
-                "window.coupler.frameLoaded === window.coupler.camera.frame",
-                timeout=240_000,
-            )
-            camera = await page.evaluate("window.coupler.camera")
-            shown = await page.evaluate("document.getElementById('camera-frame').naturalWidth")
-            boxes = await page.locator("#camera-boxes rect.detection").count()
+            # one evaluation: the camera state, its boxes and the very picture shown with them
+            # (the map keeps only its last few frames: fetched later, another one may come)
+            shown_now = await page.wait_for_function(SHOWN, timeout=240_000)
+            seen = await shown_now.json_value()
             ARTIFACT.parent.mkdir(parents=True, exist_ok=True)
             await page.screenshot(path=str(ARTIFACT))
             assert errors == []
         finally:
             await browser.close()
-    async with (
-        aiohttp.ClientSession() as session,
-        session.get(f"{url}api/frame.jpg?n={camera['frame']}") as response,
-    ):
-        picture = np.asarray(Image.open(io.BytesIO(await response.read())))
+    camera, shown, boxes = seen["camera"], seen["width"], seen["boxes"]
+    png = base64.b64decode(seen["png"].split(",", 1)[1])
+    picture = np.asarray(Image.open(io.BytesIO(png)).convert("RGB"))
     return {"camera": camera, "natural_width": shown, "boxes": boxes, "picture": picture}
 
 
@@ -150,6 +158,7 @@ def test_the_perception_variant_end_to_end(tmp_path: Path) -> None:
             if process.poll() is None:
                 process.terminate()
     assert process.returncode == 0, output[-3000:]
+    out = out / "latest"  # a fleet file's `out` is a base: each run has a folder of its own
 
     # the run, and the frames kept out of results.csv
     summary = json.loads((out / "summary.json").read_text())
@@ -171,7 +180,11 @@ def test_the_perception_variant_end_to_end(tmp_path: Path) -> None:
             assert ((r > 150) & (g > 110) & (b < 100)).any(), box  # yellow, after JPEG
             assert 5.0 < box["distance_ahead_m"] <= 40.0
 
-    # scored against TrackBalises: both groups seen before they were passed
+    # the run scored itself (coupler-railway's `coupler.reports` entry point): both groups seen
+    # before they were passed; the scoring command gives the same report
+    scored_by_run = summary["reports"]["perception"]
+    assert scored_by_run["recall"] == 1.0 and scored_by_run["missed"] == []
+    assert json.loads((out / "perception-report.json").read_text())["recall"] == 1.0
     scored = subprocess.run(
         [sys.executable, "-m", "coupler_railway.scoring", str(out)],
         capture_output=True,
@@ -183,6 +196,9 @@ def test_the_perception_variant_end_to_end(tmp_path: Path) -> None:
     passed = [b["balise_id"] for b in report["balises"]]
     assert passed == [1000, 1001, 1010, 1011, 1012]
     assert report["recall"] == 1.0 and report["precision"] == 1.0
+    assert {k: report[k] for k in scored_by_run if k in report} == {
+        k: v for k, v in scored_by_run.items() if k in report
+    }
     assert report["max_abs_error_m"] < 1.0
     for balise in report["balises"]:
         assert balise["first_detected_at_s"] < balise["passed_at_s"]

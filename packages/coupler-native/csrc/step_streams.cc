@@ -108,10 +108,12 @@ extern "C" {
 
 // Opens the step stream to `target` (host:port or unix:PATH); with `tls`, PEM texts (each may
 // be empty) for the roots, the client's key and its chain. `metadata` holds `count` pairs
-// (key, value). Never NULL: cs_error() is empty when the stream is open, else says why (the
-// stream must still be closed).
+// (key, value). Messages of up to `max_message` bytes travel either way (gRPC's channel
+// arguments); a larger answer ends the stream with RESOURCE_EXHAUSTED. Never NULL: cs_error()
+// is empty when the stream is open, else says why (the stream must still be closed).
 cs_stream* cs_open(const char* target, int tls, const char* roots, const char* key,
-                   const char* chain, const char* const* metadata, int count, double timeout) {
+                   const char* chain, const char* const* metadata, int count, double timeout,
+                   int max_message) {
   auto* s = new cs_stream();
   std::shared_ptr<grpc::ChannelCredentials> credentials = grpc::InsecureChannelCredentials();
   if (tls) {
@@ -122,7 +124,10 @@ cs_stream* cs_open(const char* target, int tls, const char* roots, const char* k
     credentials = grpc::SslCredentials(options);
   }
   Deadline deadline = after(timeout);
-  s->channel = grpc::CreateChannel(target, credentials);
+  grpc::ChannelArguments arguments;
+  arguments.SetMaxReceiveMessageSize(max_message);
+  arguments.SetMaxSendMessageSize(max_message);
+  s->channel = grpc::CreateCustomChannel(target, credentials, arguments);
   if (!s->channel->WaitForConnected(deadline)) {
     s->error = "no connection within the deadline";
     return s;

@@ -7,7 +7,7 @@ from google.protobuf import source_context_pb2
 
 from coupler import messages, values, wire
 from coupler.channels import Causality, Channel, Description, ValueType, fits_fixed_step
-from coupler.errors import ChannelValueError
+from coupler.errors import ChannelValueError, MessageTooLarge
 
 REAL = Channel(name="speed", causality=Causality.OUTPUT, type=ValueType.REAL, unit="m/s")
 INT = Channel(name="count", causality=Causality.OUTPUT, type=ValueType.INTEGER)
@@ -53,10 +53,24 @@ def test_nonfinite_allowed_by_policy() -> None:
     assert math.isinf(float(values.check(REAL, math.inf, policy)))
 
 
-def test_binary_size_limit() -> None:
-    policy = values.ValuePolicy(max_binary_bytes=4)
-    with pytest.raises(ChannelValueError, match="carries at most 4 bytes, got 5"):
-        values.check(BIN, b"12345", policy)
+def test_message_size_limit_names_the_largest_channel() -> None:
+    """The Binary and String values of one message together, both ways."""
+    label = Channel(name="label", causality=Causality.OUTPUT, type=ValueType.STRING)
+    codec = wire.Codec(
+        Description(name="P", channels=(REAL, BIN, label)), values.ValuePolicy(max_message_bytes=8)
+    )
+    assert codec.decode(codec.encode({"speed": 1.0, "blob": b"1234", "label": "abcd"}))
+    with pytest.raises(MessageTooLarge) as info:
+        codec.encode({"blob": b"12345", "label": "äbcd"})
+    assert (info.value.channel, info.value.size, info.value.total) == ("blob", 5, 10)
+    assert str(info.value).startswith(
+        "input 'blob' carries 5 bytes, 10 bytes with the message's other values: over the "
+        "message limit of 8 bytes (7.62939e-06 MiB); raise the limit"
+    )
+    assert info.value.naming("Cam").startswith("input Cam.blob carries 5 bytes")
+    bindings = wire.Codec(Description(name="P", channels=(BIN,))).encode({"blob": b"123456789"})
+    with pytest.raises(MessageTooLarge, match="'blob' carries 9 bytes: over"):
+        codec.decode(bindings)
 
 
 def test_codec_rejects_unknown_and_wrong_causality() -> None:

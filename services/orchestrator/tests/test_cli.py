@@ -6,7 +6,9 @@ coupler describe Source2.fmu            -->  FMU
 
 from __future__ import annotations
 
+import csv
 import io
+import re
 import subprocess
 import sys
 import time
@@ -107,6 +109,9 @@ SSD = """<?xml version="1.0" encoding="UTF-8"?>
 """
 
 
+RAMP = '<ssd:Connectors><ssd:Connector name="ramp" kind="output"/></ssd:Connectors>'
+
+
 def test_an_undeclared_connector_says_how_to_declare_it(
     coupler: Coupler, fmus: dict[str, Path], tmp_path: Path
 ) -> None:
@@ -135,8 +140,25 @@ def test_a_step_size_in_the_default_experiment_says_where_a_step_goes(
         "DefaultExperiment has no step size; remove stepSize and give the step with --step "
         "0.1, or in the SSD inside the DefaultExperiment: <ssd:Annotations><ssc:Annotation "
         'type="com.avl.model.connect.ssp.task"><mc:Task xmlns:mc="com.avl.model.connect.ssp.task" '
-        'deltaTime="0.1"/></ssc:Annotation></ssd:Annotations>'
+        'stepType="parallel_single_thread" deltaTime="0.1"/></ssc:Annotation></ssd:Annotations>'
     ) in outcome.err
+
+    # the fix it gives works: that annotation carries the step
+    annotation = re.search(r"<ssd:Annotations>.*</ssd:Annotations>", outcome.err)
+    assert annotation is not None
+    source = f'<ssd:Component name="A" source="{fmus["Source2"]}"/>'
+    assert source in SSD.format(fmus=fmus["Source2"].parent, step="")
+    fixed = (
+        SSD.format(fmus=fmus["Source2"].parent, step="")
+        .replace(source, source.replace("/>", ">" + RAMP + "</ssd:Component>"))
+        .replace('stopTime="1"/>', f'stopTime="1">{annotation[0]}</ssd:DefaultExperiment>')
+    )
+    ssd.write_text(fixed)
+    outcome = coupler("run", ssd, "--out", tmp_path / "out")
+    assert outcome.code == 0, outcome.err
+    with (tmp_path / "out" / "results.csv").open() as results:
+        times = [float(row["time"]) for row in csv.DictReader(results)]
+    assert times == pytest.approx([k / 10 for k in range(11)])
 
 
 def test_a_param_typo_names_what_can_be_set(coupler: Coupler, fmus: dict[str, Path]) -> None:

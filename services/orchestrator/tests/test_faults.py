@@ -169,7 +169,9 @@ def test_a_killed_participant_fails_the_run_rows_kept(
     assert outcome.code == 1
     result = summary(tmp_path)
     assert result["status"] == "failed"
-    assert "Gain.DoStep [UNAVAILABLE]" in result["reason"]
+    # gRPC's core reports a stream whose peer vanished mid-read as UNAVAILABLE, or (a reset
+    # racing the read, seen on a busy machine) as INTERNAL
+    assert re.search(r"Gain\.DoStep \[(UNAVAILABLE|INTERNAL)\]", result["reason"]), result
     assert "the run had reached t=" in result["reason"]
     assert 1 < len(assert_rows_kept(tmp_path)) < 201
 
@@ -262,6 +264,11 @@ def wait_for_rows(out: Path, count: int, within: float = 20.0) -> None:
     )
 
 
+@pytest.mark.known_leak(
+    temp="coupler-run-*",
+    reason="SIGKILL of `coupler run`: no code of it runs after it, so the run's scratch folder "
+    "(its TMPDIR, cli.supervisor) stays; the child dies with it",
+)
 def test_a_killed_orchestrator_leaves_a_summary_and_frees_its_participants(
     coupler: Coupler, ssd: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:

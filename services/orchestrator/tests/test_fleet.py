@@ -23,9 +23,10 @@ from pathlib import Path
 
 import pytest
 
+from coupler.errors import ScenarioError
 from coupler.health import probe
 from coupler.testing import end_group, free_port, wait_until
-from coupler_orchestrator.tools.fleet import FleetSpec, holders_of, port_is_free
+from coupler_orchestrator.tools.fleet import Fleet, FleetSpec, holders_of, port_is_free
 
 DATA = Path(__file__).parent / "data"
 REPO = Path(__file__).resolve().parents[3]
@@ -163,7 +164,7 @@ def test_a_second_fleet_is_refused_and_the_first_is_untouched(
     fleet_dir: Path, env: dict[str, str], consoles: list[Console]
 ) -> None:
     port = int(env["GAIN_PORT"])
-    first = Console(["fleet", "fleet.toml"], fleet_dir, env)
+    first = Console(["fleet", "fleet.toml", "--tcp"], fleet_dir, env)  # on TCP ports
     consoles.append(first)
     first.wait_for(first.out, r"services stay up; Ctrl-C stops them")
     (gain_pid,) = children_of(fleet_of(first.process.pid))
@@ -173,7 +174,7 @@ def test_a_second_fleet_is_refused_and_the_first_is_untouched(
     latest = fleet_dir / "out" / "latest"
     assert json.loads((latest / "summary.json").read_text())["status"] == "completed"
 
-    second = coupler(["fleet", "fleet.toml"], fleet_dir, env)
+    second = coupler(["fleet", "fleet.toml", "--tcp"], fleet_dir, env)
     assert second.returncode == 1
     assert "Traceback" not in second.stderr
     assert f"port {port} (gain) is in use by pid {gain_pid} (" in second.stderr
@@ -205,6 +206,12 @@ def test_results_directory_of_a_running_fleet_is_refused(
     first = Console(["fleet", "fleet.toml"], fleet_dir, env)
     consoles.append(first)
     first.wait_for(first.out, r"services stay up")
+    # on a unix socket in a private folder: its TCP port stays free
+    line = first.wait_for(first.out, r"^participants on unix sockets in ")
+    sockets = Path(line.split()[5])
+    assert (sockets / "gain.sock").is_socket()
+    assert sockets.stat().st_mode & 0o777 == 0o700
+    assert port_is_free(int(env["GAIN_PORT"]))
     moved = {**env, "GAIN_PORT": str(free_port())}  # free ports, same results directory
     second = coupler(["fleet", "fleet.toml"], fleet_dir, moved)
     assert second.returncode == 1
@@ -276,3 +283,39 @@ def test_a_participant_not_running_ends_with_how_to_start_it(
         "examples/ramp-gain/fleet.toml` or `make demo-example` (it starts them and runs the "
         "scenario), or start each one yourself"
     )
+
+
+def test_a_service_without_socket_option_is_named_with_the_way_out(
+    tmp_path: Path, env: dict[str, str]
+) -> None:
+    """``coupler fleet`` adds ``--socket PATH`` to a gRPC service's command; a program that
+    does not know the option fails, and the error says how to keep it on TCP."""
+    gain = '["python", "-m", "coupler.examples", "gain", "--port", "${GAIN_PORT:-50051}"]'
+    knows_no_socket = """["python", "-c", "import sys; sys.exit('no --socket here')"]"""
+    assert gain in FLEET
+    (tmp_path / "fleet.toml").write_text(FLEET.replace(gain, knows_no_socket))
+    done = coupler(["fleet", "fleet.toml", "--exit"], tmp_path, env)
+    assert done.returncode == 1
+    assert "Traceback" not in done.stderr
+    assert "service 'gain' exited with code 1 (started with --socket PATH" in done.stderr
+    assert "needs socket = false in its [[service]], or run coupler fleet --tcp" in done.stderr
+    assert "no --socket here" in done.stderr
+
+
+def test_the_fleet_file_keeps_services_on_tcp(fleet_dir: Path) -> None:
+    """``unix_sockets = false`` under [scenario], ``socket = false`` in a [[service]]: TCP;
+    anything but true or false is refused naming the file."""
+    path = fleet_dir / "fleet.toml"
+    on_socket = Fleet(FleetSpec.load(path, root=fleet_dir), sockets=True)
+    assert on_socket.on_socket(on_socket.spec.services[0])
+    assert on_socket.ports_of(on_socket.spec.services[0]) == ()  # its gRPC port not needed
+    for text in (
+        FLEET.replace('out = "out"', 'out = "out"\nunix_sockets = false'),
+        FLEET.replace('health = "grpc:', 'socket = false\nhealth = "grpc:'),
+    ):
+        path.write_text(text)
+        fleet = Fleet(FleetSpec.load(path, root=fleet_dir), sockets=True)
+        assert not fleet.on_socket(fleet.spec.services[0])
+    path.write_text(FLEET.replace('out = "out"', 'out = "out"\nunix_sockets = "no"'))
+    with pytest.raises(ScenarioError, match=r"fleet.toml: not a fleet file .*unix_sockets = 'no'"):
+        FleetSpec.load(path, root=fleet_dir)

@@ -181,7 +181,7 @@ def test_state_before_the_run_says_what_it_waits_for() -> None:
         "reason": "",
         "waiting_for": {"Gain": "grpc://127.0.0.1:1 (connection refused)"},
     }
-    assert frame["layout"] == {"members": [], "channels": []}
+    assert frame["layout"] == {"members": [], "channels": [], "frames": []}
 
 
 @pytest.mark.parametrize("text", ["host:port", "70000", ""])
@@ -211,8 +211,8 @@ def test_the_cli_prints_the_monitor_url(
 
 async def test_at_most_16_pages_stream_at_once_and_the_17th_is_told_why() -> None:
     """Every stream costs the run's process memory and time (issue #25: 200 streams, +56 MB,
-    the run 23 % slower), so the monitor serves 16 at once: the 17th is answered 503 with a sentence, and a
-    page gets its stream again once another has closed."""
+    the run 23 % slower), so the monitor serves 16 at once: the 17th is answered 503 with a
+    sentence, and a page gets its stream again once another has closed."""
     async with MonitorServer("127.0.0.1:0") as monitor, aiohttp.ClientSession() as session:
         url = f"{monitor.url}api/events"
         streams = [await session.get(url) for _ in range(16)]

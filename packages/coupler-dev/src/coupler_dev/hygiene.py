@@ -72,6 +72,17 @@ SHARED_HELPERS = (
     "from multiprocessing.forkserver import main",
 )
 
+SHARED_TEMP = (
+    # uv's lock files (one per uv cache it used): uv keeps them in TMPDIR by design.
+    "uv-*.lock",
+)
+
+
+def shared_temp(name: str) -> bool:
+    """Whether a temp entry is a tool's, kept on purpose (``SHARED_TEMP``)."""
+    return any(fnmatch.fnmatchcase(name, pattern) for pattern in SHARED_TEMP)
+
+
 MARKER = (
     "known_leak(temp=GLOBS, process=GLOBS, port=GLOBS, reason=TEXT): the test leaves what the "
     "globs (one or a tuple) match behind because of a known bug named in reason "
@@ -253,7 +264,7 @@ class Hygiene:
             return []
         owned = {entry for holding in self.holdings.values() for entry in holding.entries}
         new = set(os.listdir(self.root)) - before.entries - owned
-        return [temp_leftover(self.root / name) for name in sorted(new)]
+        return [temp_leftover(self.root / name) for name in sorted(new) if not shared_temp(name)]
 
     def _held(
         self, sockets: dict[int, str], processes: dict[int, ProcessInfo]
@@ -372,7 +383,11 @@ class Hygiene:
             held = self._held(self._new_sockets(before), processes)
             holding.sockets = {inode: address for inode, (address, _) in held.items()}
             if self.root is not None:
-                holding.entries = set(os.listdir(self.root)) - before.entries
+                holding.entries = {
+                    name
+                    for name in set(os.listdir(self.root)) - before.entries
+                    if not shared_temp(name)
+                }
             self.holdings[fixturedef] = holding
             self.spent += time.perf_counter() - began
 
@@ -429,7 +444,11 @@ class Hygiene:
             if inode in mine
         ]
         if self.root is not None:
-            left += [temp_leftover(self.root / name) for name in sorted(os.listdir(self.root))]
+            left += [
+                temp_leftover(self.root / name)
+                for name in sorted(os.listdir(self.root))
+                if not shared_temp(name)
+            ]
         if left:
             self._clean(left)
             self.found += ["at the end of the session:", *(f"  {x.text}" for x in left)]

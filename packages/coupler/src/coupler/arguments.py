@@ -34,3 +34,14 @@ def add_security_arguments(parser: argparse.ArgumentParser) -> None:
         help="also serve the health service alone, plaintext, on this port (probes that "
         "cannot do TLS)",
     )
+
+
+def add_socket_argument(parser: argparse.ArgumentParser) -> None:
+    """``--socket PATH``: serve gRPC on a unix socket instead of TCP (same host only; what
+    ``coupler fleet`` gives every local participant)."""
+    parser.add_argument(
+        "--socket",
+        type=Path,
+        help="serve gRPC on this unix socket instead of TCP (the address is then "
+        "unix:///ABSOLUTE/PATH; a stale socket there is replaced, a live one refused)",
+    )

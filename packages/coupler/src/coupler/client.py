@@ -24,6 +24,7 @@ from coupler import wire
 from coupler.channels import Description, RunSetup, Value
 from coupler.errors import (
     ChannelValueError,
+    MessageTooLarge,
     ParticipantError,
     ParticipantTimeout,
     ParticipantUnavailable,
@@ -32,6 +33,7 @@ from coupler.errors import (
 from coupler.participant import HEALTH_REASON, EndRun, Participant, Values
 from coupler.security import ClientSecurity
 from coupler.v1 import component_pb2_grpc as pb_grpc
+from coupler.values import MAX_MESSAGE_BYTES, ValuePolicy
 
 T = TypeVar("T")
 _UNAVAILABLE = {grpc.StatusCode.UNAVAILABLE, grpc.StatusCode.CANCELLED}
@@ -73,6 +75,8 @@ class RemoteParticipant(Participant):
     ``open()`` waits until the participant's health is SERVING (within ``connect_timeout``) and
     describes it; every call then has a deadline of ``call_timeout`` seconds. With
     ``streaming`` (and a participant that supports it) steps travel over one StepStream.
+    The values of one message (Binary and String together) may have ``max_message_bytes``; one
+    over it, either way, fails naming its channel (``MessageTooLarge``).
     """
 
     def __init__(
@@ -85,8 +89,10 @@ class RemoteParticipant(Participant):
         streaming: bool = True,
         security: ClientSecurity | None = None,
         on_waiting: Callable[[str], None] | None = None,
+        max_message_bytes: int = MAX_MESSAGE_BYTES,
     ) -> None:
         self.address = address
+        self.max_message_bytes = max_message_bytes
         self.target = parse_address(address)
         self.security = security or ClientSecurity()
         self._metadata = self.security.metadata()
@@ -125,7 +131,8 @@ class RemoteParticipant(Participant):
                 wire.DescribeRequest(), timeout=self.call_timeout, metadata=self._metadata
             ),
         )
-        self._codec = wire.Codec(wire.description_from_pb(response))
+        policy = ValuePolicy(max_message_bytes=self.max_message_bytes)
+        self._codec = wire.Codec(wire.description_from_pb(response), policy)
 
     async def wait_until_serving(self) -> None:
         """Poll the health service until SERVING; ParticipantUnavailable after the deadline, or
@@ -191,13 +198,20 @@ class RemoteParticipant(Participant):
                 why, participant=self.name, call="health", status="UNAVAILABLE"
             )
 
+    @property
+    def transport_limit(self) -> int:
+        """What the channel lets through: at least what a participant's server sends by default,
+        so that an answer over ``max_message_bytes`` arrives and is refused naming its channel."""
+        return max(self.max_message_bytes, MAX_MESSAGE_BYTES)
+
     def _ensure_channel(self) -> None:
         if self._channel is None:
+            options = wire.transport_options(self.transport_limit)
             if uses_tls(self.address):
                 credentials = self.security.channel_credentials()
-                self._channel = grpc.aio.secure_channel(self.target, credentials)
+                self._channel = grpc.aio.secure_channel(self.target, credentials, options)
             else:
-                self._channel = grpc.aio.insecure_channel(self.target)
+                self._channel = grpc.aio.insecure_channel(self.target, options)
             self._stub = pb_grpc.GRPCComponentServiceStub(self._channel)
 
     @property
@@ -307,6 +321,10 @@ class RemoteParticipant(Participant):
     def _request(self, call: str, build: Any) -> Any:
         try:
             return build()
+        except MessageTooLarge as exc:
+            raise ParticipantError(
+                exc.naming(self.name), participant=self.name, call=call, status="RESOURCE_EXHAUSTED"
+            ) from exc
         except ChannelValueError as exc:
             raise ParticipantError(
                 str(exc), participant=self.name, call=call, status="INVALID_ARGUMENT"
@@ -315,6 +333,10 @@ class RemoteParticipant(Participant):
     def _response(self, call: str, read: Any) -> Values:
         try:
             outputs: Values = read()
+        except MessageTooLarge as exc:
+            raise ParticipantError(
+                exc.naming(self.name), participant=self.name, call=call, status="RESOURCE_EXHAUSTED"
+            ) from exc
         except ChannelValueError as exc:
             raise ParticipantError(
                 f"answered outside its description: {exc}", participant=self.name, call=call
@@ -349,6 +371,12 @@ def translate(
         )
     if code is grpc.StatusCode.DEADLINE_EXCEEDED:
         return ParticipantTimeout(details, participant=participant, call=call, status=code.name)
+    if code is grpc.StatusCode.RESOURCE_EXHAUSTED and "larger than max" in details:
+        details += (
+            ": a message over the transport's limit (its values' limit plus framing); raise "
+            "the message limit on both sides (coupler run --max-message-size MiB; a "
+            'participant\'s server: max_message_bytes, docs/protocol.md "Message size")'
+        )
     return ParticipantError(details, participant=participant, call=call, status=code.name)
 
 

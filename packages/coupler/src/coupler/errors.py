@@ -5,6 +5,7 @@
     │   ├── ValidationError    several problems found together (``.problems``)
     │   └── PortInUse          a server's port is taken (``.port``, ``.holders``: pid + command)
     ├── ChannelValueError      a value does not fit its channel (``channel``, ``expected``)
+    │   └── MessageTooLarge    a message is over the message limit (``size``, ``total``, ``limit``)
     └── ParticipantError       a participant failed at run time (participant, call, status)
         ├── ParticipantUnavailable   cannot be reached, or the wrapped simulator is down
         └── ParticipantTimeout       a call exceeded its deadline
@@ -54,6 +55,33 @@ class ChannelValueError(CouplerError):
         self.channel = channel
         self.expected = expected
         super().__init__(message)
+
+
+class MessageTooLarge(ChannelValueError):
+    """A message's Binary and String values together are over the message limit; ``channel`` is
+    the largest of them (``size`` bytes), ``total`` the message's, ``limit`` the limit's."""
+
+    def __init__(self, *, channel: str, kind: str, size: int, total: int, limit: int) -> None:
+        self.kind = kind
+        """``input``, ``output`` or ``parameter``."""
+        self.size, self.total, self.limit = size, total, limit
+        self.channel = channel
+        super().__init__(self.naming(""), channel=channel, expected=f"at most {limit} bytes")
+
+    def naming(self, owner: str) -> str:
+        """The message, the channel written ``owner.channel`` when ``owner`` is given."""
+        where = f"{owner}.{self.channel}" if owner else f"'{self.channel}'"
+        others = (
+            f", {self.total} bytes with the message's other values"
+            if self.total > self.size
+            else ""
+        )
+        return (
+            f"{self.kind} {where} carries {self.size} bytes{others}: over the message limit of "
+            f"{self.limit} bytes ({self.limit / 2**20:g} MiB); raise the limit on both sides "
+            f"(coupler run --max-message-size MiB; a participant's server: max_message_bytes, "
+            f'docs/protocol.md "Message size") or send smaller values'
+        )
 
 
 class ParticipantError(CouplerError):

@@ -1,4 +1,4 @@
-"""TCP ports: who holds one, and a server's refusal to share one.
+"""TCP ports and unix sockets: who holds one, and a server's refusal to share one.
 
 gRPC servers set SO_REUSEPORT unless told otherwise, so a second server on a taken port starts
 without a word and the kernel splits connections between the two processes (a run's calls
@@ -7,6 +7,11 @@ then reach two participants). Every server Coupler starts binds without it
 gRPC binding ``localhost`` would otherwise take the one address left free), and turns a failed
 bind into ``PortInUse`` naming the port and the process holding it: its pid and command line,
 read from /proc (Linux; elsewhere the holder is "a process this user cannot see").
+
+A unix socket path is the same story: gRPC removes whatever file is at the path before it binds,
+so a second server would silently take the socket of a live one. ``add_grpc_socket`` refuses a
+path where a server answers (naming its process), removes a stale socket (its server is gone),
+and refuses a path that is not a socket or does not fit a socket address (107 bytes).
 """
 
 from __future__ import annotations
@@ -16,6 +21,7 @@ import errno
 import ipaddress
 import os
 import socket
+import stat
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -60,10 +66,14 @@ def holders_of(port: int, host: str | None = None) -> list[PortHolder]:
     given), from /proc; empty when they cannot be seen."""
     addresses = _addresses(host)
     inodes = {inode for inode, address in _listeners(port).items() if _overlaps(address, addresses)}
+    return _holding({f"socket:[{inode}]" for inode in inodes})
+
+
+def _holding(wanted: set[str]) -> list[PortHolder]:
+    """The processes that have one of the ``wanted`` files (``socket:[INODE]``) open."""
     found: list[PortHolder] = []
-    if not inodes:
+    if not wanted:
         return found
-    wanted = {f"socket:[{inode}]" for inode in inodes}
     for pid in _pids():
         if not _links(pid) & wanted:
             continue
@@ -114,6 +124,79 @@ def add_grpc_port(server: Any, host: str, port: int, credentials: Any, what: str
             f"cannot serve {what} on {_shown(host)}:{port} ({exc}); is the address one of this "
             f"machine's?"
         ) from None
+
+
+SOCKET_PATH_MAX = 107
+"""Longest unix socket path (``sun_path`` holds 108 bytes with the terminating NUL)."""
+
+
+def add_grpc_socket(server: Any, path: Path, credentials: Any, what: str) -> None:
+    """Bind ``server`` to the unix socket ``path`` (TLS with ``credentials`` unless None): a
+    live socket there is refused (PortInUse naming its process), a stale one removed first;
+    ScenarioError when the path cannot be a socket."""
+    path = Path(os.path.abspath(path))
+    if len(os.fsencode(path)) > SOCKET_PATH_MAX:
+        raise ScenarioError(
+            f"cannot serve {what} on unix socket {path}: the path is longer than "
+            f"{SOCKET_PATH_MAX} bytes; choose a shorter one"
+        )
+    if not path.parent.is_dir():
+        raise ScenarioError(
+            f"cannot serve {what} on unix socket {path}: folder {path.parent} does not exist"
+        )
+    clear_socket(path, what)
+    bind = f"unix:{path}"
+    try:
+        if credentials is None:
+            server.add_insecure_port(bind)
+        else:
+            server.add_secure_port(bind, credentials)
+    except RuntimeError as exc:  # grpc says "Failed to bind", not why
+        raise ScenarioError(f"cannot serve {what} on unix socket {path} ({exc})") from None
+
+
+def clear_socket(path: Path, what: str) -> None:
+    """Make ``path`` free for a new socket: nothing there, or a stale socket (removed);
+    PortInUse when a server answers there, ScenarioError when it is another kind of file."""
+    try:
+        mode = path.lstat().st_mode
+    except FileNotFoundError:
+        return
+    if not stat.S_ISSOCK(mode):
+        raise ScenarioError(
+            f"cannot serve {what} on unix socket {path}: a file that is not a socket is there; "
+            f"remove it or choose another path"
+        )
+    with socket.socket(socket.AF_UNIX, socket.SOCK_STREAM) as probe_socket:
+        try:
+            probe_socket.connect(str(path))
+        except ConnectionRefusedError:  # nobody listens: a crashed server's leftover
+            path.unlink(missing_ok=True)
+            return
+        except OSError as exc:
+            raise ScenarioError(
+                f"cannot serve {what} on unix socket {path}: {exc.strerror or exc}"
+            ) from None
+    holders = socket_holders(path)
+    by = ", ".join(map(str, holders)) if holders else "a process this user cannot see"
+    raise PortInUse(
+        f"cannot serve {what} on unix socket {path}: the socket is in use by {by}; stop that "
+        f"process or choose another path",
+        port=0,
+        holders=holders,
+    )
+
+
+def socket_holders(path: Path) -> list[PortHolder]:
+    """The processes listening on the unix socket ``path``, from /proc; empty when they
+    cannot be seen."""
+    wanted = set()
+    with contextlib.suppress(OSError):
+        for line in Path("/proc/net/unix").read_text().splitlines()[1:]:
+            fields = line.split(maxsplit=7)
+            if len(fields) == 8 and fields[7] == str(path) and fields[3] == "00010000":
+                wanted.add(f"socket:[{fields[6]}]")
+    return _holding(wanted)
 
 
 @contextlib.contextmanager
@@ -216,10 +299,13 @@ __all__ = [
     "PortHolder",
     "PortInUse",
     "add_grpc_port",
+    "add_grpc_socket",
+    "clear_socket",
     "holders_of",
     "host_port",
     "in_use",
     "listening",
     "port_is_free",
     "refuse_taken",
+    "socket_holders",
 ]

@@ -27,6 +27,7 @@ from __future__ import annotations
 import asyncio
 import hmac
 import math
+import os
 import signal
 import time
 from collections.abc import AsyncIterator, Awaitable, Callable, Coroutine
@@ -41,10 +42,16 @@ from grpc_reflection.v1alpha import reflection
 
 from coupler import durations, ports, wire
 from coupler.channels import Description
-from coupler.errors import ChannelValueError, ParticipantUnavailable, ScenarioError
+from coupler.errors import (
+    ChannelValueError,
+    MessageTooLarge,
+    ParticipantUnavailable,
+    ScenarioError,
+)
 from coupler.participant import HEALTH_REASON, EndRun, Participant
 from coupler.security import ServerSecurity
 from coupler.v1 import component_pb2_grpc as pb_grpc
+from coupler.values import MAX_MESSAGE_BYTES, ValuePolicy
 
 log = structlog.get_logger("coupler.server")
 SERVICE_NAME = wire.SERVICE_NAME
@@ -74,8 +81,9 @@ class _Run:
 class _Servicer(pb_grpc.GRPCComponentServiceServicer):
     """Applies the protocol's rules around one participant."""
 
-    def __init__(self, participant: Participant) -> None:
+    def __init__(self, participant: Participant, max_message_bytes: int) -> None:
         self.participant = participant
+        self.policy = ValuePolicy(max_message_bytes=max_message_bytes)
         self._codec: wire.Codec | None = None
         self.run: _Run | None = None
         self._lock = asyncio.Lock()
@@ -90,7 +98,7 @@ class _Servicer(pb_grpc.GRPCComponentServiceServicer):
 
     def ready(self, description: Description) -> None:
         """The participant is open and described: calls are answered from now on."""
-        self._codec = wire.Codec(description)
+        self._codec = wire.Codec(description, self.policy)
 
     @property
     def codec(self) -> wire.Codec:
@@ -344,6 +352,8 @@ async def _guard(context: grpc.aio.ServicerContext, call: Callable[[], T | Await
         return result
     except _NotReady:
         await _abort(context, grpc.StatusCode.UNAVAILABLE, "participant is starting; not ready yet")
+    except MessageTooLarge as exc:
+        await _abort(context, grpc.StatusCode.RESOURCE_EXHAUSTED, str(exc))
     except (ChannelValueError, ScenarioError) as exc:
         await _abort(context, grpc.StatusCode.INVALID_ARGUMENT, str(exc))
     except ParticipantUnavailable as exc:  # the caller names the participant and the call
@@ -390,9 +400,13 @@ class ParticipantServer:
         reflection: bool = False,
         security: ServerSecurity | None = None,
         unix_socket: Path | None = None,
+        max_message_bytes: int = MAX_MESSAGE_BYTES,
     ):
         self.participant = participant
-        self.unix_socket = unix_socket
+        self.max_message_bytes = max_message_bytes
+        """The values of one message, Binary and String together, may have this many bytes;
+        more fails the call as RESOURCE_EXHAUSTED naming the channel (docs/protocol.md)."""
+        self.unix_socket = Path(os.path.abspath(unix_socket)) if unix_socket else None
         self.host = host
         self.requested_port = port
         self.reflection = reflection
@@ -425,11 +439,12 @@ class ParticipantServer:
             log.warning("insecure_interface", host=self.host, detail=warning)
         credentials = self.security.credentials()
         server = grpc.aio.server(
-            interceptors=self.security.interceptors(), options=ports.GRPC_SERVER_OPTIONS
+            interceptors=self.security.interceptors(),
+            options=ports.GRPC_SERVER_OPTIONS + wire.transport_options(self.max_message_bytes),
         )
         self._server = server
         await self._set_health(health_pb2.HealthCheckResponse.NOT_SERVING)
-        self._servicer = _Servicer(self.participant)
+        self._servicer = _Servicer(self.participant, self.max_message_bytes)
         pb_grpc.add_GRPCComponentServiceServicer_to_server(self._servicer, server)
         health_pb2_grpc.add_HealthServicer_to_server(self.health, server)
         if self.reflection:
@@ -437,11 +452,7 @@ class ParticipantServer:
                 (SERVICE_NAME, health.SERVICE_NAME, reflection.SERVICE_NAME), server
             )
         if self.unix_socket is not None:
-            bind = f"unix:{self.unix_socket}"
-            if credentials is None:
-                self.port = server.add_insecure_port(bind)
-            else:
-                self.port = server.add_secure_port(bind, credentials)
+            ports.add_grpc_socket(server, self.unix_socket, credentials, "the participant")
         else:
             self.port = ports.add_grpc_port(
                 server, self.host, self.requested_port, credentials, "the participant"
@@ -529,10 +540,19 @@ async def serve(
     reflection: bool = False,
     security: ServerSecurity | None = None,
     on_started: Callable[[ParticipantServer], None] | None = None,
+    max_message_bytes: int = MAX_MESSAGE_BYTES,
+    unix_socket: Path | None = None,
 ) -> None:
-    """Serve ``participant`` until SIGTERM or SIGINT, then shut down gracefully."""
+    """Serve ``participant`` until SIGTERM or SIGINT, then shut down gracefully; on
+    ``unix_socket`` (``unix:///PATH``, same host only) instead of ``host:port`` when given."""
     server = ParticipantServer(
-        participant, host=host, port=port, reflection=reflection, security=security
+        participant,
+        host=host,
+        port=port,
+        reflection=reflection,
+        security=security,
+        max_message_bytes=max_message_bytes,
+        unix_socket=unix_socket,
     )
     stop = asyncio.Event()
     loop = asyncio.get_running_loop()

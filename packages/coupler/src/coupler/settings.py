@@ -13,10 +13,15 @@ from pathlib import Path
 
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
-from coupler.arguments import add_security_arguments
+from coupler.arguments import add_security_arguments, add_socket_argument
 from coupler.security import ServerSecurity
 
-__all__ = ["ParticipantSettings", "SecuritySettings", "add_security_arguments"]
+__all__ = [
+    "ParticipantSettings",
+    "SecuritySettings",
+    "add_security_arguments",
+    "add_socket_argument",
+]
 
 
 class SecuritySettings(BaseSettings):
@@ -58,6 +63,8 @@ class ParticipantSettings(SecuritySettings):
     """Address the gRPC server binds; 0.0.0.0 in containers (with TLS, or ``insecure``)."""
     port: int = 50051
     """gRPC port; 0 picks a free one (printed at start)."""
+    socket: Path | None = None
+    """Unix socket to serve on instead of ``host:port`` (``unix:///PATH``, same host only)."""
     log_level: str = "INFO"
     """DEBUG, INFO, WARNING or ERROR."""
     log_json: bool | None = None

@@ -16,7 +16,10 @@ from coupler.channels import Channel, Value, ValueType
 from coupler.errors import ChannelValueError
 
 INT32_MIN, INT32_MAX = -(2**31), 2**31 - 1
-DEFAULT_MAX_BINARY_BYTES = 4 * 1024 * 1024
+MAX_MESSAGE_BYTES = 64 * 1024 * 1024
+"""Default message limit [bytes]: the Binary and String values of one message together (an
+800 x 600 RGB frame is 1.44 MB). ``coupler.wire.Codec`` checks it; docs/protocol.md
+"Message size"."""
 
 _TRUE, _FALSE = ("true", "1"), ("false", "0")
 
@@ -27,8 +30,9 @@ class ValuePolicy:
 
     allow_nonfinite: bool = False
     """Accept NaN and +/-Inf on Real channels."""
-    max_binary_bytes: int = DEFAULT_MAX_BINARY_BYTES
-    """Largest binary value accepted [bytes]."""
+    max_message_bytes: int = MAX_MESSAGE_BYTES
+    """Largest sum of the Binary and String values of one message [bytes] (``coupler.wire``
+    checks it per message, naming the largest channel)."""
 
 
 DEFAULT_POLICY = ValuePolicy()
@@ -69,13 +73,6 @@ def check(channel: Channel, value: object, policy: ValuePolicy = DEFAULT_POLICY)
         return value
     if not isinstance(value, bytes | bytearray):
         raise _mismatch(channel, value)
-    if len(value) > policy.max_binary_bytes:
-        raise ChannelValueError(
-            f"channel '{channel.name}' carries at most {policy.max_binary_bytes} bytes, "
-            f"got {len(value)}",
-            channel=channel.name,
-            expected="Binary",
-        )
     return bytes(value)
 
 

@@ -20,9 +20,9 @@ from coupler.channels import (
     Value,
     ValueType,
 )
-from coupler.errors import ChannelValueError
+from coupler.errors import ChannelValueError, MessageTooLarge
 from coupler.v1 import component_pb2 as pb
-from coupler.values import DEFAULT_POLICY, ValuePolicy, check
+from coupler.values import DEFAULT_POLICY, MAX_MESSAGE_BYTES, ValuePolicy, check
 
 _FIELD_OF_TYPE = {
     ValueType.REAL: "real",
@@ -54,6 +54,7 @@ _TYPE_TO_PB = {
     ValueType.ENUMERATION: pb.VALUE_TYPE_ENUMERATION,
 }
 _TYPE_FROM_PB = {v: k for k, v in _TYPE_TO_PB.items()}
+_SIZED = (ValueType.BINARY, ValueType.STRING)
 
 # Message classes, re-exported so that server and client name them through this module.
 DescribeRequest = pb.DescribeRequest
@@ -66,6 +67,17 @@ TerminateRequest = pb.TerminateRequest
 TerminateResponse = pb.TerminateResponse
 SERVICE_NAME = pb.DESCRIPTOR.services_by_name["GRPCComponentService"].full_name
 
+FRAMING_BYTES = 8 * 1024 * 1024
+"""What a message may carry beyond its Binary and String values (names, numbers, ids) [bytes]."""
+
+
+def transport_options(limit: int = MAX_MESSAGE_BYTES) -> tuple[tuple[str, int], ...]:
+    """gRPC channel/server options for messages whose values fit ``limit`` bytes: the codec
+    names the channel of a message over ``limit``; the transport refuses only what is larger
+    still (its RESOURCE_EXHAUSTED names no channel)."""
+    size = limit + FRAMING_BYTES
+    return (("grpc.max_receive_message_length", size), ("grpc.max_send_message_length", size))
+
 
 class Codec:
     """Encodes and decodes the bindings of one participant, checked against its channels."""
@@ -74,6 +86,8 @@ class Codec:
         self.description = description
         self.policy = policy
         self._channels = {c.name: c for c in description.channels}
+        self._sized = any(c.type in _SIZED for c in description.channels)
+        """Whether a message can grow: only Binary and String values count to its limit."""
 
     def channel(self, name: str, allowed: Iterable[Causality] | None = None) -> Channel:
         """The channel ``name``, or ChannelValueError listing the channels there are."""
@@ -98,7 +112,10 @@ class Codec:
     ) -> list[pb.VariableBinding]:
         """Bindings for ``values``, each checked against its channel."""
         allowed = tuple(allowed) if allowed is not None else None
-        return [self.binding(self.channel(n, allowed), v) for n, v in values.items()]
+        bindings = [self.binding(self.channel(n, allowed), v) for n, v in values.items()]
+        if self._sized:
+            self._fits(values)
+        return bindings
 
     def binding(self, channel: Channel, value: object) -> pb.VariableBinding:
         """One checked binding."""
@@ -124,7 +141,33 @@ class Codec:
                     expected=str(channel.type),
                 )
             values[channel.name] = check(channel, getattr(binding, field), self.policy)
+        if self._sized:
+            self._fits(values)
         return values
+
+    def _fits(self, values: Mapping[str, object]) -> None:
+        """MessageTooLarge naming the largest channel when the Binary and String ``values`` of
+        one message together are over the policy's message limit."""
+        sizes = {n: _size(v) for n, v in values.items() if isinstance(v, bytes | bytearray | str)}
+        total = sum(sizes.values())
+        limit = self.policy.max_message_bytes
+        if total <= limit:
+            return
+        name = max(sizes, key=sizes.__getitem__)
+        raise MessageTooLarge(
+            channel=name,
+            kind=str(self._channels[name].causality),
+            size=sizes[name],
+            total=total,
+            limit=limit,
+        )
+
+
+def _size(value: bytes | bytearray | str) -> int:
+    """Bytes of a value on the wire (UTF-8 for text)."""
+    if isinstance(value, str) and not value.isascii():
+        return len(value.encode())
+    return len(value)
 
 
 def _untyped_binding(name: str, value: Value) -> pb.VariableBinding:

@@ -18,7 +18,9 @@ the error's mean, maximum and 95th percentile.
 
 ``python -m coupler_railway.scoring RESULTS_DIR`` writes ``perception-report.json`` (summary
 and per balise) and ``perception-report.csv`` (one row per balise passed) into the folder and
-prints the summary.
+prints the summary. ``coupler run`` does the same at the end of every run that records a
+``BaliseDetections`` channel and a ``passed_in_step`` column (``run_report``, the entry point
+``coupler.reports: perception``), and puts the summary into summary.json.
 """
 
 from __future__ import annotations
@@ -228,7 +230,7 @@ def score_results(
             if missing:
                 raise ScoringError(
                     f"{path} has no column {missing[0]!r}: record it (coupler run "
-                    f"--output-variables '{perception}.*' '{balises}.*')"
+                    f"--output-variables '{perception}.*,{balises}.*')"
                 )
             rows = [(float(r["time"]), r[detections], r[passed]) for r in reader]
     except OSError as exc:
@@ -238,6 +240,30 @@ def score_results(
         parse_detections(((t, d) for t, d, _ in rows), BALISE_DETECTIONS),
         gate_m,
     )
+
+
+def run_report(folder: Path, columns: Mapping[str, str]) -> dict[str, Any] | None:
+    """The perception report of the run whose results are in ``folder``, written there, for
+    summary.json (the orchestrator's ``coupler.reports`` hook); None when the run recorded no
+    ``BaliseDetections`` channel or no ``passed_in_step`` column: it is not a perception run."""
+    from coupler_railway.messages import BALISE_DETECTIONS
+
+    detections = [n for n, message in columns.items() if message == BALISE_DETECTIONS]
+    passes = [n for n in columns if n.endswith(".passed_in_step")]
+    if len(detections) != 1 or len(passes) != 1:
+        return None
+    perception, balises = detections[0].rpartition(".")[0], passes[0].rpartition(".")[0]
+    if detections[0] != f"{perception}.detections":
+        return None
+    report = score_results(folder, perception=perception, balises=balises)
+    as_json, as_csv = write_report(report, folder)
+    return {
+        "perception": perception,
+        "ground_truth": balises,
+        **report.summary(),
+        "missed": [b.balise_id for b in report.balises if not b.detected],
+        "files": [as_json.name, as_csv.name],
+    }
 
 
 def write_report(report: Report, folder: Path) -> tuple[Path, Path]:

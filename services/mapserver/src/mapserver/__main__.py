@@ -18,7 +18,7 @@ from coupler.logs import configure_logging
 from coupler.ports import host_port, listening
 from coupler.server import ParticipantServer
 from coupler.server import run as run_participant
-from coupler.settings import add_security_arguments
+from coupler.settings import add_security_arguments, add_socket_argument
 from coupler_railway import Infrastructure, RailMLError, load_infrastructure
 from mapserver.config import MapServerSettings
 from mapserver.feed import Feed
@@ -35,6 +35,7 @@ def _parse(argv: list[str] | None) -> MapServerSettings:
     )
     parser.add_argument("--grpc-host", dest="grpc_host")
     parser.add_argument("--grpc-port", dest="grpc_port", type=int, help="default 50071")
+    add_socket_argument(parser)
     parser.add_argument("--http-host", dest="http_host")
     parser.add_argument("--http-port", dest="http_port", type=int, help="default 8080")
     parser.add_argument("--railml", type=Path, help="default: the railway scenario's file")
@@ -65,6 +66,7 @@ async def run(settings: MapServerSettings) -> None:
         MapParticipant(state),
         host=settings.grpc_host,
         port=settings.grpc_port,
+        unix_socket=settings.socket,
         security=settings.security(),
         reflection=settings.reflection,
     )

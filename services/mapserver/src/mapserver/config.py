@@ -28,6 +28,9 @@ class MapServerSettings(SecuritySettings):
     """Address the participant's gRPC server binds; 0.0.0.0 in containers."""
     grpc_port: int = Field(default=50071, ge=0, le=65535)
     """gRPC port of the participant; 0 picks a free one (logged at start)."""
+    socket: Path | None = None
+    """Unix socket the participant serves on instead of ``grpc_host:grpc_port`` (same host
+    only; the web app stays on ``http_host:http_port``)."""
     http_host: str = "127.0.0.1"
     """Address the web app binds; 0.0.0.0 in containers."""
     http_port: int = Field(default=8080, ge=0, le=65535)

@@ -15,7 +15,7 @@ from coupler.errors import CouplerError, ScenarioError
 from coupler.logs import configure_logging
 from coupler.server import ParticipantServer, serve
 from coupler.server import run as run_participant
-from coupler.settings import add_security_arguments
+from coupler.settings import add_security_arguments, add_socket_argument
 
 from .adapter import OpenRailsAdapter
 from .config import BridgeSettings
@@ -46,6 +46,7 @@ def _parse(argv: list[str] | None) -> BridgeSettings:
     parser.add_argument("--locomotive", help="lockstep LocomotiveName (default PLAYER)")
     parser.add_argument("--host", help="gRPC bind address (default 127.0.0.1)")
     parser.add_argument("--port", type=int, help="gRPC port, 0 = any free one (default 50061)")
+    add_socket_argument(parser)
     parser.add_argument("--log-level", dest="log_level")
     add_security_arguments(parser)
     given = {k: v for k, v in vars(parser.parse_args(argv)).items() if v is not None}
@@ -111,6 +112,7 @@ def main(argv: list[str] | None = None) -> None:
                 participant,
                 host=settings.host,
                 port=settings.port,
+                unix_socket=settings.socket,
                 security=settings.security(),
                 reflection=settings.reflection,
                 on_started=announce,

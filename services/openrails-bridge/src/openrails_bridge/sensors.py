@@ -91,7 +91,7 @@ def load_sensors(path: Path) -> tuple[Sensor, ...]:
                 f"{at}: sensorName must be 1 to 64 letters, digits, '_', '.' or '-', got {name!r}"
             )
         kind = entry.get("sensorType")
-        if kind not in ENCODING:
+        if not isinstance(kind, str) or kind not in ENCODING:
             raise ScenarioError(
                 f"{at} ({name!r}): unknown sensorType {kind!r}; the sensor types are 'rgb' "
                 f"and 'depth'"

@@ -15,6 +15,7 @@ from pathlib import Path
 from coupler.archives import DEFAULT_BUDGET_BYTES
 from coupler.errors import ScenarioError
 from coupler.security import ClientSecurity
+from coupler.values import MAX_MESSAGE_BYTES
 from coupler.wire import MAX_SECRET, MIN_SECRET, SECRET_BYTES
 from coupler_orchestrator.model import Algorithm
 from coupler_orchestrator.observer import RunEnd
@@ -86,6 +87,10 @@ class RunOptions:
     interrupt), after every observer was told how it ended. The command line ends the process
     there, the only way out of a thread stuck in C; a library caller that gives nothing keeps
     its process and is told the run failed (or was aborted)."""
+    max_message_bytes: int = MAX_MESSAGE_BYTES
+    """The Binary and String values of one message to or from a remote participant may have
+    this many bytes together; more fails the run naming the channel (docs/protocol.md
+    "Message size")."""
     unpack_limit: int = DEFAULT_BUDGET_BYTES
     """Bytes an .ssp and the FMUs it runs may unpack to, together (zip bombs)."""
     isolate_fmus: bool = False
@@ -102,6 +107,10 @@ class RunOptions:
     directory (docs/replay.md)."""
     replays: Mapping[str, Path] = field(default_factory=dict)
     """Component -> recording (a .crec file or a results directory) served in its place."""
+    addresses: Mapping[str, str] = field(default_factory=dict)
+    """Where remote participants really are: a component's name, or an address as the SSD's
+    sources expand to (``grpc://127.0.0.1:50061``), -> the address to use instead
+    (``unix:///PATH``: ``coupler fleet`` serves its local participants on unix sockets)."""
     security: ClientSecurity = field(default_factory=ClientSecurity.from_environment)
     """TLS trust, client certificate and token for every remote participant (default: the
     ``COUPLER_TLS_*`` and ``COUPLER_TOKEN_FILE`` environment variables)."""

@@ -11,7 +11,7 @@ from coupler.errors import CouplerError
 from coupler.logs import configure_logging
 from coupler.server import ParticipantServer, serve
 from coupler.server import run as run_participant
-from coupler.settings import add_security_arguments
+from coupler.settings import add_security_arguments, add_socket_argument
 
 from .config import PerceptionSettings
 from .participant import PerceptionParticipant
@@ -21,6 +21,7 @@ def _parse(argv: list[str] | None) -> PerceptionSettings:
     parser = argparse.ArgumentParser(prog="perception", description=__doc__)
     parser.add_argument("--host", help="gRPC bind address (default 127.0.0.1)")
     parser.add_argument("--port", type=int, help="gRPC port, 0 = any free one (default 50063)")
+    add_socket_argument(parser)
     parser.add_argument("--log-level", dest="log_level")
     add_security_arguments(parser)
     given = {k: v for k, v in vars(parser.parse_args(argv)).items() if v is not None}
@@ -40,6 +41,7 @@ def main(argv: list[str] | None = None) -> None:
                 PerceptionParticipant(),
                 host=settings.host,
                 port=settings.port,
+                unix_socket=settings.socket,
                 security=settings.security(),
                 reflection=settings.reflection,
                 on_started=announce,

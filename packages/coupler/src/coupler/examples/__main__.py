@@ -9,7 +9,7 @@ from coupler.examples.gain import GainParticipant
 from coupler.logs import configure_logging
 from coupler.server import ParticipantServer, serve
 from coupler.server import run as run_participant
-from coupler.settings import ParticipantSettings, add_security_arguments
+from coupler.settings import ParticipantSettings, add_security_arguments, add_socket_argument
 
 
 def main() -> None:
@@ -18,6 +18,7 @@ def main() -> None:
     parser.add_argument("--name", default="Gain", help="participant name (default: Gain)")
     parser.add_argument("--host", help="bind address (default: 127.0.0.1)")
     parser.add_argument("--port", type=int, help="gRPC port, 0 = any free one (default 50051)")
+    add_socket_argument(parser)
     parser.add_argument("--log-level", dest="log_level")
     add_security_arguments(parser)
     args = parser.parse_args()
@@ -34,6 +35,7 @@ def main() -> None:
                 GainParticipant(args.name),
                 host=settings.host,
                 port=settings.port,
+                unix_socket=settings.socket,
                 security=settings.security(),
                 reflection=settings.reflection,
                 on_started=announce,

@@ -30,6 +30,12 @@ def arguments(fleet: argparse.ArgumentParser) -> None:
         "fleet", type=Path, help="fleet file (TOML), e.g. scenarios/railway/fleet.toml"
     )
     fleet.add_argument("--exit", action="store_true", help="stop the services when the run ends")
+    fleet.add_argument(
+        "--tcp",
+        action="store_true",
+        help="serve the participants on their TCP ports instead of unix sockets (the default "
+        "on one host; the fleet file's unix_sockets = false does the same)",
+    )
     out_options(fleet, default="the fleet file's out")
     fleet.add_argument(
         "--realtime-factor",
@@ -79,17 +85,25 @@ async def _fleet_run(
     from coupler_orchestrator.cli.run import run
     from coupler_orchestrator.tools.fleet import Fleet
 
-    async with Fleet(spec, health_timeout=args.health_timeout) as fleet:
+    async with Fleet(spec, health_timeout=args.health_timeout, sockets=not args.tcp) as fleet:
         print(
             f"fleet: {len(spec.services)} services healthy (logs in {shown(fleet.logs)})",
             file=out,
         )
+        if fleet.sockets is not None:
+            print(
+                f"participants on unix sockets in {fleet.sockets} (--tcp: on their TCP ports, "
+                "for other runs too)",
+                file=out,
+            )
         for name, url in spec.urls.items():
             print(f"{name}: {url}", file=out)
         if session.monitor is not None:
             print(f"monitor: {session.monitor.url}", file=out)
         out.flush()
-        options = replace(options_of(run_args), on_waiting=session.waiting)
+        options = replace(
+            options_of(run_args), on_waiting=session.waiting, addresses=dict(fleet.addresses)
+        )
         code = await run(run_args, options, out, session)
         if code == EXIT_OK and not args.exit:
             print("services stay up; Ctrl-C stops them", file=out, flush=True)

@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING
 
 from coupler import durations
 from coupler.errors import CouplerError
+from coupler.values import MAX_MESSAGE_BYTES
 from coupler_orchestrator.model import Algorithm
 
 if TYPE_CHECKING:
@@ -26,6 +27,23 @@ MIN_REALTIME_FACTOR = 1e-3
 """The slowest pacing: one simulated second per 1000 s of wall time (slower would wait for
 days between steps; 1e-300 never ended)."""
 
+MAX_MESSAGE_MIB = 1024
+"""The largest --max-message-size: gRPC and protobuf stop short of 2 GiB per message."""
+
+
+def _message_size(text: str) -> float:
+    """``--max-message-size``: MiB, above 0 and at most ``MAX_MESSAGE_MIB``."""
+    try:
+        size = float(text)
+    except ValueError:
+        size = math.nan
+    if not 0 < size <= MAX_MESSAGE_MIB:
+        raise argparse.ArgumentTypeError(
+            f"{text!r} is not a size in MiB above 0 and at most {MAX_MESSAGE_MIB}"
+        )
+    return size
+
+
 COMMANDS = {
     "run": "run",
     "validate": "validate",
@@ -35,6 +53,7 @@ COMMANDS = {
     "replay": "replay",
     "export-fmu": "export_fmu",
     "describe": "describe",
+    "new": "new",
 }
 """Each command and its module in ``coupler_orchestrator.cli``, in the order ``--help`` lists
 them. A module has ``HELP`` (and may have ``DESCRIPTION``), ``arguments(parser)`` and
@@ -111,6 +130,14 @@ def run_options(command: argparse.ArgumentParser) -> None:
         help="override a parameter or input start value (repeatable; a single FMU's "
         "parameters may be given as NAME=VALUE)",
     )
+    command.add_argument(
+        "--address",
+        action="append",
+        default=[],
+        metavar="COMPONENT=ADDRESS",
+        help="reach COMPONENT's participant at ADDRESS instead of its SSD source, e.g. "
+        "Gain=unix:///tmp/gain.sock (repeatable)",
+    )
     command.add_argument("--run-id", help="run id sent to participants (default: a random UUID)")
     command.add_argument(
         "--lease",
@@ -129,6 +156,15 @@ def run_options(command: argparse.ArgumentParser) -> None:
         type=durations.argument(durations.MAX_TIMEOUT),
         default=30.0,
         help="[s] deadline of every call to a participant (default 30; at most 86400 = 24 h)",
+    )
+    command.add_argument(
+        "--max-message-size",
+        type=_message_size,
+        default=MAX_MESSAGE_BYTES // 2**20,
+        metavar="MiB",
+        help="the Binary and String values of one message to or from a participant may have "
+        f"this many MiB together (default {MAX_MESSAGE_BYTES // 2**20}; at most "
+        f"{MAX_MESSAGE_MIB}); a larger message fails the run naming its channel",
     )
     command.add_argument(
         "--unpack-limit",
@@ -245,6 +281,7 @@ def options_of(args: argparse.Namespace) -> RunOptions:
         isolate_fmus=args.isolate_fmus,
         native_steps=args.native_steps,
         unpack_limit=args.unpack_limit * 1024 * 1024,
+        max_message_bytes=round(args.max_message_size * 2**20),
         lease=args.lease,
         security=security_of(args),
         on_abandoned=end_abandoned,
@@ -253,6 +290,7 @@ def options_of(args: argparse.Namespace) -> RunOptions:
         parquet=getattr(args, "parquet", False),
         record=_listed(getattr(args, "record", ())),
         replays=_replays_of(getattr(args, "replay", ())),
+        addresses=_addresses_of(args.address),
         **({"run_id": args.run_id} if args.run_id else {}),
     )
 
@@ -270,3 +308,13 @@ def _replays_of(items: Sequence[str]) -> dict[str, Path]:
             raise CouplerError(f"--replay {item!r}: write COMPONENT=RECORDING")
         replays[component] = Path(path)
     return replays
+
+
+def _addresses_of(items: Sequence[str]) -> dict[str, str]:
+    addresses = {}
+    for item in items:
+        component, sep, address = item.partition("=")
+        if not sep or not component or not address:
+            raise CouplerError(f"--address {item!r}: write COMPONENT=ADDRESS")
+        addresses[component] = address
+    return addresses

@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 from typing import TextIO
 
-from coupler.arguments import add_security_arguments
+from coupler.arguments import add_security_arguments, add_socket_argument
 from coupler_orchestrator.cli.exits import EXIT_OK
 from coupler_orchestrator.cli.session import Session
 
@@ -20,6 +20,7 @@ def arguments(replay: argparse.ArgumentParser) -> None:
     )
     replay.add_argument("--host", default="127.0.0.1", help="bind address (default: 127.0.0.1)")
     replay.add_argument("--port", type=int, default=0, help="gRPC port (default: any free one)")
+    add_socket_argument(replay)
     add_security_arguments(replay)
 
 
@@ -29,6 +30,12 @@ async def execute(args: argparse.Namespace, out: TextIO, session: Session) -> in
 
     given = {k: getattr(args, k) for k in ReplaySettings.model_fields if getattr(args, k, None)}
     await serve_recording(
-        args.recording, args.component, host=args.host, port=args.port, given=given, out=out
+        args.recording,
+        args.component,
+        host=args.host,
+        port=args.port,
+        unix_socket=args.socket,
+        given=given,
+        out=out,
     )
     return EXIT_OK

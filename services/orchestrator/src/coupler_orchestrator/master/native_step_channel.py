@@ -107,6 +107,7 @@ class NativeRemote(RemoteParticipant):
             metadata,
             len(self._metadata),
             self.call_timeout,
+            self.transport_limit + wire.FRAMING_BYTES,
         )
         error = self._ffi.string(self._lib.cs_error(stream)).decode(errors="replace")
         if error:

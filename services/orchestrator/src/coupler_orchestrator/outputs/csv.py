@@ -3,7 +3,9 @@ point.
 
 Reals are written with ``repr`` (the shortest text that reads back to the same double),
 Booleans as 1/0, strings as they are (CSV-quoted), binary values as JSON text when their channel
-names a registered protobuf message (``coupler.messages``), else as hex. Rows are buffered and
+names a registered protobuf message (``coupler.messages``), else as hex. Camera frames
+(``coupler.v1.Image``) are never text: left out unless ``--output-variables`` picks them, then
+PNG files whose names the cells hold (``outputs.frames``). Rows are buffered and
 flushed at least once a second and on every exit path, so a crash loses at most the last second
 and an interrupted or failed run keeps every completed row.
 """
@@ -23,6 +25,7 @@ from coupler import messages
 from coupler.channels import Value
 from coupler_orchestrator.observer import Column, Observer, RunEnd, RunInfo
 from coupler_orchestrator.outputs.files import write_failed
+from coupler_orchestrator.outputs.frames import FrameStore, is_frame
 
 FLUSH_EVERY_S = 1.0
 """Longest time a written row may stay in the buffer [s]."""
@@ -92,14 +95,15 @@ class Selection:
     """Which columns and which communication points results.csv records."""
 
     patterns: tuple[str, ...] = ()
-    """Column names or globs (``Gain.*``, ``*.speed``); empty: every column."""
+    """Column names or globs (``Gain.*``, ``*.speed``); empty: every column but camera
+    frames (``outputs.frames.is_frame``), which are recorded only when picked."""
     every: int = 1
     """Record every ``every``-th communication point (t_0 always)."""
 
     def columns(self, columns: Sequence[Column]) -> list[int]:
         """Indices of the selected columns, in column order."""
         if not self.patterns:
-            return list(range(len(columns)))
+            return [i for i, c in enumerate(columns) if not is_frame(c)]
         return [
             i
             for i, c in enumerate(columns)
@@ -128,10 +132,14 @@ class CsvRecorder(Observer):
         self._flushed = 0.0
         self._good = 0
         """Bytes of results.csv known to hold only complete rows (flushed without error)."""
+        self._store = FrameStore(path.parent)
+        self._frames: list[tuple[int, str]] = []
+        """(index in a row, column name) of the picked frame columns."""
 
     def started(self, info: RunInfo) -> None:
         picked = self.selection.columns(info.columns)
         columns = [info.columns[i] for i in picked]
+        self._frames = [(i, info.columns[i].name) for i in picked if is_frame(info.columns[i])]
         self._line = row_formatter(info.columns, picked)
         try:
             self.path.parent.mkdir(parents=True, exist_ok=True)
@@ -149,6 +157,10 @@ class CsvRecorder(Observer):
         if count % self.selection.every or self._file is None:
             return
         try:
+            if self._frames:
+                row = list(row)
+                for i, name in self._frames:
+                    row[i] = self._store.write(name, count, row[i])
             self._file.write(self._line(time, row))
             now = wallclock.monotonic()
             if now - self._flushed >= FLUSH_EVERY_S:

@@ -1,13 +1,17 @@
 """The live monitor of ``coupler run --monitor [HOST:]PORT``: a page served while the run goes.
 
 It shows the run's status, simulated time, progress, real-time factor, each participant's step
-latency (a live chart) and live charts of the channels picked in the page. It follows the map
-server's rules: the run never waits for a browser.
+latency (a live chart), live charts of the channels picked in the page and the latest frame of
+each camera channel (``coupler.v1.Image``, ``/api/frame/<Component.channel>``, a PNG). It
+follows the map server's rules: the run never waits for a browser.
 
 - The run only hands its events to :class:`MonitorState` (an observer): O(1) per step, no
   network, no awaiting. History is kept decimated: at most ``points`` points per run (every
   point at first; when full, every other point is dropped and the stride doubles), so a run of
-  a million steps keeps a bounded, evenly spread history.
+  a million steps keeps a bounded, evenly spread history of the numeric channels (never of
+  frames or other large values: only the latest row holds those).
+- A camera frame is encoded for a browser only when one asks for it, off the event loop, once
+  per frame however many browsers ask.
 - Each browser has a stream (server-sent events) that wakes four times a second and sends what
   is new since what that browser already has, read from the state at that moment: nothing
   queues up for a slow browser, and one whose socket stays full for ``write_timeout`` seconds
@@ -40,6 +44,7 @@ from coupler.channels import Value
 from coupler.errors import CouplerError, ScenarioError
 from coupler.ports import host_port, listening
 from coupler_orchestrator.observer import Observer, RunEnd, RunInfo
+from coupler_orchestrator.outputs.frames import is_frame, png, read_image
 
 log = structlog.get_logger("coupler.monitor")
 
@@ -99,6 +104,14 @@ class MonitorState(Observer):
         self._started = 0.0
         self._ended: float | None = None
         self._numeric: list[int] = []
+        self._kept: dict[str, int] = {}
+        """Numeric column -> its place in the rows the history keeps."""
+        self._whole = True
+        """Every column is numeric: the history keeps rows as they come."""
+        self._frames: dict[str, int] = {}
+        """Frame column -> its place in a row."""
+        self._encoded: dict[str, tuple[object, bytes | None]] = {}
+        """Frame column -> (the frame's value, its PNG): one encoding per frame."""
         self.version = 0
         """Bumped by every event (streams sleep while it stays the same)."""
 
@@ -114,12 +127,18 @@ class MonitorState(Observer):
         self.values, self.latencies = Decimated(self.points), Decimated(self.points)
         self.time, self.latency = None, [None] * len(info.members)
         self._numeric = [i for i, c in enumerate(info.columns) if c.type in NUMERIC]
+        self._whole = len(self._numeric) == len(info.columns)
+        self._kept = {
+            info.columns[i].name: i if self._whole else j for j, i in enumerate(self._numeric)
+        }
+        self._frames = {c.name: i for i, c in enumerate(info.columns) if is_frame(c)}
+        self._encoded.clear()
         self._started, self._ended = time.monotonic(), None
         self.version += 1
 
     def stepped(self, time_s: float, row: Sequence[Value]) -> None:
         self.time, self.row = time_s, row
-        self.values.offer(time_s, row)
+        self.values.offer(time_s, row if self._whole else [row[i] for i in self._numeric])
         self.version += 1
 
     def timed(self, seconds: Sequence[float | None]) -> None:
@@ -163,12 +182,13 @@ class MonitorState(Observer):
         """The run's participants and the channels the page may chart."""
         info = self.info
         if info is None:
-            return {"members": [], "channels": []}
+            return {"members": [], "channels": [], "frames": []}
         return {
             "members": list(info.members),
             "channels": [
                 {"name": info.columns[i].name, "unit": info.columns[i].unit} for i in self._numeric
             ],
+            "frames": list(self._frames),
         }
 
     def first(self) -> dict[str, Any]:
@@ -192,8 +212,7 @@ class MonitorState(Observer):
             "t": times,
             "series": {m: [r[i] for r in rows] for i, m in enumerate(info.members)},
         }
-        index = {info.columns[i].name: i for i in self._numeric}
-        picked = [(name, index[name]) for name in channels if name in index]
+        picked = [(name, self._kept[name]) for name in channels if name in self._kept]
         times_v, rows_v = self.values.after(values_after)
         frame["values"] = {
             "t": times_v,
@@ -203,6 +222,29 @@ class MonitorState(Observer):
             times[-1] if times else latency_after,
             times_v[-1] if times_v else values_after,
         )
+
+    def has_frames(self, name: str) -> bool:
+        """Whether ``name`` is a frame column of the run."""
+        return name in self._frames
+
+    async def latest_png(self, name: str) -> bytes | None:
+        """The latest frame of the frame column ``name`` as a PNG; None while it has none (or
+        one PNG cannot show). Encoded off the event loop, once per frame."""
+        index = self._frames.get(name)
+        if index is None or index >= len(self.row):
+            return None
+        value = self.row[index]
+        cached = self._encoded.get(name)
+        if cached is not None and cached[0] is value:
+            return cached[1]
+        encoded = await asyncio.get_running_loop().run_in_executor(None, _png_of, value)
+        self._encoded[name] = (value, encoded)
+        return encoded
+
+
+def _png_of(value: object) -> bytes | None:
+    image = read_image(value) if isinstance(value, bytes) else None
+    return None if image is None else png(image, level=1)
 
 
 def _number(value: Value) -> float | None:
@@ -238,6 +280,7 @@ def application(state: MonitorState, settings: MonitorSettings | None = None) ->
     app.router.add_get("/", _index)
     app.router.add_get("/api/state", _state)
     app.router.add_get("/api/events", _events)
+    app.router.add_get("/api/frame/{channel}", _frame)
     app.router.add_static("/static/", STATIC, append_version=False)
     app.on_shutdown.append(_close_streams)
     return app
@@ -265,6 +308,21 @@ async def _state(request: web.Request) -> web.Response:
     channels = [c for c in request.query.get("channels", "").split(",") if c]
     frame, _ = request.app[STATE].frame(None, channels)
     return web.json_response(frame)
+
+
+async def _frame(request: web.Request) -> web.Response:
+    """The latest frame of a camera channel as a PNG; 404 naming the run's camera channels
+    when it is none of them, 204 while it has no frame yet."""
+    state, name = request.app[STATE], request.match_info["channel"]
+    if not state.has_frames(name):
+        known = ", ".join(state.layout()["frames"]) or "none"
+        raise web.HTTPNotFound(text=f"'{name}' is not a camera channel of this run ({known})")
+    encoded = await state.latest_png(name)
+    if encoded is None:
+        return web.Response(status=204, headers={"Cache-Control": "no-store"})
+    return web.Response(
+        body=encoded, content_type="image/png", headers={"Cache-Control": "no-store"}
+    )
 
 
 async def _events(request: web.Request) -> web.StreamResponse:

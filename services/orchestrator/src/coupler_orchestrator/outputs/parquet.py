@@ -12,6 +12,7 @@ from coupler.channels import Value
 from coupler_orchestrator.observer import Column, Observer, RunEnd, RunInfo
 from coupler_orchestrator.outputs.csv import Selection, format_value
 from coupler_orchestrator.outputs.files import ResultsError
+from coupler_orchestrator.outputs.frames import is_frame
 
 
 class ParquetRecorder(Observer):
@@ -41,7 +42,9 @@ class ParquetRecorder(Observer):
         import pyarrow.parquet
 
         pa = self._pa
-        self._picked = self.selection.columns(info.columns)
+        # frames are files: results.csv names them (outputs.frames)
+        picked = self.selection.columns(info.columns)
+        self._picked = [i for i in picked if not is_frame(info.columns[i])]
         self._columns = [info.columns[i] for i in self._picked]
         kinds = {
             "Real": pa.float64(),

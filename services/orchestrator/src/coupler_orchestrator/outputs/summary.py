@@ -1,6 +1,8 @@
 """summary.json: it exists from the start of a run (status ``running``), is refreshed every few
 seconds while it runs and rewritten when it ends, always atomically (never half-written): status,
-reason, steps, wall time, real-time factor, each member's step latency, the recorded columns."""
+reason, steps, wall time, real-time factor, each member's step latency, the recorded columns,
+and at the end of a completed (or terminated) run the reports installed packages make from its
+results (``outputs.reports``)."""
 
 from __future__ import annotations
 
@@ -14,6 +16,7 @@ from coupler.channels import Value
 from coupler_orchestrator.observer import Observer, RunEnd, RunInfo
 from coupler_orchestrator.outputs.files import write_json
 from coupler_orchestrator.outputs.latency import LatencyStats
+from coupler_orchestrator.outputs.reports import make_reports
 
 SUMMARY_EVERY_S = 5.0
 """How often summary.json is refreshed while a run goes [s]."""
@@ -58,6 +61,12 @@ class SummaryWriter(Observer):
             self._fold()
 
     def finished(self, end: RunEnd) -> None:
+        """The final summary; the reports first when the run got to its end (results.csv is
+        complete: its recorder is told before this one)."""
+        if end.status in ("completed", "terminated") and self._info is not None:
+            reports = make_reports(self.path.parent, self._info.columns)
+            if reports:
+                self.extra["reports"] = reports
         self._write(end)
 
     def _fold(self) -> None:

@@ -10,13 +10,13 @@ from __future__ import annotations
 
 import asyncio
 from collections.abc import AsyncIterator
-from contextlib import asynccontextmanager
+from contextlib import asynccontextmanager, suppress
 from functools import partial
 from pathlib import Path
 
 from coupler.archives import Budget, declared_size
 from coupler.channels import Description
-from coupler.client import RemoteParticipant
+from coupler.client import RemoteParticipant, parse_address, uses_tls
 from coupler.errors import CouplerError, ScenarioError
 from coupler.fmu import FmuParticipant
 from coupler.fmuhost import IsolatedFmu
@@ -64,22 +64,42 @@ def create(
             token_file=settings.token_file,
         )
         remote = NativeRemote if enabled(options.native_steps) else RemoteParticipant
+        address = address_of(component, options)
         return remote(
-            component.source,
+            address,
             name=component.name,
             connect_timeout=options.connect_timeout,
             call_timeout=call_timeout,
+            max_message_bytes=options.max_message_bytes,
             security=options.security.override(own),
             on_waiting=(
-                partial(options.on_waiting, component.name, component.source)
-                if options.on_waiting
-                else None
+                partial(options.on_waiting, component.name, address) if options.on_waiting else None
             ),
         )
     raise ScenarioError(
         f"{where(component)}: component '{component.name}' has type '{component.type}'; "
         f"supported: {ssp.FMU_TYPE}, {ssp.GRPC_TYPE}"
     )
+
+
+def address_of(component: ssp.Component, options: RunOptions) -> str:
+    """Where the remote participant of ``component`` is: its source, unless the run's
+    ``addresses`` move it (by component name, or by the address its source names)."""
+    if component.name in options.addresses:
+        return options.addresses[component.name]
+    if uses_tls(component.source):
+        return component.source
+    target = _target(component.source)
+    for address, moved in options.addresses.items():
+        if target is not None and _target(address) == target:
+            return moved
+    return component.source
+
+
+def _target(address: str) -> str | None:
+    with suppress(ScenarioError):
+        return parse_address(address)
+    return None
 
 
 def replay_of(component: ssp.Component, options: RunOptions) -> ReplayParticipant | None:
@@ -132,6 +152,12 @@ async def opened(
             f"--replay {unknown}: no component '{unknown}' in the scenario (components: "
             f"{', '.join(known)})"
         )
+    for unknown in sorted(set(options.addresses) - set(known)):
+        if "://" not in unknown:  # a component's name, not an address the fleet moved
+            problems.append(
+                f"--address {unknown}: no component '{unknown}' in the scenario (components: "
+                f"{', '.join(known)})"
+            )
     for component in scenario.components:
         try:
             created[component.name] = create(component, options, budget)

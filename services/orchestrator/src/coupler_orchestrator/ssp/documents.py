@@ -126,10 +126,11 @@ def validate(root: Element, display: str) -> str | None:
 
 STEP_ANNOTATION = (
     '<ssd:Annotations><ssc:Annotation type="com.avl.model.connect.ssp.task">'
-    '<mc:Task xmlns:mc="com.avl.model.connect.ssp.task" deltaTime="{step}"/>'
-    "</ssc:Annotation></ssd:Annotations>"
+    '<mc:Task xmlns:mc="com.avl.model.connect.ssp.task" stepType="parallel_single_thread" '
+    'deltaTime="{step}"/></ssc:Annotation></ssd:Annotations>'
 )
-"""How an SSD carries its step size (OpenMCx's task annotation in the DefaultExperiment)."""
+"""How an SSD carries its step size (OpenMCx's task annotation in the DefaultExperiment; OpenMCx
+requires its stepType: ``parallel_single_thread`` is Jacobi, Coupler's default)."""
 
 
 def _with_fix(message: str, root: Element) -> str:

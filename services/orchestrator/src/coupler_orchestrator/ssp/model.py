@@ -219,8 +219,9 @@ class Component:
     """MIME type: ``application/x-fmu-sharedlibrary``, ``application/x-coupler-grpc`` or one of
     OpenMCx's built-ins (``BUILTIN_TYPES``)."""
     source: str
-    """For FMUs an absolute path; for gRPC ``grpc://HOST:PORT`` with ``${VAR}`` expanded; for a
-    replay ``replay:PATH#Component`` with PATH absolute."""
+    """For FMUs an absolute path; for gRPC ``grpc://HOST:PORT`` (``grpcs://``, or
+    ``unix:///PATH``) with ``${VAR}`` expanded; for a replay ``replay:PATH#Component`` with
+    PATH absolute."""
     connectors: tuple[Connector, ...]
     parameters: Mapping[str, ParameterValue] = field(default_factory=lambda: frozen_mapping())
     """Parameter values by connector/variable name, after all bindings and mappings."""

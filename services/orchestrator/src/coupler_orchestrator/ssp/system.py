@@ -212,16 +212,7 @@ class SystemReader:
                 )
             source = f"{REPLAY_SCHEME}{recording if raw else ''}{sep}{recorded}"
         else:
-            parts = urlsplit(source)
-            try:
-                port = parts.port
-            except ValueError:
-                port = None
-            if parts.scheme not in ("grpc", "grpcs") or not parts.hostname or port is None:
-                raise ScenarioError(
-                    f"{what}: source {shown} is not of the form grpc://HOST:PORT (or "
-                    f"grpcs:// for TLS); fix it"
-                )
+            _check_address(source, what, shown)
         implementation = element.get("implementation", "any")
         if implementation == "ModelExchange":
             self.warnings.append(
@@ -586,3 +577,21 @@ def _undeclared(flat: str, connector: str, component: Component, *, start: bool)
         f'kind="{kind}"/> to its <ssd:Connectors> (`coupler describe` lists the '
         f"participant's channels)"
     )
+
+
+def _check_address(source: str, what: str, shown: str) -> None:
+    """A remote component's source: ``grpc://HOST:PORT``, ``grpcs://HOST:PORT`` or
+    ``unix:///ABSOLUTE/PATH`` (a participant on this host, over its unix socket); ``shown``:
+    the source as the message quotes it (as written when it expanded variables)."""
+    parts = urlsplit(source)
+    if parts.scheme == "unix" and not parts.netloc and parts.path.startswith("/"):
+        return
+    try:
+        port = parts.port
+    except ValueError:
+        port = None
+    if parts.scheme not in ("grpc", "grpcs") or not parts.hostname or port is None:
+        raise ScenarioError(
+            f"{what}: source {shown} is not of the form grpc://HOST:PORT (grpcs:// for TLS, "
+            f"unix:///ABSOLUTE/PATH for a unix socket on this host); fix it"
+        )

@@ -2,7 +2,8 @@
 // server-sent event stream (/api/events?channels=...), whose first frame is that small state
 // again, whose second is the whole history and whose later frames carry only what is new.
 // Picking a channel opens a new stream (its history comes with it). The header never waits
-// for the chart library (loaded async); the charts do.
+// for the chart library (loaded async); the charts do. Camera channels show their latest
+// frame (/api/frame/NAME, a PNG), fetched again when the run has moved and the last one is in.
 "use strict";
 
 const MAX_POINTS = 4000; // per chart; beyond, every other point is dropped (as the server does)
@@ -12,7 +13,8 @@ const view = {
   members: [], channels: [], units: {},
   latency: null, latencyData: null,
   values: {}, // channel -> {chart, data: [[t...], [v...]]}
-  source: null, frames: 0,
+  cameras: {}, // frame channel -> {img, loading, shown: the run time of the frame asked for}
+  source: null, frames: 0, time: null,
 };
 window.monitor = view; // for tests and the curious
 
@@ -83,6 +85,7 @@ function showLayout(layout) {
     list.append(label);
   }
   filterChannels();
+  showCameras(layout.frames || []);
   if (view.latency) { view.latency.destroy(); view.latency = null; }
   view.latencyData = [[], ...layout.members.map(() => [])];
   if (layout.members.length) {
@@ -91,6 +94,39 @@ function showLayout(layout) {
       series: [{ label: "t [s]" }, ...layout.members.map((m, i) => ({ label: m, stroke: COLORS[i % COLORS.length], width: 1.5 }))],
       axes: [{}, { label: "ms" }],
     }, view.latencyData, document.getElementById("latency-chart"));
+  }
+}
+
+function showCameras(names) {
+  const list = document.getElementById("camera-list");
+  list.innerHTML = "";
+  view.cameras = {};
+  document.getElementById("cameras").hidden = !names.length;
+  for (const name of names) {
+    const figure = document.createElement("figure");
+    const img = document.createElement("img");
+    img.alt = `latest frame of ${name}`;
+    img.dataset.channel = name;
+    const caption = document.createElement("figcaption");
+    caption.textContent = name;
+    figure.append(img, caption);
+    list.append(figure);
+    const camera = { img, loading: false, shown: null };
+    const done = () => { camera.loading = false; refreshCameras(view.time); }; // caught up?
+    img.addEventListener("load", done);
+    img.addEventListener("error", done); // no frame yet (204)
+    view.cameras[name] = camera;
+  }
+}
+
+function refreshCameras(time) {
+  view.time = time;
+  if (time === null || time === undefined) return;
+  for (const [name, camera] of Object.entries(view.cameras)) {
+    if (camera.loading || camera.shown === time) continue;
+    camera.loading = true;
+    camera.shown = time;
+    camera.img.src = `/api/frame/${encodeURIComponent(name)}?t=${time}`;
   }
 }
 
@@ -129,7 +165,7 @@ const chartsReady = new Promise((resolve) => {
 function onFrame(frame) {
   view.frames++;
   showHeader(frame.header);
-  chartsReady.then(() => draw(frame)); // in the order the frames came
+  chartsReady.then(() => { draw(frame); refreshCameras(frame.header.time); }); // in order
 }
 
 function draw(frame) {

@@ -1,4 +1,4 @@
-"""A scenario's fleet as local processes: each service its own process, on loopback.
+"""A scenario's fleet as local processes: each service its own process, on this host.
 
 A fleet file (TOML) names the scenario and the services::
 
@@ -6,18 +6,29 @@ A fleet file (TOML) names the scenario and the services::
     ssp = "scenarios/railway/SystemStructure.ssd"
     out = "results/railway"           # each run: a new folder in it (default results/<scenario>)
     args = ["--realtime-factor", "20"]       # extra `coupler run` options
+    # unix_sockets = false                   # keep the participants on TCP (coupler fleet --tcp)
 
     [[service]]
     name = "openrails-mock"
     command = ["python", "-m", "openrails_mock", "--port", "${MOCK_PORT:-2150}"]
     health = "http://127.0.0.1:${MOCK_PORT:-2150}/API/READY"   # or grpc(s)://HOST:PORT
     # ports = [2150]    # default: the health URL's port and every --*port option's value
+    # socket = false    # a grpc:// participant stays on TCP although the fleet uses sockets
 
     [urls]
     map = "http://127.0.0.1:${MAP_HTTP_PORT:-8080}/"
 
 Commands, health and URLs expand ``${VAR}`` / ``${VAR:-default}`` as SSD sources do (names
 ending in ``_PORT``, ``_HOST``, ...), so the same variables move a fleet and its SSD.
+
+``coupler fleet`` has the participants talk over unix sockets (``Fleet(sockets=True)``): a
+service whose health is
+``grpc://HOST:PORT`` is started with ``--socket PATH`` added to its command (a socket in a
+private folder of this fleet, mode 0700, removed when it stops), so it serves there instead of
+on its TCP port; its health is checked there, and the run is told to reach the SSD's
+``grpc://HOST:PORT`` at ``unix:///PATH`` instead (``Fleet.addresses``). The results are the
+same bytes either way; ``unix_sockets = false`` (``coupler fleet --tcp``) keeps TCP, and
+``grpcs://`` services (TLS: another host's business) always do.
 
 ``Fleet`` first checks that every port it needs is free (naming the process that holds one)
 and that no other fleet writes the same results directory; then it starts the services (logs
@@ -32,6 +43,7 @@ import contextlib
 import fcntl
 import os
 import re
+import shutil
 import signal
 import socket
 import sys
@@ -81,6 +93,9 @@ class ServiceSpec:
     health URL's port and the value of every ``--*port`` option of the command."""
     port_variables: Mapping[int, str] = field(default_factory=dict)
     """The environment variable each port came from (``MOCK_PORT``), for messages."""
+    socket: bool = True
+    """Whether the service may serve on a unix socket (``--socket PATH``) when the fleet uses
+    them; false keeps it on TCP (a command without ``--socket``)."""
 
     def needed_ports(self) -> tuple[int, ...]:
         """The ports this service will listen on."""
@@ -112,6 +127,8 @@ class FleetSpec:
     """Started in order."""
     urls: dict[str, str] = field(default_factory=dict)
     """Printed before the run (e.g. the map)."""
+    unix_sockets: bool = True
+    """Serve the ``grpc://`` participants on unix sockets (false: on their TCP ports)."""
     source: Path | None = None
     """The fleet file, when loaded from one."""
 
@@ -139,6 +156,7 @@ class FleetSpec:
                     k: expand(v, env, what=f"{path} [urls] {k}")
                     for k, v in data.get("urls", {}).items()
                 },
+                unix_sockets=_flag(scenario, "unix_sockets"),
                 source=path,
             )
         except OSError as exc:
@@ -158,8 +176,8 @@ def _service(path: Path, raw: Mapping[str, Any], env: Mapping[str, str]) -> Serv
         used = variables_in(raw["health"])
         given = f" (with {', '.join(used)} from the environment)" if used else ""
         raise ScenarioError(
-            f"{what}: health '{raw['health']}'{given} is not grpc://HOST:PORT, grpcs://HOST:PORT "
-            "or an http URL; fix it" + (" or the variables" if used else "")
+            f"{what}: health '{raw['health']}'{given} is not grpc://HOST:PORT, grpcs://HOST:PORT, "
+            "unix:///PATH or an http URL; fix it" + (" or the variables" if used else "")
         )
     variables: dict[int, str] = {}
     for text, value in [*zip(raw["command"], command, strict=True), (raw["health"], health)]:
@@ -175,6 +193,7 @@ def _service(path: Path, raw: Mapping[str, Any], env: Mapping[str, str]) -> Serv
         health=health,
         ports=tuple(int(p) for p in raw.get("ports", ())),
         port_variables=variables,
+        socket=_flag(raw, "socket"),
     )
 
 
@@ -186,7 +205,16 @@ def _health_url(text: str) -> bool:
         return False
     if parts.scheme in ("http", "https"):
         return bool(parts.hostname)
+    if parts.scheme == "unix":
+        return not parts.netloc and parts.path.startswith("/")
     return parts.scheme in ("grpc", "grpcs") and bool(parts.hostname) and port is not None
+
+
+def _flag(table: Mapping[str, Any], key: str) -> bool:
+    value = table.get(key, True)
+    if not isinstance(value, bool):
+        raise TypeError(f"{key} = {value!r} must be true or false")
+    return value
 
 
 def port_variables(path: Path) -> tuple[str, ...]:
@@ -221,15 +249,38 @@ class Fleet:
     FleetError), stops them all on exit."""
 
     def __init__(
-        self, spec: FleetSpec, *, health_timeout: float = 60.0, logs: Path | None = None
+        self,
+        spec: FleetSpec,
+        *,
+        health_timeout: float = 60.0,
+        logs: Path | None = None,
+        sockets: bool = False,
     ) -> None:
         self.spec = spec
+        self.use_sockets = sockets
+        """Serve the ``grpc://`` participants on unix sockets (``coupler fleet`` asks for it
+        unless ``--tcp`` or the fleet file's ``unix_sockets = false``); off for callers that
+        reach the services by their TCP addresses (a separate ``coupler run``, other hosts)."""
         self.health_timeout = health_timeout
         self.logs = logs or spec.root / "build" / "logs"
         """This fleet's own log folder (``<logs>/fleet-<UTC time>-<random>/`` once entered,
         ``logs`` defaulting to the project's ``build/logs``): no other fleet writes there."""
         self._processes: dict[str, asyncio.subprocess.Process] = {}
         self._lock: IO[str] | None = None
+        self.sockets: Path | None = None
+        """The private folder (mode 0700) of the participants' unix sockets, while up."""
+        self.addresses: dict[str, str] = {}
+        """The SSD's address of each participant on a socket -> ``unix:///PATH`` (the run's
+        ``RunOptions.addresses``)."""
+
+    def on_socket(self, service: ServiceSpec) -> bool:
+        """Whether ``service`` serves on a unix socket in this fleet."""
+        return (
+            self.use_sockets
+            and self.spec.unix_sockets
+            and service.socket
+            and service.health.startswith("grpc://")
+        )
 
     async def __aenter__(self) -> Fleet:
         self.check_ports()
@@ -238,11 +289,13 @@ class Fleet:
             self.logs.mkdir(parents=True, exist_ok=True)
             stamp = datetime.now(UTC).strftime("%Y%m%d-%H%M%S")
             self.logs = Path(tempfile.mkdtemp(prefix=f"fleet-{stamp}-", dir=self.logs))
+            if any(map(self.on_socket, self.spec.services)):
+                self.sockets = Path(tempfile.mkdtemp(prefix="coupler-fleet-", dir=_socket_base()))
             for service in self.spec.services:
                 await self._start(service)
             for service in self.spec.services:
                 await self._wait_healthy(service)
-                log.info("service_healthy", service=service.name, health=service.health)
+                log.info("service_healthy", service=service.name, health=self.health_of(service))
         except BaseException:
             await self.stop()
             raise
@@ -265,7 +318,7 @@ class Fleet:
         the process already there)."""
         taken = []
         for service in self.spec.services:
-            for port in service.needed_ports():
+            for port in self.ports_of(service):
                 if port_is_free(port):
                     continue
                 holders = holders_of(port)
@@ -284,6 +337,17 @@ class Fleet:
                 + ". Another fleet (make demo?) is probably running: stop it first (Ctrl-C in "
                 "its terminal, or kill the pid)"
             )
+
+    def ports_of(self, service: ServiceSpec) -> tuple[int, ...]:
+        """The TCP ports ``service`` will listen on: its gRPC port not, on a socket."""
+        ports = service.needed_ports()
+        if self.on_socket(service):
+            ports = tuple(p for p in ports if p != urlsplit(service.health).port)
+        return ports
+
+    def health_of(self, service: ServiceSpec) -> str:
+        """Where the service's health is checked: its socket's address, on one."""
+        return self.addresses.get(service.health, service.health)
 
     def _lock_results(self) -> None:
         """Hold ``out/.fleet.lock`` while the fleet lives, so two fleets never write one
@@ -308,6 +372,10 @@ class Fleet:
 
     async def _start(self, service: ServiceSpec) -> None:
         command = [sys.executable if c == "python" else c for c in service.command]
+        if self.sockets is not None and self.on_socket(service):
+            path = self.sockets / f"{service.name}.sock"
+            command += ["--socket", str(path)]
+            self.addresses[service.health] = f"unix://{path}"
         with self.log_of(service.name).open("xb") as output:
             try:
                 process = await asyncio.create_subprocess_exec(
@@ -328,18 +396,20 @@ class Fleet:
         while True:
             if process.returncode is not None:
                 raise FleetError(self._failure(service, f"exited with code {process.returncode}"))
-            if await self._healthy(service.health):
+            if await self._healthy(self.health_of(service)):
                 return
             if time.monotonic() > deadline:
                 raise FleetError(
                     self._failure(
-                        service, f"not healthy at {service.health} within {self.health_timeout:g} s"
+                        service,
+                        f"not healthy at {self.health_of(service)} within "
+                        f"{self.health_timeout:g} s",
                     )
                 )
             await asyncio.sleep(0.2)
 
     async def _healthy(self, url: str) -> bool:
-        if url.startswith(("grpc://", "grpcs://")):
+        if url.startswith(("grpc://", "grpcs://", "unix://")):
             try:
                 await probe(url, connect_timeout=0.5)
                 return True
@@ -357,6 +427,11 @@ class Fleet:
             lines = path.read_text(errors="replace").splitlines()[-15:]
         except OSError:
             lines = ["(no log)"]
+        if self.on_socket(service):  # a program of the user's may not know --socket
+            what += (
+                " (started with --socket PATH, to serve on a unix socket: a program without that "
+                "option needs socket = false in its [[service]], or run coupler fleet --tcp)"
+            )
         return f"service '{service.name}' {what}; last lines of {path}:\n" + "\n".join(lines)
 
     async def stop(self, grace: float = 10.0) -> None:
@@ -375,9 +450,20 @@ class Fleet:
         if running:
             log.info("fleet_stopped", services=list(running))
         self._processes.clear()
+        if self.sockets is not None:
+            shutil.rmtree(self.sockets, ignore_errors=True)
+            self.sockets = None
+            self.addresses.clear()
         if self._lock is not None:
             self._lock.close()
             self._lock = None
+
+
+def _socket_base() -> str:
+    """Where the sockets' folder goes: the temp folder, unless its path leaves too little of
+    a socket address's 107 bytes for the sockets' names."""
+    base = tempfile.gettempdir()
+    return base if len(os.fsencode(base)) <= 60 else "/tmp"
 
 
 def _short(command: str, limit: int = 80) -> str:

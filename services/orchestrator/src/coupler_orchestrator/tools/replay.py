@@ -27,6 +27,7 @@ async def serve_recording(
     port: int,
     given: dict[str, Any],
     out: TextIO,
+    unix_socket: Path | None = None,
 ) -> None:
     """Serve a recording until cancelled; ``given``: the security options set on the command
     line (``ReplaySettings`` fields), over the environment's."""
@@ -36,6 +37,7 @@ async def serve_recording(
         participant,
         host=host,
         port=port,
+        unix_socket=unix_socket,
         security=security,
         reflection=bool(given.get("reflection")),
     )

@@ -10,6 +10,7 @@ import json
 import logging
 import os
 import shutil
+import tempfile
 from collections.abc import Awaitable, Callable
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
@@ -132,6 +133,7 @@ async def _executor(scheduler: str | None, jobs: int | None) -> Any:
         yield run_job, jobs or os.cpu_count() or 1
         return
     try:
+        import dask
         from distributed import Client, LocalCluster
     except ImportError:
         raise CampaignError(
@@ -142,8 +144,13 @@ async def _executor(scheduler: str | None, jobs: int | None) -> Any:
         logging.getLogger("distributed").setLevel(logging.WARNING)
     async with contextlib.AsyncExitStack() as stack:
         if scheduler == "local":
+            # the workers' scratch space is the campaign's, removed with it (Dask's default,
+            # TMPDIR/dask-scratch-space, outlives every campaign)
+            scratch = stack.enter_context(tempfile.TemporaryDirectory(prefix="coupler-dask-"))
+            stack.enter_context(dask.config.set({"temporary-directory": scratch}))
             cluster = await stack.enter_async_context(
                 LocalCluster(
+                    local_directory=scratch,
                     n_workers=jobs or os.cpu_count() or 1,
                     threads_per_worker=1,
                     processes=True,
