@@ -101,3 +101,26 @@ async def test_python_dash_m_serves_on_a_free_port() -> None:
     finally:
         process.terminate()
         await process.wait()
+
+
+async def test_on_ipv6_it_prints_a_url_with_brackets() -> None:
+    """``--host ::1``: the printed URL is one a client opens (it was http://::1:PORT/API)."""
+    process = await asyncio.create_subprocess_exec(
+        *(sys.executable, "-m", "openrails_mock", "--host", "::1", "--port", "0"),
+        *("--loading-delay-s", "0"),
+        stdout=asyncio.subprocess.PIPE,
+        stderr=asyncio.subprocess.STDOUT,
+    )
+    try:
+        assert process.stdout is not None
+        line = ""
+        while "listening on" not in line:
+            line = (await asyncio.wait_for(process.stdout.readline(), 30)).decode()
+            assert line, "the mock exited before listening"
+        url = line.split()[-1]
+        assert url.startswith("http://[::1]:"), url
+        async with aiohttp.ClientSession() as session, session.get(f"{url}/READY") as resp:
+            assert resp.status == 200
+    finally:
+        process.terminate()
+        await process.wait()

@@ -15,6 +15,7 @@ import asyncio
 import contextlib
 import csv
 import json
+import resource
 import subprocess
 import sys
 from collections.abc import Iterator
@@ -267,6 +268,151 @@ def test_variants_from_a_table_and_from_a_seeded_sample(ramp_gain: Path, tmp_pat
     assert len(drawn) == 4 and all(0.5 <= float(g) <= 2.0 for g in drawn)
     again = CampaignSpec.load(campaign_file(tmp_path, '[table]\nfile = "variants.csv"\n' + sampled))
     assert again.variants == spec.variants  # the seed makes the sample reproducible
+
+
+@pytest.mark.parametrize(
+    ("csv_bytes", "message"),
+    [
+        (b"Gain.gain\n1.5\n\xe9t\xe9\n", "variants.csv:3: not UTF-8 (byte 0xe9 at column 1)"),
+        (
+            b"Gain.gain,stop_time,Gain.gain\n1,2,3\n",
+            "variants.csv:1: column 3: 'Gain.gain' is also column 1",
+        ),
+        (b"Gain.gain\n", "variants.csv has a header and no row"),
+        (b"", "variants.csv is empty"),
+        (b"Gain.gain,\n1,2\n", "variants.csv:1: column 2: '' is not a key"),
+        (b"Gain.gain\n1\n2,3\n", "variants.csv:3: 2 cells, the header has 1"),
+        (b'Gain.gain\n"1\n', "variants.csv:2: unexpected end of data"),
+    ],
+    ids=["latin-1", "duplicate-header", "header-only", "empty", "empty-key", "cells", "quote"],
+)
+def test_bad_variant_tables_are_refused_naming_line_and_column(
+    ramp_gain: Path, tmp_path: Path, csv_bytes: bytes, message: str
+) -> None:
+    """Each used to be a traceback (UnicodeDecodeError) or accepted silently (the second
+    column of a name replacing the first; a header alone: one run with no variant)."""
+    (tmp_path / "variants.csv").write_bytes(csv_bytes)
+    path = campaign_file(tmp_path, '[table]\nfile = "variants.csv"\n')
+    with pytest.raises(CampaignError) as caught:
+        CampaignSpec.load(path)
+    assert str(path) in str(caught.value) and message in str(caught.value), caught.value
+
+
+def test_a_table_with_a_byte_order_mark_reads_its_first_key(
+    ramp_gain: Path, tmp_path: Path
+) -> None:
+    """A spreadsheet's "CSV UTF-8" starts with a byte order mark: it is not part of the first
+    key (it used to be: a parameter named '\\ufeffGain.gain')."""
+    (tmp_path / "variants.csv").write_bytes(b"\xef\xbb\xbfGain.gain,stop_time\n1.5,1\n")
+    spec = CampaignSpec.load(campaign_file(tmp_path, '[table]\nfile = "variants.csv"\n'))
+    assert list(spec.variants) == [{"Gain.gain": 1.5, "stop_time": 1}]
+
+
+@pytest.mark.parametrize(
+    ("body", "message"),
+    [
+        ('n = 3\n"Gain.gain" = { uniform = ["a", 2] }', "uniform = ['a', 2] is not [low, high]"),
+        ('n = 3\n"Gain.gain" = { uniform = [3, 2] }', "uniform = [3, 2] is not [low, high]"),
+        ('n = 3\n"Gain.gain" = { uniform = [1] }', "uniform = [1] is not [low, high]"),
+        ('n = 3\n"Gain.gain" = { uniform = 2 }', "uniform = 2 is not [low, high]"),
+        ('n = 3\n"Gain.gain" = { uniform = [0, inf] }', "uniform = [0, inf] is not"),
+        ('n = 3\n"Gain.gain" = { choice = [] }', "choice = []"),
+        ('n = 3\n"Gain.gain" = { choice = [[1]] }', "'Gain.gain' = [1] is not a number"),
+        ('n = 0\n"Gain.gain" = { choice = [1] }', "n = 0 is not between 1 and 100,000"),
+        ('n = 2.5\n"Gain.gain" = { choice = [1] }', "both must be whole numbers"),
+        ('n = "ten"\n"Gain.gain" = { choice = [1] }', "both must be whole numbers"),
+    ],
+)
+def test_bad_samples_are_refused(ramp_gain: Path, tmp_path: Path, body: str, message: str) -> None:
+    """Bounds that are not two ordered finite numbers used to be tracebacks (ValueError,
+    TypeError) or a silent sample of another range; n = 0 a campaign of one unvaried run."""
+    path = campaign_file(tmp_path, f"[sample]\n{body}\n")
+    with pytest.raises(CampaignError) as caught:
+        CampaignSpec.load(path)
+    assert f"{path} [sample]" in str(caught.value) and message in str(caught.value), caught.value
+
+
+@pytest.mark.parametrize(
+    ("expression", "message"),
+    [
+        ("'x' * 100000000000 == 'x'", "a text cannot be computed with"),
+        ("y_max * 'x' > 1", "a text cannot be computed with"),
+        ("y_max > " + "9" * 5000, "characters, more than 1000"),
+        ("(" * 300 + "1" + ")" * 300 + " > 0", "not an expression"),
+        ("y_max == b'x'", "b'x' is not a number or a text"),
+    ],
+    ids=["text-times-huge", "output-times-text", "huge-number", "nested", "bytes"],
+)
+def test_checks_that_cannot_be_evaluated_are_refused(
+    ramp_gain: Path, tmp_path: Path, expression: str, message: str
+) -> None:
+    """A text multiplied by 10^11 used to be evaluated after each run (MemoryError)."""
+    body = f'[outputs]\ny_max = "max(Gain.y)"\n[checks]\nok = """{expression}"""\n'
+    path = campaign_file(tmp_path, body)
+    with pytest.raises(CampaignError) as caught:
+        CampaignSpec.load(path)
+    assert f"{path} [checks]" in str(caught.value) and message in str(caught.value), caught.value
+
+
+def grid_of(axes: int, values: int) -> str:
+    return "[grid]\n" + "".join(f'"Gain.p{i}" = {list(range(values))}\n' for i in range(axes))
+
+
+@pytest.mark.parametrize(
+    ("body", "message"),
+    [
+        (
+            grid_of(6, 100),
+            "[grid]: 1,000,000,000,000 variants (grid 1,000,000,000,000) are more than the "
+            "100,000 a campaign may run",
+        ),
+        (
+            '[sample]\nn = 1_000_000_000\n"Gain.gain" = { uniform = [1, 2] }\n',
+            "[sample]: n = 1,000,000,000 is not between 1 and 100,000",
+        ),
+        (
+            grid_of(5, 10) + '[sample]\nn = 1\n"Gain.gain" = { uniform = [1, 2] }\n',
+            "100,001 variants (grid 100,000, sampled 1) are more than the 100,000",
+        ),
+    ],
+    ids=["grid-1e12", "sample-1e9", "together"],
+)
+def test_campaigns_past_the_maximum_are_refused_at_once(
+    ramp_gain: Path, tmp_path: Path, body: str, message: str
+) -> None:
+    """``coupler campaign`` as a user runs it, its address space held to 1.5 GB: refused in one
+    sentence before any variant is made (it used to grow to 3.75 GB, then MemoryError)."""
+    path = campaign_file(tmp_path, body)
+
+    def limited() -> None:
+        resource.setrlimit(resource.RLIMIT_AS, (1536 << 20, 1536 << 20))
+
+    done = subprocess.run(
+        [str(Path(sys.executable).with_name("coupler")), "campaign", str(path)],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        preexec_fn=limited,
+    )
+    assert done.returncode == 1, done.stderr
+    assert done.stderr.startswith(f"error: {path} ") and message in done.stderr, done.stderr
+    assert "Traceback" not in done.stderr and "MemoryError" not in done.stderr
+
+
+def test_variants_are_made_as_they_are_asked_for(ramp_gain: Path, tmp_path: Path) -> None:
+    """A grid of 10,000 and a sample of 90,000: counted without being made; any one of them,
+    or a slice, is made on demand and equals what iterating gives."""
+    body = (
+        grid_of(4, 10) + '[sample]\nn = 90000\nseed = 3\n"Gain.gain" = { uniform = [0.5, 2.0] }\n'
+    )
+    spec = CampaignSpec.load(campaign_file(tmp_path, body))
+    assert len(spec.variants) == 100_000
+    assert spec.variants[0] == {"Gain.p0": 0, "Gain.p1": 0, "Gain.p2": 0, "Gain.p3": 0}
+    assert spec.variants[1234] == {"Gain.p0": 1, "Gain.p1": 2, "Gain.p2": 3, "Gain.p3": 4}
+    assert spec.variants[9999] == {"Gain.p0": 9, "Gain.p1": 9, "Gain.p2": 9, "Gain.p3": 9}
+    assert spec.variants[9998:10003:2][1] == spec.variants[10000]
+    assert spec.variants[-1] == list(spec.variants)[-1]
+    assert 0.5 <= float(spec.variants[10000]["Gain.gain"]) <= 2.0
 
 
 def test_reductions() -> None:

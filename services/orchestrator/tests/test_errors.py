@@ -364,3 +364,74 @@ def test_step_not_a_multiple_of_participant_fixed_step(coupler: Coupler, tmp_pat
             "communication step is 0.3 s; choose --step (or its deltaTime) as a multiple of 0.2 s"
         ) in outcome.err
         assert coupler("validate", path, "--step", "0.4", "--stop-time", "0.8").code == 0
+
+
+LEAKY_SSD = """<?xml version="1.0" encoding="UTF-8"?>
+<ssd:SystemStructureDescription version="1.0" name="Leak"
+    xmlns:ssd="http://ssp-standard.org/SSP1/SystemStructureDescription">
+  <ssd:System name="Leak">
+    <ssd:Elements>
+      <ssd:Component name="A" type="application/x-coupler-grpc"
+                     source="grpc://${LEAK_HOST}:${LEAK_PORT}">
+        <ssd:Connectors><ssd:Connector name="y" kind="output"/></ssd:Connectors>
+      </ssd:Component>
+      <ssd:Component name="B" source="${LEAK_DIR}/b.fmu">
+        <ssd:Connectors><ssd:Connector name="u" kind="input"/></ssd:Connectors>
+      </ssd:Component>
+      <ssd:Component name="C" source="${SCHEME_DIR}/c.fmu">
+        <ssd:Connectors><ssd:Connector name="u" kind="input"/></ssd:Connectors>
+      </ssd:Component>
+    </ssd:Elements>
+  </ssd:System>
+</ssd:SystemStructureDescription>
+"""
+
+
+def test_a_source_in_error_names_its_variables_never_their_values(tmp_path: Path) -> None:
+    """An SSD may read ``${..._HOST}``, ``_PORT`` and ``_DIR`` variables into its sources; a
+    source that then does not work is quoted as written, naming the variables — their values
+    (here made to look like secrets) are never shown (they were: "source
+    'grpc://127.0.0.1:s3cr3t-port' is not of the form ...", "FMU file '/s3cr3t-dir/b.fmu'")."""
+    path = tmp_path / "leak.ssd"
+    path.write_text(LEAKY_SSD)
+    values = {
+        "LEAK_HOST": "127.0.0.1",
+        "LEAK_PORT": "s3cr3t-port",
+        "LEAK_DIR": "/s3cr3t-dir",
+        "SCHEME_DIR": "https://s3cr3t.example",
+    }
+    outcome = Coupler.process("validate", path, env=values)
+    assert outcome.code == 1, outcome
+    assert "source 'grpc://${LEAK_HOST}:${LEAK_PORT}' (with LEAK_HOST, LEAK_PORT from the " in (
+        outcome.err
+    )
+    assert "FMU file '${LEAK_DIR}/b.fmu' (with LEAK_DIR from the environment) does not exist" in (
+        outcome.err
+    )
+    assert "FMU source '${SCHEME_DIR}/c.fmu' (with SCHEME_DIR from the environment) uses a " in (
+        outcome.err
+    )
+    assert "s3cr3t" not in outcome.err + outcome.out, outcome.err
+
+
+def test_a_fleet_health_url_in_error_names_its_variables_never_their_values(
+    tmp_path: Path,
+) -> None:
+    """A fleet file's health URL that does not work once expanded: one sentence naming the
+    variables (it was a traceback ending "Port could not be cast to integer value as
+    's3cr3t-port'")."""
+    (tmp_path / "leak.ssd").write_text(LEAKY_SSD)
+    fleet = tmp_path / "fleet.toml"
+    fleet.write_text(
+        '[scenario]\nssp = "leak.ssd"\n\n[[service]]\nname = "gain"\n'
+        'command = ["python", "-m", "coupler.examples", "gain", "--port", "${GAIN_PORT}"]\n'
+        'health = "grpc://${GAIN_HOST}:${GAIN_PORT}"\n'
+    )
+    values = {"GAIN_HOST": "127.0.0.1", "GAIN_PORT": "s3cr3t-port"}
+    outcome = Coupler.process("fleet", fleet, env=values, cwd=tmp_path)
+    assert outcome.code == 1, outcome
+    assert outcome.err.startswith(
+        f"error: {fleet} service 'gain': health 'grpc://${{GAIN_HOST}}:${{GAIN_PORT}}' (with "
+        "GAIN_HOST, GAIN_PORT from the environment) is not grpc://HOST:PORT"
+    ), outcome.err
+    assert "s3cr3t" not in outcome.err + outcome.out and "Traceback" not in outcome.err

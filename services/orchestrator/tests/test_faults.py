@@ -525,6 +525,38 @@ def test_a_full_disk_fails_the_run_keeping_whole_rows(
         subprocess.run(["umount", str(full)], check=False)
 
 
+@pytest.mark.skipif(os.geteuid() != 0, reason="mounting a small tmpfs needs root")
+def test_a_full_disk_leaves_no_unreadable_parquet_behind(
+    ssd: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``coupler run --parquet`` on a disk that fills up: results.csv keeps its whole rows, and
+    results.parquet, which could not be finished, is removed (it used to stay, 4 KiB without
+    its footer: "Parquet magic bytes not found")."""
+    import pyarrow.parquet as pq
+
+    full = tmp_path / "full"
+    full.mkdir()
+    mounted = subprocess.run(
+        ["mount", "-t", "tmpfs", "-o", "size=64k", "tmpfs", str(full)], capture_output=True
+    )
+    if mounted.returncode:
+        pytest.skip(f"cannot mount a tmpfs here: {mounted.stderr.decode().strip()}")
+    try:
+        with gain(monkeypatch):
+            outcome = Coupler.process(
+                "run", ssd, "--out", full, "--parquet", "--step", "0.001", "--stop-time", "60"
+            )
+        assert outcome.code == 1, outcome.err
+        assert "No space left on device" in summary(full)["reason"]
+        assert rows(full) and all(None not in row.values() for row in rows(full))
+        assert "Traceback" not in outcome.err
+        parquet = full / "results.parquet"
+        if parquet.exists():  # only when it could be finished: then it reads whole
+            assert pq.read_table(parquet).num_rows > 0
+    finally:
+        subprocess.run(["umount", str(full)], check=False)
+
+
 FAULTY_SSD = """<?xml version="1.0" encoding="UTF-8"?>
 <ssd:SystemStructureDescription version="1.0" name="FaultyFmu"
     xmlns:ssd="http://ssp-standard.org/SSP1/SystemStructureDescription">

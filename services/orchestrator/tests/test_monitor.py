@@ -207,3 +207,38 @@ def test_the_cli_prints_the_monitor_url(
     )
     assert outcome.code == 0, outcome
     assert "monitor: http://127.0.0.1:" in outcome.out
+
+
+async def test_at_most_16_pages_stream_at_once_and_the_17th_is_told_why() -> None:
+    """Every stream costs the run's process memory and time (issue #25: 200 streams, +56 MB,
+    the run 23 % slower), so the monitor serves 16 at once: the 17th is answered 503 with a
+    sentence, and a page gets its stream again once another has closed."""
+    async with MonitorServer("127.0.0.1:0") as monitor, aiohttp.ClientSession() as session:
+        url = f"{monitor.url}api/events"
+        streams = [await session.get(url) for _ in range(16)]
+        for reply in streams:
+            assert reply.status == 200
+            assert (await reply.content.readline()).startswith(b"data: ")
+        refused = await session.get(url)
+        assert refused.status == 503
+        assert (await refused.text()).startswith(
+            "the monitor serves at most 16 live pages at once and 16 are open; close one"
+        )
+        streams.pop().close()
+        await asyncio.sleep(2 * 0.25 + 0.1)  # the server sees the stream gone at its next write
+        again = await session.get(url)
+        assert again.status == 200
+        for reply in [*streams, again]:
+            reply.close()
+
+
+def test_an_ipv6_monitor_url_is_written_with_brackets(
+    fmus: dict[str, Path], gain_server: ParticipantServer, tmp_path: Path
+) -> None:
+    """``coupler run --monitor [::1]:0`` prints a URL a browser opens (it printed
+    http://::1:PORT/, which none does)."""
+    outcome = Coupler.process(
+        "run", DATA / "mixed.ssd", "--out", tmp_path, "--monitor", "[::1]:0", "--no-progress"
+    )
+    assert outcome.code == 0, outcome.err
+    assert "monitor: http://[::1]:" in outcome.out, outcome.out

@@ -112,7 +112,7 @@ def add_grpc_port(server: Any, host: str, port: int, credentials: Any, what: str
     cannot. Returns the port bound."""
     host = host[1:-1] if host.startswith("[") else host
     refuse_taken(host, port, what)
-    bind = f"[{host}]:{port}" if ":" in host else f"{host}:{port}"
+    bind = host_port(host, port)
     try:
         if credentials is None:
             return int(server.add_insecure_port(bind))
@@ -280,8 +280,14 @@ def _pids() -> Iterator[int]:
                 yield int(entry)
 
 
+def host_port(host: str, port: int) -> str:
+    """``host:port`` as a URL or a gRPC target writes it: an IPv6 address in brackets
+    (``[::1]:8090``)."""
+    return f"{_shown(host) if host else host}:{port}"
+
+
 def _shown(host: str) -> str:
-    return f"[{host}]" if ":" in host else host or "*"
+    return f"[{host}]" if ":" in host and not host.startswith("[") else host or "*"
 
 
 def _short(command: str, limit: int = 80) -> str:
@@ -296,6 +302,7 @@ __all__ = [
     "add_grpc_socket",
     "clear_socket",
     "holders_of",
+    "host_port",
     "in_use",
     "listening",
     "port_is_free",

@@ -428,7 +428,7 @@ class ParticipantServer:
         if self.unix_socket is not None:
             return f"unix://{self.unix_socket}"
         scheme = "grpcs" if self.security.tls else "grpc"
-        return f"{scheme}://{self.host}:{self.port}"
+        return f"{scheme}://{ports.host_port(self.host, self.port)}"
 
     async def start(self) -> int:
         """Bind, open the participant, describe it, then report its health (SERVING unless

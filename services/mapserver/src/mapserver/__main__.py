@@ -15,7 +15,7 @@ import structlog
 
 from coupler.errors import CouplerError
 from coupler.logs import configure_logging
-from coupler.ports import listening
+from coupler.ports import host_port, listening
 from coupler.server import ParticipantServer
 from coupler.server import run as run_participant
 from coupler.settings import add_security_arguments, add_socket_argument
@@ -81,7 +81,7 @@ async def run(settings: MapServerSettings) -> None:
             runner, http_port = await start_site(
                 create_app(feed, infrastructure, settings), settings.http_host, settings.http_port
             )
-        url = f"http://{settings.http_host}:{http_port}/"
+        url = f"http://{host_port(settings.http_host, http_port)}/"
         log.info(
             "mapserver_started",
             grpc=server.address,

@@ -16,7 +16,7 @@ from aiohttp import web
 from pydantic import ValidationError
 
 from coupler.errors import CouplerError
-from coupler.ports import listening
+from coupler.ports import host_port, listening
 
 from .api import SERVER, create_app
 from .config import MockConfig
@@ -85,7 +85,7 @@ async def _serve(config: MockConfig) -> None:
         consist=consist.name,
         sensors=sorted(cameras.specs) if cameras else [],
     )
-    print(f"openrails-mock listening on http://{config.host}:{port}/API", flush=True)
+    print(f"openrails-mock listening on http://{host_port(config.host, port)}/API", flush=True)
     stop = asyncio.Event()
     loop = asyncio.get_running_loop()
     for sig in (signal.SIGTERM, signal.SIGINT):

@@ -15,7 +15,9 @@ follows the map server's rules: the run never waits for a browser.
 - Each browser has a stream (server-sent events) that wakes four times a second and sends what
   is new since what that browser already has, read from the state at that moment: nothing
   queues up for a slow browser, and one whose socket stays full for ``write_timeout`` seconds
-  is dropped (the page reconnects and starts over).
+  is dropped (the page reconnects and starts over). At most ``max_streams`` streams go at once
+  (16): a stream costs the run's process memory and time, so another page is answered 503 with
+  a sentence until one closes.
 - A page's first paint is fast however busy the run keeps this process: the page itself carries
   the run's status (header and layout, inlined into the HTML), and every stream's first frame is
   that small state again; the whole history follows in the second frame, so a late joiner sees
@@ -40,7 +42,7 @@ from aiohttp import web
 
 from coupler.channels import Value
 from coupler.errors import CouplerError, ScenarioError
-from coupler.ports import listening
+from coupler.ports import host_port, listening
 from coupler_orchestrator.observer import Observer, RunEnd, RunInfo
 from coupler_orchestrator.outputs.frames import is_frame, png, read_image
 
@@ -258,6 +260,8 @@ class MonitorSettings:
     """How often a stream looks for news."""
     write_timeout_s: float = 10.0
     """A browser whose socket stays full this long is dropped."""
+    max_streams: int = 16
+    """Streams served at once; one more is answered 503."""
 
 
 STATE: web.AppKey[MonitorState] = web.AppKey("state", MonitorState)
@@ -326,21 +330,29 @@ async def _events(request: web.Request) -> web.StreamResponse:
     then what is new, at its own pace."""
     state, settings = request.app[STATE], request.app[SETTINGS]
     channels = [c for c in request.query.get("channels", "").split(",") if c]
-    response = web.StreamResponse(headers=SSE_HEADERS)
-    try:
-        await response.prepare(request)
-    except ConnectionError:
-        return response
+    streams = request.app[STREAMS]
+    if len(streams) >= settings.max_streams:
+        return web.Response(
+            status=503,
+            text=f"the monitor serves at most {settings.max_streams} live pages at once and "
+            f"{len(streams)} are open; close one and reload this page\n",
+            headers={"Retry-After": "10", "Cache-Control": "no-store"},
+        )
     stop = asyncio.Event()
-    request.app[STREAMS].add(stop)
+    streams.add(stop)  # the slot is taken before the first await
+    response = web.StreamResponse(headers=SSE_HEADERS)
     cursor: tuple[float, float] | None = None
     seen = -1
     try:
+        await response.prepare(request)
         first = json.dumps(state.first(), separators=(",", ":"))
         await asyncio.wait_for(
             response.write(f"data: {first}\n\n".encode()), settings.write_timeout_s
         )
         while not stop.is_set():
+            transport = request.transport
+            if transport is None or transport.is_closing():
+                break  # the page has gone: its slot is free at once, news or not
             if state.version != seen:
                 seen = state.version
                 frame, cursor = state.frame(cursor, channels)
@@ -377,8 +389,8 @@ class MonitorServer:
 
     @property
     def url(self) -> str:
-        host = "127.0.0.1" if self.host in ("0.0.0.0", "::", "") else self.host
-        return f"http://{host}:{self.port}/"
+        host = {"0.0.0.0": "127.0.0.1", "::": "::1", "": "127.0.0.1"}.get(self.host, self.host)
+        return f"http://{host_port(host, self.port)}/"
 
     async def __aenter__(self) -> MonitorServer:
         self._app = application(self.state)

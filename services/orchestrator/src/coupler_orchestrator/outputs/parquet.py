@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -10,7 +11,7 @@ from coupler import messages
 from coupler.channels import Value
 from coupler_orchestrator.observer import Column, Observer, RunEnd, RunInfo
 from coupler_orchestrator.outputs.csv import Selection, format_value
-from coupler_orchestrator.outputs.files import write_failed
+from coupler_orchestrator.outputs.files import ResultsError
 from coupler_orchestrator.outputs.frames import is_frame
 
 
@@ -18,7 +19,9 @@ class ParquetRecorder(Observer):
     """Writes results.parquet (when pyarrow is installed): the rows results.csv holds, typed —
     Real float64, Integer/Enumeration int64, Boolean bool, String string, Binary binary (or
     the JSON text of a registered message) — in row groups of ``group_rows`` rows, so memory
-    stays bounded; the last group is written on every exit path."""
+    stays bounded; the last group is written on every exit path. A file that could not be
+    written whole (a full disk, a size limit) is removed at the run's end, never left behind
+    unreadable: results.csv keeps the rows."""
 
     def __init__(self, path: Path, selection: Selection | None = None, group_rows: int = 65536):
         import pyarrow  # checked by parquet_available() before a run
@@ -33,6 +36,7 @@ class ParquetRecorder(Observer):
         self._picked: list[int] = []
         self._buffer: list[list[Any]] = []
         self._count = 0
+        self._failed = False
 
     def started(self, info: RunInfo) -> None:
         import pyarrow.parquet
@@ -62,7 +66,9 @@ class ParquetRecorder(Observer):
             self.path.parent.mkdir(parents=True, exist_ok=True)
             self._writer = pyarrow.parquet.ParquetWriter(str(self.path), self._schema)
         except OSError as exc:
-            raise write_failed(self.path, exc) from exc
+            with contextlib.suppress(OSError):
+                self.path.unlink(missing_ok=True)
+            raise self._write_failed(exc) from exc
 
     def stepped(self, time: float, row: Sequence[Value]) -> None:
         count, self._count = self._count, self._count + 1
@@ -90,21 +96,35 @@ class ParquetRecorder(Observer):
             ],
             schema=self._schema,
         )
+        self._buffer = [[] for _ in self._buffer]
         try:
             self._writer.write_table(table)
         except OSError as exc:
-            raise write_failed(self.path, exc) from exc
-        self._buffer = [[] for _ in self._buffer]
+            raise self._write_failed(exc) from exc
+
+    def _write_failed(self, exc: OSError) -> ResultsError:
+        self._failed = True
+        return ResultsError(
+            f"cannot write {self.path}: {exc.strerror or exc}; it is removed at the run's end "
+            "(results.csv keeps every complete row)"
+        )
 
     def finished(self, end: RunEnd) -> None:
         writer = self._writer
         if writer is None:
             return
         try:
-            self._flush()
+            if not self._failed:
+                self._flush()
+                writer.close()
+        except OSError as exc:
+            raise self._write_failed(exc) from exc
         finally:
             self._writer = None
-            writer.close()
+            if self._failed:
+                with contextlib.suppress(Exception):
+                    writer.close()
+                self.path.unlink(missing_ok=True)
 
 
 def parquet_available() -> bool:

@@ -2,9 +2,9 @@
 
 Only variables that name where a participant is may be expanded: names ending in ``_HOST``,
 ``_PORT``, ``_ADDRESS``, ``_SCHEME`` or ``_DIR`` (``BRIDGE_HOST``, ``COUPLER_FMU_DIR``). An SSD
-therefore cannot read an arbitrary environment variable (a secret) into an address, and the
-values expanded are never secrets when a message shows an address. Sources may not carry user
-information (``grpc://user:password@host``).
+therefore cannot read an arbitrary environment variable (a secret) into an address. A message
+about a source quotes it as written and names its variables (``variables_in``), never their
+values. Sources may not carry user information (``grpc://user:password@host``).
 """
 
 from __future__ import annotations
@@ -55,6 +55,11 @@ def expand(text: str, env: Mapping[str, str], *, what: str) -> str:
             "never go into an SSD - use a token file (docs/security.md)"
         )
     return expanded
+
+
+def variables_in(text: str) -> list[str]:
+    """The variables ``text`` expands, in order, each once."""
+    return list(dict.fromkeys(m.group(1) for m in _PATTERN.finditer(text)))
 
 
 def _allowed(text: str) -> set[str]:

@@ -24,19 +24,25 @@ class Documents:
         self.confined = confined
         self.warnings = warnings
 
-    def resolve(self, source: str, element: Element, display: str, *, what: str) -> Path:
-        """An SSD-relative URI as an absolute path, confined to the archive for .ssp files."""
+    def resolve(
+        self, source: str, element: Element, display: str, *, what: str, shown: str = ""
+    ) -> Path:
+        """An SSD-relative URI as an absolute path, confined to the archive for .ssp files.
+        ``shown``: the source as a message quotes it (as written, when it expanded ``${VAR}``s
+        whose values a message never shows)."""
+        shown = shown or f"'{source}'"
         parts = urlsplit(source)
         if parts.scheme and parts.scheme != "file" and len(parts.scheme) > 1:
+            scheme = f"the scheme '{parts.scheme}:'" if shown == f"'{source}'" else "a scheme"
             raise ScenarioError(
-                f"{where(display, element)}: {what} source '{source}' uses the scheme "
-                f"'{parts.scheme}:', which is not supported; use a path relative to the SSD"
+                f"{where(display, element)}: {what} source {shown} uses {scheme}, which is not "
+                "supported; use a path relative to the SSD"
             )
         raw = unquote(parts.path if parts.scheme == "file" else source)
         path = (self.resource_dir / raw).resolve()
         if self.confined and not path.is_relative_to(self.resource_dir):
             raise ScenarioError(
-                f"{where(display, element)}: {what} source '{source}' points outside the .ssp "
+                f"{where(display, element)}: {what} source {shown} points outside the .ssp "
                 "archive; use a path inside the archive"
             )
         return path

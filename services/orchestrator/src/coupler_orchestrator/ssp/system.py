@@ -16,7 +16,7 @@ from coupler.errors import ScenarioError, ValidationError
 from . import openmcx
 from . import tool_annotations as notes
 from .documents import Element, boolean, child, children, elements, line_of, local, required, where
-from .expansion import expand
+from .expansion import expand, variables_in
 from .files import Documents
 from .graph import Edge, Graph, Node
 from .model import (
@@ -175,7 +175,15 @@ class SystemReader:
                 f"use {FMU_TYPE} or {GRPC_TYPE} (or one of OpenMCx's built-ins: {builtins})"
             )
         what = f"{here}: component '{name}'"
-        source = expand(required(element, "source", self.display), self.env, what=what)
+        written = required(element, "source", self.display)
+        source = expand(written, self.env, what=what)
+        # a problem quotes the source as written: ${VAR} named, its value never shown
+        expanded = variables_in(written)
+        shown = (
+            f"'{written}' (with {', '.join(expanded)} from the environment)"
+            if expanded
+            else f"'{source}'"
+        )
         for other, kind in openmcx.SPECIFIC_DATA.items():
             if other != mime and openmcx.annotation(element, kind) is not None:
                 raise ScenarioError(
@@ -187,10 +195,11 @@ class SystemReader:
         if mime in BUILTIN_TYPES:
             builtin = openmcx.read_builtin(element, mime, connectors, name, self.display)
         elif mime == FMU_TYPE and not source.startswith(REPLAY_SCHEME):
-            fmu = self.documents.resolve(source, element, self.display, what="FMU")
+            fmu = self.documents.resolve(source, element, self.display, what="FMU", shown=shown)
             if not fmu.is_file():
+                looked = "" if expanded else f" (looked for {fmu})"
                 raise ScenarioError(
-                    f"{what}: FMU file '{source}' does not exist (looked for {fmu}); add the FMU "
+                    f"{what}: FMU file {shown} does not exist{looked}; add the FMU "
                     "to the archive/directory or fix the source attribute"
                 )
             source = str(fmu)
@@ -198,10 +207,12 @@ class SystemReader:
             raw, sep, recorded = source.removeprefix(REPLAY_SCHEME).partition("#")
             recording = Path(raw)
             if raw and not recording.is_absolute():
-                recording = self.documents.resolve(raw, element, self.display, what="recording")
+                recording = self.documents.resolve(
+                    raw, element, self.display, what="recording", shown=shown
+                )
             source = f"{REPLAY_SCHEME}{recording if raw else ''}{sep}{recorded}"
         else:
-            _check_address(source, what)
+            _check_address(source, what, shown)
         implementation = element.get("implementation", "any")
         if implementation == "ModelExchange":
             self.warnings.append(
@@ -568,9 +579,10 @@ def _undeclared(flat: str, connector: str, component: Component, *, start: bool)
     )
 
 
-def _check_address(source: str, what: str) -> None:
+def _check_address(source: str, what: str, shown: str) -> None:
     """A remote component's source: ``grpc://HOST:PORT``, ``grpcs://HOST:PORT`` or
-    ``unix:///ABSOLUTE/PATH`` (a participant on this host, over its unix socket)."""
+    ``unix:///ABSOLUTE/PATH`` (a participant on this host, over its unix socket); ``shown``:
+    the source as the message quotes it (as written when it expanded variables)."""
     parts = urlsplit(source)
     if parts.scheme == "unix" and not parts.netloc and parts.path.startswith("/"):
         return
@@ -580,6 +592,6 @@ def _check_address(source: str, what: str) -> None:
         port = None
     if parts.scheme not in ("grpc", "grpcs") or not parts.hostname or port is None:
         raise ScenarioError(
-            f"{what}: source '{source}' is not of the form grpc://HOST:PORT (grpcs:// for TLS, "
+            f"{what}: source {shown} is not of the form grpc://HOST:PORT (grpcs:// for TLS, "
             f"unix:///ABSOLUTE/PATH for a unix socket on this host); fix it"
         )

@@ -191,11 +191,17 @@ function connect() {
   view.source.onmessage = (event) => onFrame(JSON.parse(event.data));
   view.source.onerror = () => {
     const status = document.getElementById("status");
-    if (!["completed", "terminated", "failed", "aborted"].includes(status.textContent)) {
+    if (["completed", "terminated", "failed", "aborted"].includes(status.textContent)) {
+      view.source.close(); // the run ended and its server has gone: keep the last picture
+    } else if (view.source.readyState === EventSource.CLOSED) {
+      // answered but refused (503): the monitor serves a limited number of pages at once
+      status.textContent = "not streaming";
+      status.className = "status";
+      text("reason", "the monitor refused this page's stream: it serves at most 16 pages at " +
+        "once; close another page and reload this one");
+    } else {
       status.textContent = "reconnecting";
       status.className = "status";
-    } else {
-      view.source.close(); // the run ended and its server has gone: keep the last picture
     }
   };
 }

@@ -65,7 +65,7 @@ from coupler.errors import CouplerError, ScenarioError
 from coupler.health import probe
 from coupler.ports import holders_of, port_is_free
 from coupler_orchestrator.outputs.files import default_base
-from coupler_orchestrator.ssp.expansion import expand
+from coupler_orchestrator.ssp.expansion import expand, variables_in
 
 log = structlog.get_logger("coupler.fleet")
 
@@ -172,6 +172,13 @@ def _service(path: Path, raw: Mapping[str, Any], env: Mapping[str, str]) -> Serv
     what = f"{path} service '{raw['name']}'"
     command = tuple(expand(str(c), env, what=what) for c in raw["command"])
     health = expand(raw["health"], env, what=what)
+    if not _health_url(health):
+        used = variables_in(raw["health"])
+        given = f" (with {', '.join(used)} from the environment)" if used else ""
+        raise ScenarioError(
+            f"{what}: health '{raw['health']}'{given} is not grpc://HOST:PORT, grpcs://HOST:PORT, "
+            "unix:///PATH or an http URL; fix it" + (" or the variables" if used else "")
+        )
     variables: dict[int, str] = {}
     for text, value in [*zip(raw["command"], command, strict=True), (raw["health"], health)]:
         for match in _VARIABLE.finditer(str(text)):
@@ -188,6 +195,19 @@ def _service(path: Path, raw: Mapping[str, Any], env: Mapping[str, str]) -> Serv
         port_variables=variables,
         socket=_flag(raw, "socket"),
     )
+
+
+def _health_url(text: str) -> bool:
+    try:
+        parts = urlsplit(text)
+        port = parts.port
+    except ValueError:
+        return False
+    if parts.scheme in ("http", "https"):
+        return bool(parts.hostname)
+    if parts.scheme == "unix":
+        return not parts.netloc and parts.path.startswith("/")
+    return parts.scheme in ("grpc", "grpcs") and bool(parts.hostname) and port is not None
 
 
 def _flag(table: Mapping[str, Any], key: str) -> bool:

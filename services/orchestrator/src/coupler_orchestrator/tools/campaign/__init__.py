@@ -41,6 +41,7 @@ A campaign file (TOML) names the scenario and its variants::
     [pool]                                    # instead of starting services: running ones
     env = [{ GAIN_PORT = "50051" }, { GAIN_PORT = "50052" }]
 
+A campaign has at most 100,000 variants (``variants.MAXIMUM``), counted before any is made.
 A variant's keys are ``Component.parameter`` (as ``coupler run --param``; start values too),
 ``start_time``, ``stop_time`` and ``step``. Each run gets its own participants: the fleet
 file's services started on free ports (every ``${NAME_PORT}`` variable of the fleet file gets

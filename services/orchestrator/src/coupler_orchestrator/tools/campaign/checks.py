@@ -33,29 +33,53 @@ _OPERATORS: dict[type, Callable[..., Any]] = {
 }
 
 
+LONGEST = 1000
+"""Characters a check's expression may have."""
+
+_ALLOWED = (
+    ast.BoolOp,
+    ast.And,
+    ast.Or,
+    ast.BinOp,
+    ast.UnaryOp,
+    ast.Compare,
+    ast.Name,
+    ast.Load,
+    ast.Constant,
+)
+
+
 class Expression:
-    """A check's expression: names, numbers, arithmetic, comparisons, and/or/not; nothing else
-    (no calls, no attributes), evaluated without eval."""
+    """A check's expression: names, numbers, texts, arithmetic on numbers, comparisons,
+    and/or/not; nothing else (no calls, no attributes, no powers, no arithmetic on texts),
+    evaluated without eval, so a check costs no more than its length."""
 
     def __init__(self, text: str) -> None:
+        if len(text) > LONGEST:
+            raise ExpressionError(f"it has {len(text):,} characters, more than {LONGEST}")
         try:
             self.tree = ast.parse(text, mode="eval").body
         except SyntaxError as exc:
             raise ExpressionError(f"not an expression ({exc.msg})") from None
+        except (RecursionError, MemoryError):
+            raise ExpressionError("not an expression (nested too deeply)") from None
         for node in ast.walk(self.tree):
-            allowed = (
-                ast.BoolOp,
-                ast.And,
-                ast.Or,
-                ast.BinOp,
-                ast.UnaryOp,
-                ast.Compare,
-                ast.Name,
-                ast.Load,
-                ast.Constant,
-            )
-            if not isinstance(node, allowed) and type(node) not in _OPERATORS:
+            if not isinstance(node, _ALLOWED) and type(node) not in _OPERATORS:
                 raise ExpressionError(f"{type(node).__name__} is not allowed")
+            if isinstance(node, ast.Constant) and not isinstance(node.value, (int, float, str)):
+                raise ExpressionError(f"{ast.unparse(node)} is not a number or a text")
+            operands = (
+                [node.left, node.right]
+                if isinstance(node, ast.BinOp)
+                else [node.operand]
+                if isinstance(node, ast.UnaryOp) and not isinstance(node.op, ast.Not)
+                else []
+            )
+            if any(isinstance(o, ast.Constant) and isinstance(o.value, str) for o in operands):
+                raise ExpressionError(
+                    f"{ast.unparse(node)}: a text cannot be computed with; compare texts with "
+                    "== or !="
+                )
 
     def evaluate(self, names: Mapping[str, Any]) -> Any:
         return self._value(self.tree, names)
@@ -71,10 +95,13 @@ class Expression:
             values = (self._value(v, names) for v in node.values)
             return all(values) if isinstance(node.op, ast.And) else any(values)
         if isinstance(node, ast.UnaryOp):
-            return _OPERATORS[type(node.op)](self._value(node.operand, names))
+            operand = self._value(node.operand, names)
+            if not isinstance(node.op, ast.Not):
+                _number(operand)
+            return _OPERATORS[type(node.op)](operand)
         if isinstance(node, ast.BinOp):
             return _OPERATORS[type(node.op)](
-                self._value(node.left, names), self._value(node.right, names)
+                _number(self._value(node.left, names)), _number(self._value(node.right, names))
             )
         assert isinstance(node, ast.Compare)
         left = self._value(node.left, names)
@@ -86,6 +113,14 @@ class Expression:
         return True
 
 
+def _number(value: Any) -> Any:
+    """Arithmetic is on numbers only: a parameter or output that is a text is no operand (a
+    text times a large number would be a large text)."""
+    if not isinstance(value, (int, float)):
+        raise TypeError(f"{value!r} is not a number")
+    return value
+
+
 def evaluate_checks(checks: Sequence[Check], values: Mapping[str, Any]) -> dict[str, bool | None]:
     """Each check's truth over ``values``; None when a name it uses has no value (a failed
     run, an output missing)."""
@@ -93,6 +128,6 @@ def evaluate_checks(checks: Sequence[Check], values: Mapping[str, Any]) -> dict[
     for check in checks:
         try:
             found[check.name] = bool(Expression(check.expression).evaluate(values))
-        except (KeyError, TypeError, ZeroDivisionError):
+        except (KeyError, TypeError, ZeroDivisionError, OverflowError):
             found[check.name] = None
     return found

@@ -13,7 +13,7 @@ from typing import Any
 from coupler.errors import ScenarioError
 from coupler_orchestrator.tools.campaign import variants
 from coupler_orchestrator.tools.campaign.checks import Expression, ExpressionError
-from coupler_orchestrator.tools.campaign.variants import Scalar
+from coupler_orchestrator.tools.campaign.variants import Scalar, Variants
 from coupler_orchestrator.tools.fleet import FleetSpec
 
 REDUCTIONS = ("max", "min", "first", "last", "mean", "count_changes")
@@ -76,13 +76,20 @@ class CampaignSpec:
     source: Path
     scenario: ScenarioSpec
     out: Path
-    variants: tuple[dict[str, Scalar], ...]
+    variants: Variants
+    """Made as they are asked for; at most ``variants.MAXIMUM``. A sequence of variants (a
+    slice of another campaign's) is taken as they are."""
     outputs: tuple[Output, ...] = ()
     derive: tuple[Derive, ...] = ()
     """Functions computing more columns from a finished run (:class:`Finished`)."""
     checks: tuple[Check, ...] = ()
     pool: tuple[dict[str, str], ...] = ()
     """Environments naming running participants (``GAIN_PORT``...), one run each at a time."""
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.variants, Variants):
+            made = Variants([variants.Listed(tuple(dict(v) for v in self.variants))])
+            object.__setattr__(self, "variants", made)
 
     @classmethod
     def load(cls, path: Path, *, root: Path | None = None) -> CampaignSpec:
@@ -115,12 +122,15 @@ class _Reader:
                 f"sections are {', '.join(sorted(known))}, checks, pool",
             )
         scenario, out = self.scenario(data.get("scenario"))
-        made = [
-            *variants.grid(data.get("grid", {}), self.fail),
-            *variants.explicit(data.get("variant", []), self.fail),
-            *variants.table(data.get("table"), self.path.parent, self.fail),
-            *variants.sample(data.get("sample"), self.fail),
-        ]
+        made = variants.counted(
+            {
+                "grid": variants.grid(data.get("grid", {}), self.fail),
+                "variant": variants.explicit(data.get("variant", []), self.fail),
+                "table": variants.table(data.get("table"), self.path.parent, self.fail),
+                "sample": variants.sample(data.get("sample"), self.fail),
+            },
+            self.fail,
+        )
         outputs = self.outputs(data.get("outputs", {}))
         derive = self.derive(data.get("derive", []))
         checks = self.checks(data.get("checks", {}), outputs)
@@ -129,7 +139,7 @@ class _Reader:
             source=self.path,
             scenario=scenario,
             out=out,
-            variants=tuple(made) or ({},),
+            variants=made or Variants([variants.Listed(({},))]),
             outputs=outputs,
             derive=derive,
             checks=checks,
@@ -213,10 +223,12 @@ class _Reader:
             try:
                 Expression(str(expression))
             except ExpressionError as exc:
+                text = str(expression)
+                shown = text if len(text) <= 80 else text[:77] + "..."
                 raise self.fail(
                     "checks",
-                    f'{name} = "{expression}": {exc}',
-                    "use outputs, numbers, comparisons, and/or/not, + - * /",
+                    f'{name} = "{shown}": {exc}',
+                    "use outputs, numbers, comparisons, and/or/not, + - * / on numbers",
                 ) from None
             checks.append(Check(name=name, expression=str(expression)))
         return tuple(checks)

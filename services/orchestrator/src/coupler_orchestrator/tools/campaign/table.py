@@ -26,7 +26,7 @@ def table_rows(
     spec: CampaignSpec, reports: Iterable[RunReport]
 ) -> tuple[list[str], list[dict[str, Any]]]:
     """The campaign table: header and one row per run."""
-    parameters = list(dict.fromkeys(k for v in spec.variants for k in v))
+    parameters = spec.variants.names()
     values = [o.name for o in spec.outputs]
     rows = []
     for report in reports:

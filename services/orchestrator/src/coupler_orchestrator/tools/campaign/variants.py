@@ -1,24 +1,38 @@
 """The sections of a campaign file that make variants — [grid] (every combination), [[variant]]
 (explicit), [table] (one per row of a CSV file), [sample] (n drawn with a seed) — and the key
-that names a variant's run."""
+that names a variant's run.
+
+Variants are made as they are asked for (:class:`Variants`, a sequence): a grid is its axes, a
+sample its laws and seed, so a campaign is counted before any variant is made, and one of more
+than ``MAXIMUM`` variants is refused at once.
+"""
 
 from __future__ import annotations
 
 import contextlib
 import csv
 import hashlib
+import io
 import itertools
 import json
+import math
 import random
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, overload
 
 if TYPE_CHECKING:
     from coupler_orchestrator.tools.campaign.spec import ScenarioSpec
 
 Scalar = float | int | str | bool
 """A variant's value, an output's value."""
+
+MAXIMUM = 100_000
+"""Variants a campaign may have, all sections together."""
+
+TABLE_BYTES = 64 << 20
+"""The largest [table] file read."""
 
 RUN_OPTIONS = {"start_time": "--start-time", "stop_time": "--stop-time", "step": "--step"}
 """Variant keys that are options of ``coupler run`` rather than parameters."""
@@ -27,100 +41,315 @@ Fail = Callable[[str, str, str], Exception]
 """``fail(section, problem, fix)``: the error naming the campaign file, section and fix."""
 
 
-def grid(raw: Any, fail: Fail) -> list[dict[str, Scalar]]:
+@dataclass(frozen=True)
+class Grid:
+    """Every combination of the axes' values, the last axis varying fastest (as
+    ``itertools.product``)."""
+
+    axes: tuple[tuple[str, tuple[Scalar, ...]], ...]
+
+    def __len__(self) -> int:
+        return math.prod(len(values) for _, values in self.axes) if self.axes else 0
+
+    def __getitem__(self, index: int) -> dict[str, Scalar]:
+        variant: dict[str, Scalar] = {}
+        for key, values in reversed(self.axes):
+            index, digit = divmod(index, len(values))
+            variant[key] = values[digit]
+        return {key: variant[key] for key, _ in self.axes}
+
+    def names(self) -> list[str]:
+        return [key for key, _ in self.axes]
+
+
+@dataclass(frozen=True)
+class Listed:
+    """Variants written out: [[variant]] tables, [table] rows."""
+
+    variants: tuple[dict[str, Scalar], ...]
+
+    def __len__(self) -> int:
+        return len(self.variants)
+
+    def __getitem__(self, index: int) -> dict[str, Scalar]:
+        return dict(self.variants[index])
+
+    def names(self) -> list[str]:
+        return list(dict.fromkeys(k for v in self.variants for k in v))
+
+
+@dataclass(frozen=True)
+class Sample:
+    """``count`` variants drawn by the laws; the i-th from a generator seeded by the seed and
+    i, so any one is made alone and always the same."""
+
+    count: int
+    seed: int
+    laws: tuple[tuple[str, str, tuple[Scalar, ...]], ...]
+    """(key, "uniform" or "choice", bounds or choices)."""
+
+    def __len__(self) -> int:
+        return self.count
+
+    def __getitem__(self, index: int) -> dict[str, Scalar]:
+        draw = random.Random(f"{self.seed}/{index}")
+        variant: dict[str, Scalar] = {}
+        for key, law, values in self.laws:
+            if law == "uniform":
+                low, high = values
+                variant[key] = draw.uniform(float(low), float(high))
+            else:
+                variant[key] = draw.choice(values)
+        return variant
+
+    def names(self) -> list[str]:
+        return [key for key, _, _ in self.laws]
+
+
+Part = Grid | Listed | Sample
+
+
+class Variants(Sequence[dict[str, Scalar]]):
+    """A campaign's variants, all sections in order (grid, [[variant]], table, sample), each
+    made when it is asked for; a slice is a tuple."""
+
+    def __init__(self, parts: Sequence[Part]) -> None:
+        self.parts = tuple(p for p in parts if len(p))
+        self._ends = list(itertools.accumulate(len(p) for p in self.parts))
+
+    def __len__(self) -> int:
+        return self._ends[-1] if self._ends else 0
+
+    @overload
+    def __getitem__(self, index: int) -> dict[str, Scalar]: ...
+    @overload
+    def __getitem__(self, index: slice) -> tuple[dict[str, Scalar], ...]: ...
+    def __getitem__(self, index: int | slice) -> dict[str, Scalar] | tuple[dict[str, Scalar], ...]:
+        if isinstance(index, slice):
+            return tuple(self[i] for i in range(*index.indices(len(self))))
+        if index < 0:
+            index += len(self)
+        if not 0 <= index < len(self):
+            raise IndexError(index)
+        for part, end in zip(self.parts, self._ends, strict=True):
+            if index < end:
+                return part[index - end + len(part)]
+        raise AssertionError  # unreachable: the index is below the last end
+
+    def __iter__(self) -> Iterator[dict[str, Scalar]]:
+        for part in self.parts:
+            for i in range(len(part)):
+                yield part[i]
+
+    def __eq__(self, other: object) -> bool:
+        return isinstance(other, Variants) and self.parts == other.parts
+
+    def __hash__(self) -> int:
+        return hash(len(self))
+
+    def __repr__(self) -> str:
+        return f"Variants({', '.join(f'{type(p).__name__.lower()} {len(p)}' for p in self.parts)})"
+
+    def names(self) -> list[str]:
+        """Every key a variant may have, in order of appearance (the table's columns)."""
+        return list(dict.fromkeys(k for p in self.parts for k in p.names()))
+
+
+def counted(parts: Mapping[str, Part], fail: Fail) -> Variants:
+    """The variants of the sections (section name -> part), refused when more than MAXIMUM."""
+    sizes = {name: len(part) for name, part in parts.items() if len(part)}
+    total = sum(sizes.values())
+    if total > MAXIMUM:
+        labels = {"variant": "[[variant]]", "sample": "sampled"}
+        raise fail(
+            ", ".join(sizes),
+            f"{total:,} variants "
+            f"({', '.join(f'{labels.get(n, n)} {s:,}' for n, s in sizes.items())}) are more "
+            f"than the {MAXIMUM:,} a campaign may run",
+            "split the campaign into several files, or sample the space ([sample] n = ...)",
+        )
+    return Variants(list(parts.values()))
+
+
+def grid(raw: Any, fail: Fail) -> Grid:
     if not isinstance(raw, dict):
         raise fail("grid", "not a table", '"Component.parameter" = [values...]')
     for key, values in raw.items():
         check_key("grid", key, fail)
         if not isinstance(values, list) or not values:
             raise fail("grid", f"'{key}' is not a list of values", f'"{key}" = [1.0, 2.0]')
-    if not raw:
-        return []
-    keys = list(raw)
-    return [dict(zip(keys, combo, strict=True)) for combo in itertools.product(*raw.values())]
+        for value in values:
+            check_scalar("grid", key, value, fail)
+    return Grid(tuple((key, tuple(values)) for key, values in raw.items()))
 
 
-def explicit(raw: Any, fail: Fail) -> list[dict[str, Scalar]]:
-    if not isinstance(raw, list):
+def explicit(raw: Any, fail: Fail) -> Listed:
+    if not isinstance(raw, list) or not all(isinstance(v, dict) for v in raw):
         raise fail("variant", "must be [[variant]] tables", "write [[variant]] per variant")
     for variant in raw:
         for key, value in variant.items():
             check_key("variant", key, fail)
             check_scalar("variant", key, value, fail)
-    return [dict(v) for v in raw]
+    return Listed(tuple(dict(v) for v in raw))
 
 
-def table(raw: Any, folder: Path, fail: Fail) -> list[dict[str, Scalar]]:
+def table(raw: Any, folder: Path, fail: Fail) -> Listed:
+    """One variant per row of a CSV file (UTF-8, a byte order mark allowed; a header of keys,
+    each once); a cell left empty leaves its key out of that row's variant."""
     if raw is None:
-        return []
+        return Listed(())
     if not isinstance(raw, dict) or "file" not in raw:
         raise fail("table", "no file", 'file = "variants.csv" (a header of parameter names)')
-    path = folder / raw["file"]
+    path = folder / str(raw["file"])
     try:
-        with path.open(encoding="utf-8", newline="") as file:
-            rows = list(csv.DictReader(file))
+        with path.open("rb") as file:
+            data = file.read(TABLE_BYTES + 1)
     except OSError as exc:
         raise fail("table", f"cannot read {path}: {exc.strerror}", "fix file = ...") from exc
+    if len(data) > TABLE_BYTES:
+        raise fail("table", f"{path} is larger than {TABLE_BYTES >> 20} MiB", "split it")
+    rows = _rows(path, _text(path, data, fail), fail)
+    if not rows:
+        raise fail("table", f"{path} is empty", "write a header of keys and a row per variant")
+    (_, header), body = rows[0], rows[1:]
+    for column, key in enumerate(header, start=1):
+        if not key.strip():
+            raise fail(
+                "table",
+                f"{path}:1: column {column}: '{key}' is not a key",
+                "name every column (Component.parameter) or remove the empty one",
+            )
+        if header.index(key) + 1 != column:
+            raise fail(
+                "table",
+                f"{path}:1: column {column}: '{key}' is also column {header.index(key) + 1}",
+                "name each key once",
+            )
+        check_key("table", key, fail, at=f"{path}:1: column {column}: ")
+    if not body:
+        raise fail("table", f"{path} has a header and no row", "add a row per variant")
     variants = []
-    for number, row in enumerate(rows, start=2):
-        variant: dict[str, Scalar] = {}
-        for key, text in row.items():
-            if key is None or text is None:
+    for line, cells in body:
+        if len(cells) != len(header):
+            raise fail(
+                "table",
+                f"{path}:{line}: {len(cells)} cells, the header has {len(header)}",
+                "fix the row",
+            )
+        variants.append(
+            {k: number_or_text(c.strip()) for k, c in zip(header, cells, strict=True) if c.strip()}
+        )
+    return Listed(tuple(variants))
+
+
+def _text(path: Path, data: bytes, fail: Fail) -> str:
+    data = data.removeprefix(b"\xef\xbb\xbf")  # a spreadsheet's "CSV UTF-8" starts with one
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        line = data.count(b"\n", 0, exc.start) + 1
+        column = exc.start - data.rfind(b"\n", 0, exc.start)
+        raise fail(
+            "table",
+            f"{path}:{line}: not UTF-8 (byte 0x{data[exc.start]:02x} at column {column})",
+            "save the file as UTF-8 (a spreadsheet's 'CSV UTF-8')",
+        ) from None
+
+
+def _rows(path: Path, text: str, fail: Fail) -> list[tuple[int, list[str]]]:
+    """The file's rows that are not blank, each with the line it starts on; at most one more
+    than MAXIMUM (the header)."""
+    reader = csv.reader(io.StringIO(text, newline=""), strict=True)
+    rows: list[tuple[int, list[str]]] = []
+    line = 1
+    try:
+        for cells in reader:
+            if cells:
+                rows.append((line, cells))
+            if len(rows) > MAXIMUM + 1:
                 raise fail(
                     "table",
-                    f"{path}:{number} has more or fewer cells than the header",
-                    "fix the row",
+                    f"{path} has more than {MAXIMUM:,} rows, the most a campaign may run",
+                    "split the table into several campaigns",
                 )
-            check_key("table", key, fail)
-            if text.strip() != "":
-                variant[key] = number_or_text(text.strip())
-        variants.append(variant)
-    return variants
+            line = reader.line_num + 1
+    except csv.Error as exc:
+        raise fail("table", f"{path}:{line}: {exc}", "fix the row (CSV, quotes paired)") from None
+    return rows
 
 
-def sample(raw: Any, fail: Fail) -> list[dict[str, Scalar]]:
+def sample(raw: Any, fail: Fail) -> Sample:
     if raw is None:
-        return []
-    try:
-        count, seed = int(raw["n"]), int(raw.get("seed", 0))
-    except (KeyError, TypeError, ValueError) as exc:
-        raise fail("sample", "needs n (and a seed)", "n = 20, seed = 7") from exc
+        return Sample(0, 0, ())
+    if not isinstance(raw, dict):
+        raise fail("sample", "not a table", 'n = 20, seed = 7, "C.p" = { uniform = [0.5, 2.0] }')
+    if "n" not in raw:
+        raise fail("sample", "needs n (and a seed)", "n = 20, seed = 7")
+    count: Any = raw["n"]
+    seed: Any = raw.get("seed", 0)
+    if not (_whole(count) and _whole(seed)):
+        raise fail(
+            "sample",
+            f"n = {count!r}, seed = {seed!r}: both must be whole numbers",
+            "n = 20, seed = 7",
+        )
+    count, seed = int(count), int(seed)
+    if not 1 <= count <= MAXIMUM:
+        raise fail(
+            "sample",
+            f"n = {count:,} is not between 1 and {MAXIMUM:,}",
+            f"draw at most the {MAXIMUM:,} variants a campaign may run",
+        )
     laws = {k: v for k, v in raw.items() if k not in ("n", "seed")}
     if not laws:
         raise fail("sample", "no parameter to sample", '"C.p" = { uniform = [0.5, 2.0] }')
-    for key, law in laws.items():
-        check_key("sample", key, fail)
-        if not (
-            isinstance(law, dict) and len(law) == 1 and next(iter(law)) in ("uniform", "choice")
-        ):
-            raise fail(
-                "sample",
-                f"'{key}' has no law",
-                "{ uniform = [low, high] } or { choice = [a, b] }",
-            )
-    draw = random.Random(seed)
-    variants = []
-    for _ in range(count):
-        variant: dict[str, Scalar] = {}
-        for key, law in laws.items():
-            if "uniform" in law:
-                low, high = (float(x) for x in law["uniform"])
-                variant[key] = draw.uniform(low, high)
-            else:
-                variant[key] = draw.choice(law["choice"])
-        variants.append(variant)
-    return variants
+    return Sample(count, seed, tuple(_law(key, law, fail) for key, law in laws.items()))
 
 
-def check_key(where: str, key: str, fail: Fail) -> None:
-    """A variant's key is ``Component.parameter`` or one of RUN_OPTIONS."""
+def _whole(value: Any) -> bool:
+    if isinstance(value, bool):
+        return False
+    return isinstance(value, int) or (isinstance(value, float) and value.is_integer())
+
+
+def _law(key: str, law: Any, fail: Fail) -> tuple[str, str, tuple[Scalar, ...]]:
+    check_key("sample", key, fail)
+    if not (isinstance(law, dict) and len(law) == 1 and next(iter(law)) in ("uniform", "choice")):
+        raise fail(
+            "sample", f"'{key}' has no law", "{ uniform = [low, high] } or { choice = [a, b] }"
+        )
+    if "choice" in law:
+        choices = law["choice"]
+        if not isinstance(choices, list) or not choices:
+            raise fail("sample", f"'{key}': choice = {choices!r}", "choice = [a, b, ...]")
+        for choice in choices:
+            check_scalar("sample", key, choice, fail)
+        return key, "choice", tuple(choices)
+    bounds = law["uniform"]
+    numbers = (
+        isinstance(bounds, list)
+        and len(bounds) == 2
+        and all(isinstance(b, (int, float)) and not isinstance(b, bool) for b in bounds)
+    )
+    if not numbers or not all(math.isfinite(b) for b in bounds) or bounds[0] > bounds[1]:
+        raise fail(
+            "sample",
+            f"'{key}': uniform = {bounds!r} is not [low, high]",
+            "two finite numbers, low <= high: uniform = [0.5, 2.0]",
+        )
+    return key, "uniform", (float(bounds[0]), float(bounds[1]))
+
+
+def check_key(where: str, key: str, fail: Fail, *, at: str = "") -> None:
+    """A variant's key is ``Component.parameter`` or one of RUN_OPTIONS (``at``: where it is
+    written, for the message)."""
     if key in RUN_OPTIONS:
         return
     component, _, name = key.partition(".")
     if not component or not name:
         raise fail(
             where,
-            f"'{key}' is neither Component.parameter nor one of {', '.join(RUN_OPTIONS)}",
+            f"{at}'{key}' is neither Component.parameter nor one of {', '.join(RUN_OPTIONS)}",
             "name parameters as coupler run --param does (Gain.gain)",
         )
 
