@@ -26,8 +26,10 @@ naming the version.
 from __future__ import annotations
 
 import bisect
+import dataclasses
 import json
 import math
+import os
 import struct
 import time as wallclock
 import zlib
@@ -117,6 +119,10 @@ class Recording:
     """The component asked to end the run at its last point, with this reason; else None."""
     sealed: bool = True
     """False when the recorded run was killed: the file ends without its seal."""
+    location: Path | None = None
+    """``path`` made absolute when it was read: its blocks are read from there later, whatever
+    the process's working folder is then (FMPy changes it while it loads an FMU's library, on
+    another thread of the same run)."""
 
     @property
     def steps(self) -> int:
@@ -218,7 +224,7 @@ class Points:
         path = self.recording.path
         try:
             if self._file is None:
-                self._file = path.open("rb")
+                self._file = (self.recording.location or path).open("rb")
             self._file.seek(block.offset)
             payload = self._file.read(block.length)
             if len(payload) != block.length or zlib.crc32(payload) != block.crc:
@@ -414,9 +420,10 @@ def _block_head(length: int, first: int, count: int, crc: int) -> bytes:
 def read(path: Path) -> Recording:
     """The recording at ``path``, every block's checksums checked, reading one block at a
     time; ScenarioError when it is not one this version can read, or is damaged."""
+    location = Path(os.path.abspath(path))
     try:
-        with path.open("rb") as file:
-            return _index(path, file)
+        with location.open("rb") as file:
+            return dataclasses.replace(_index(path, file), location=location)
     except OSError as exc:
         raise ScenarioError(f"cannot read the recording {path}: {exc.strerror or exc}") from exc
     except (ValueError, KeyError, TypeError, AttributeError, RecursionError, struct.error) as exc:
