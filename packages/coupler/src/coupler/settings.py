@@ -9,12 +9,19 @@ participants), never collides with the orchestrator's client settings (``COUPLER
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
 from coupler.arguments import add_security_arguments, add_socket_argument
+from coupler.errors import CouplerError
 from coupler.security import ServerSecurity
+
+if TYPE_CHECKING:
+    from coupler.participant import Participant
+    from coupler.server import ParticipantServer
 
 __all__ = [
     "ParticipantSettings",
@@ -69,3 +76,30 @@ class ParticipantSettings(SecuritySettings):
     """DEBUG, INFO, WARNING or ERROR."""
     log_json: bool | None = None
     """JSON log lines; default: when stderr is not a terminal."""
+
+    def serve(
+        self,
+        participant: Participant,
+        *,
+        program: str,
+        on_started: Callable[[ParticipantServer], None] | None = None,
+    ) -> None:
+        """Serve ``participant`` as these settings say (address or unix socket, TLS and token,
+        reflection) until SIGTERM or SIGINT: a participant program's main. A CouplerError (a
+        taken port, a bad certificate, ...) ends the process with ``PROGRAM: the error``."""
+        from coupler.server import run, serve
+
+        try:
+            run(
+                serve(
+                    participant,
+                    host=self.host,
+                    port=self.port,
+                    unix_socket=self.socket,
+                    security=self.security(),
+                    reflection=self.reflection,
+                    on_started=on_started,
+                )
+            )
+        except CouplerError as exc:
+            raise SystemExit(f"{program}: {exc}") from exc

@@ -13,12 +13,10 @@ from pathlib import Path
 
 import structlog
 
-from coupler.errors import CouplerError
 from coupler.fmu import FmuParticipant
 from coupler.fmubuild import FmuBuildError
 from coupler.logs import configure_logging
-from coupler.server import ParticipantServer, serve
-from coupler.server import run as run_participant
+from coupler.server import ParticipantServer
 from coupler.settings import add_security_arguments, add_socket_argument
 from coupler_railway import RailMLError
 
@@ -76,20 +74,7 @@ def main(argv: list[str] | None = None) -> None:
     def announce(server: ParticipantServer) -> None:
         print(f"balise-fmu serving {path} at {server.address}", flush=True)
 
-    try:
-        run_participant(
-            serve(
-                participant,
-                host=settings.host,
-                port=settings.port,
-                unix_socket=settings.socket,
-                security=settings.security(),
-                reflection=settings.reflection,
-                on_started=announce,
-            )
-        )
-    except CouplerError as exc:
-        raise SystemExit(f"balise-fmu: {exc}") from exc
+    settings.serve(participant, program="balise-fmu", on_started=announce)
 
 
 if __name__ == "__main__":

@@ -13,8 +13,7 @@ from coupler.adapter import AdapterConfig, AdapterParticipant
 from coupler.channels import Causality
 from coupler.errors import CouplerError, ScenarioError
 from coupler.logs import configure_logging
-from coupler.server import ParticipantServer, serve
-from coupler.server import run as run_participant
+from coupler.server import ParticipantServer
 from coupler.settings import add_security_arguments, add_socket_argument
 
 from .adapter import OpenRailsAdapter
@@ -106,20 +105,7 @@ def main(argv: list[str] | None = None) -> None:
             flush=True,
         )
 
-    try:
-        run_participant(
-            serve(
-                participant,
-                host=settings.host,
-                port=settings.port,
-                unix_socket=settings.socket,
-                security=settings.security(),
-                reflection=settings.reflection,
-                on_started=announce,
-            )
-        )
-    except CouplerError as exc:
-        raise SystemExit(f"openrails-bridge: {exc}") from exc
+    settings.serve(participant, program="openrails-bridge", on_started=announce)
 
 
 if __name__ == "__main__":

@@ -7,10 +7,8 @@ from __future__ import annotations
 
 import argparse
 
-from coupler.errors import CouplerError
 from coupler.logs import configure_logging
-from coupler.server import ParticipantServer, serve
-from coupler.server import run as run_participant
+from coupler.server import ParticipantServer
 from coupler.settings import add_security_arguments, add_socket_argument
 
 from .config import PerceptionSettings
@@ -35,20 +33,7 @@ def main(argv: list[str] | None = None) -> None:
     def announce(server: ParticipantServer) -> None:
         print(f"perception listening at {server.address}", flush=True)
 
-    try:
-        run_participant(
-            serve(
-                PerceptionParticipant(),
-                host=settings.host,
-                port=settings.port,
-                unix_socket=settings.socket,
-                security=settings.security(),
-                reflection=settings.reflection,
-                on_started=announce,
-            )
-        )
-    except CouplerError as exc:
-        raise SystemExit(f"perception: {exc}") from exc
+    settings.serve(PerceptionParticipant(), program="perception", on_started=announce)
 
 
 if __name__ == "__main__":

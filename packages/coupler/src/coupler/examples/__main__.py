@@ -4,11 +4,9 @@ from __future__ import annotations
 
 import argparse
 
-from coupler.errors import CouplerError
 from coupler.examples.gain import GainParticipant
 from coupler.logs import configure_logging
-from coupler.server import ParticipantServer, serve
-from coupler.server import run as run_participant
+from coupler.server import ParticipantServer
 from coupler.settings import ParticipantSettings, add_security_arguments, add_socket_argument
 
 
@@ -29,20 +27,7 @@ def main() -> None:
     def announce(server: ParticipantServer) -> None:
         print(f"serving {args.name} at {server.address}", flush=True)
 
-    try:
-        run_participant(
-            serve(
-                GainParticipant(args.name),
-                host=settings.host,
-                port=settings.port,
-                unix_socket=settings.socket,
-                security=settings.security(),
-                reflection=settings.reflection,
-                on_started=announce,
-            )
-        )
-    except CouplerError as exc:
-        raise SystemExit(f"coupler.examples: {exc}") from exc
+    settings.serve(GainParticipant(args.name), program="coupler.examples", on_started=announce)
 
 
 if __name__ == "__main__":
