@@ -116,12 +116,12 @@ demo: setup
 
 # The railway scenario's perception variant: the mock's front camera -> bridge -> perception
 # participant -> map; then its detections scored against TrackBalises (docs/railway-perception.md).
-# ARGS=--exit to not wait; the report is written when the fleet ends (Ctrl-C included).
-PERCEPTION_OUT ?= results/railway-perception
+# ARGS=--exit to not wait; the report is written when the fleet ends (Ctrl-C included). Each run
+# gets a new folder under results/railway-perception/ (the fleet file's `out`); `latest` is it.
 demo-perception: setup
-	$(UV) run --frozen coupler fleet scenarios/railway/perception-fleet.toml --out $(PERCEPTION_OUT) \
-	  $(ARGS) || [ $$? -eq 130 ]
-	$(UV) run --frozen python -m coupler_railway.scoring $(PERCEPTION_OUT)
+	$(UV) run --frozen coupler fleet scenarios/railway/perception-fleet.toml $(ARGS) \
+	  || [ $$? -eq 130 ]
+	$(UV) run --frozen python -m coupler_railway.scoring results/railway-perception/latest
 
 # The smallest scenario: two FMUs and the example gRPC participant.
 demo-example: setup
