@@ -6,7 +6,7 @@ FMU_DIR := build/fmus
 RAILML := scenarios/railway/data/annaberg-schwarzenberg.railml
 ROUTE := build/routes/annaberg-schwarzenberg
 
-.PHONY: setup sync proto proto-check lint test demo demo-perception demo-example fmus \
+.PHONY: setup sync proto proto-check lint test test-slow test-all demo demo-perception demo-example fmus \
         faulty-fmus track-fmu route assets node-participant browser grpc-dev wheels bench \
         compose-check swarm-check k8s-check export-fmu-check native-check clean
 
@@ -106,8 +106,16 @@ lint: sync
 	$(UV) run --frozen mypy packages/coupler/src packages/coupler-dev/src packages/coupler-native/src \
 	  packages/railway/src services/*/src
 
+# The suite without the tests marked slow (whole scenarios, campaigns, clusters, several hosts):
+# the developer's default. `make test-slow` runs those; CI runs both (`make test-all` too).
 test: setup browser grpc-dev
-	$(UV) run --frozen pytest
+	$(UV) run --frozen pytest -m "not slow" $(ARGS)
+
+test-slow: setup browser grpc-dev
+	$(UV) run --frozen pytest -m slow $(ARGS)
+
+test-all: setup browser grpc-dev
+	$(UV) run --frozen pytest $(ARGS)
 
 # The railway scenario end to end on local processes (no Docker). ARGS=--exit to not wait.
 # Ctrl-C (exit 130) is the way to stop it, not an error of make's.

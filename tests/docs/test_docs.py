@@ -12,6 +12,11 @@ names the file (the page tells the reader to save it under that name)::
 
     <!-- docs-test: file controller.py -->
 
+A block that takes long (a whole scenario run, a campaign) runs with the slow tests (``make
+test-slow``, which CI runs; docs/testing.md) when the line before it says why::
+
+    <!-- docs-test: slow (runs the railway scenario for 60 simulated seconds) -->
+
 How a block runs:
 
 - in a sandbox: a temporary folder with the repository's top-level entries linked in (the
@@ -73,6 +78,7 @@ PORT_VARIABLES = {
 """Well-known ports of the docs and the environment variable that moves each (SSDs, fleets)."""
 SKIP = re.compile(r"^\s*<!--\s*docs-test:\s*skip\s*\((?P<reason>[^)]+)\)\s*-->\s*$")
 FILE = re.compile(r"^\s*<!--\s*docs-test:\s*file\s+(?P<name>[\w.-]+)\s*-->\s*$")
+SLOW = re.compile(r"^\s*<!--\s*docs-test:\s*slow\s*\((?P<reason>[^)]+)\)\s*-->\s*$")
 FENCE = re.compile(r"^(?P<indent>\s*)```(?P<lang>[\w-]*)\s*$")
 COMMAND_START = re.compile(r"^\s*(\.venv/bin/|python3? |make |coupler |uv |docker |npm )")
 BARE_UV = re.compile(r"(?<![\w/.-])uv run\b")
@@ -96,6 +102,8 @@ class Block:
     file: str | None = None
     """The name the file marker gives the block: written into the sandbox for the page's
     shell blocks."""
+    slow: str | None = None
+    """The reason given in the slow marker: the block runs with the slow tests."""
 
     @property
     def where(self) -> str:
@@ -119,7 +127,7 @@ def blocks_of(doc: Path) -> list[Block]:
             body.append(lines[i][indent:] if kept else lines[i].lstrip())
             i += 1
         before = next((lines[j] for j in range(start - 1, -1, -1) if lines[j].strip()), "")
-        marker, file = SKIP.match(before), FILE.match(before)
+        marker, file, slow = SKIP.match(before), FILE.match(before), SLOW.match(before)
         found.append(
             Block(
                 doc=doc,
@@ -128,6 +136,7 @@ def blocks_of(doc: Path) -> list[Block]:
                 text="\n".join(body) + "\n",
                 skip=marker["reason"].strip() if marker else None,
                 file=file["name"] if file else None,
+                slow=slow["reason"].strip() if slow else None,
             )
         )
         i += 1
@@ -151,6 +160,8 @@ def test_the_docs_follow_the_convention() -> None:
             problems.append(f"{block.where}: commands in an unlabelled block; label it ```sh")
         if block.skip is not None and block.lang != "sh":
             problems.append(f"{block.where}: a docs-test skip marker before a non-sh block")
+        if block.slow is not None and block.lang != "sh":
+            problems.append(f"{block.where}: a docs-test slow marker before a non-sh block")
         if block.file is not None and block.lang == "sh":
             problems.append(f"{block.where}: a docs-test file marker before a shell block")
     named: dict[str, Block] = {}
@@ -171,6 +182,10 @@ def test_the_docs_follow_the_convention() -> None:
             if "docs-test" in line and "file" in line and not FILE.match(line):
                 problems.append(
                     f"{doc.relative_to(ROOT)}:{number}: write <!-- docs-test: file NAME -->"
+                )
+            if "docs-test" in line and "slow" in line and not SLOW.match(line):
+                problems.append(
+                    f"{doc.relative_to(ROOT)}:{number}: write <!-- docs-test: slow (REASON) -->"
                 )
     assert not problems, "\n".join(problems)
     assert len(RUNNABLE) >= 8, "the docs lost their runnable examples"
@@ -242,7 +257,10 @@ def remap(text: str, ports: dict[int, int]) -> str:
 
 
 @pytest.mark.timeout(BLOCK_TIMEOUT_S + 60)
-@pytest.mark.parametrize("block", RUNNABLE, ids=[b.where for b in RUNNABLE])
+@pytest.mark.parametrize(
+    "block",
+    [pytest.param(b, id=b.where, marks=[pytest.mark.slow] if b.slow else []) for b in RUNNABLE],
+)
 def test_shell_block_runs(block: Block, sandbox: Path) -> None:
     ports = {well_known: free_port() for well_known in PORT_VARIABLES}
     marker = uuid.uuid4().hex
