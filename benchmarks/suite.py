@@ -1362,7 +1362,7 @@ async def participant_side(
 
 MANY = 100
 """Participants of the ``many`` section."""
-PER_HOST = 10
+PER_HOST = 25
 """Participants one process of the ``many`` section serves."""
 MANY_UP_TARGET = 10.0
 """All of ``MANY`` participants up (launched, serving, the run at its first step) within [s]."""
