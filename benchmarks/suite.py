@@ -24,6 +24,11 @@ Cases (steps/s, median of the repetitions; Coupler and its reference interleaved
 - remote x1 over UDS: remote x1 with the gain participant on a unix socket (``--socket``, as
   ``coupler fleet`` serves local participants) against the same over TCP, and against a raw
   grpc.aio StepStream to a trivial server on a unix socket;
+- remote x1 against a bare stream (section participant_side): remote x1 against a bare grpc.aio
+  StepStream of empty messages to a trivial server (the participant runtime's own work);
+- many: 100 gain participants served PER_HOST to a process (``--gain-host``), one run stepping
+  them in lockstep, against 100 bare grpc.aio streams to trivial servers grouped the same way;
+  and the time from launching the processes to the run's first step;
 - proxy FMU x1: the gain participant exported by `coupler export-fmu` (FMI 2, its C++ binary
   calling the participant over its StepStream) run in-process by Coupler and by a hand-written
   FMPy loop, against `coupler run` driving the same participant directly (its stream);
