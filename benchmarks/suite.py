@@ -24,6 +24,11 @@ Cases (steps/s, median of the repetitions; Coupler and its reference interleaved
 - remote x1 over UDS: remote x1 with the gain participant on a unix socket (``--socket``, as
   ``coupler fleet`` serves local participants) against the same over TCP, and against a raw
   grpc.aio StepStream to a trivial server on a unix socket;
+- remote x1 against a bare stream (section participant_side): remote x1 against a bare grpc.aio
+  StepStream of empty messages to a trivial server (the participant runtime's own work);
+- many: 100 gain participants served PER_HOST to a process (``--gain-host``), one run stepping
+  them in lockstep, against 100 bare grpc.aio streams to trivial servers grouped the same way;
+  and the time from launching the processes to the run's first step;
 - proxy FMU x1: the gain participant exported by `coupler export-fmu` (FMI 2, its C++ binary
   calling the participant over its StepStream) run in-process by Coupler and by a hand-written
   FMPy loop, against `coupler run` driving the same participant directly (its stream);
@@ -593,15 +598,29 @@ def _frame_messages(direction: str) -> tuple[Any, Any]:
     return request, response
 
 
+def _messages(kind: str) -> tuple[Any, Any]:
+    """A step's request and response: the gain participant's sizes (``kind`` empty), a camera
+    frame's (``out``, ``in``: ``_frame_messages``) or ``minimal`` (empty messages)."""
+    if kind == "minimal":
+        from coupler.v1 import component_pb2 as pb
+
+        return pb.DoStepRequest(), pb.DoStepResponse()
+    return _frame_messages(kind) if kind else _raw_messages()
+
+
 async def raw_server(where: str, frames: str = "") -> None:
     """A trivial GRPCComponentService on a port (``where`` a number) or a unix socket (``where``
-    ``unix:PATH``): every step answered with the same outputs (``frames`` ``out``: a camera
-    frame; ``in``: nothing, its requests carry one)."""
+    ``unix:PATH``), or one on each of several ports (``where`` comma-separated, one process):
+    every step answered with the same outputs (``frames`` ``out``: a camera frame; ``in``:
+    nothing, its requests carry one; ``minimal``: an empty response)."""
+    if "," in where:
+        await asyncio.gather(*(raw_server(w, frames) for w in where.split(",")))
+        return
     import grpc
 
     from coupler.v1 import component_pb2_grpc as rpc
 
-    _, response = _frame_messages(frames) if frames else _raw_messages()
+    _, response = _messages(frames)
 
     class Trivial(rpc.GRPCComponentServiceServicer):  # type: ignore[misc]
         async def DoStep(self, request: Any, context: Any) -> Any:
@@ -618,14 +637,16 @@ async def raw_server(where: str, frames: str = "") -> None:
     await server.wait_for_termination()
 
 
-async def raw_floor(servers: Sequence[int | str], steps: int, *, stream: bool) -> float:
+async def raw_floor(
+    servers: Sequence[int | str], steps: int, *, stream: bool, messages: str = ""
+) -> float:
     """Steps/s of bare grpc.aio round trips to every server (a port, or ``unix:PATH``) per
-    step (gathered)."""
+    step (gathered); requests of the kind ``messages`` (``_messages``)."""
     import grpc
 
     from coupler.v1 import component_pb2_grpc as rpc
 
-    request, _ = _raw_messages()
+    request, _ = _messages(messages)
     targets = [f"127.0.0.1:{s}" if isinstance(s, int) else s for s in servers]
     channels = [grpc.aio.insecure_channel(t) for t in targets]
     try:
@@ -1317,6 +1338,150 @@ OPENRAILS_STEP_S = 0.2
 """OpenRails' lockstep step: the time a frame pair may take."""
 
 
+# ----------------------------------- the participant side; many participants (#31 targets 3, 4)
+
+
+async def participant_side(
+    sizes: Sizes, log: Callable[[str], None], work: Path, rows: list[Row], extra: dict[str, Any]
+) -> None:
+    """remote x1 against a bare grpc.aio bidi stream of empty messages: what the participant
+    runtime's own per-step work (decoding, the adapter, encoding) costs."""
+    log("remote x1 against a bare grpc.aio stream of empty messages")
+    port, raw_port = free_ports(2)
+    raw = [sys.executable, __file__, "--raw-server", str(raw_port), "--frames", "minimal"]
+    with processes([*gains([port]), raw]):
+        await serving([port])  # the raw server: channel_ready in raw_floor
+        ssd = ring_ssd(work, [port])
+        steps = sizes.remote_steps
+
+        async def coupler_remote() -> float:
+            return (await coupler_run(ssd, steps, work / "out")).rate
+
+        async def bare() -> float:
+            return await raw_floor([raw_port], steps, stream=True, messages="minimal")
+
+        coupler, floor = await interleaved(sizes.repeats, coupler_remote, bare)
+    assert coupler is not None and floor is not None
+    rows.append(Row("remote x1", coupler, "bare grpc.aio stream, empty", floor, 0.85))
+
+
+MANY = 100
+"""Participants of the ``many`` section."""
+PER_HOST = 25
+"""Participants one process of the ``many`` section serves."""
+MANY_UP_TARGET = 10.0
+"""All of ``MANY`` participants up (launched, serving, the run at its first step) within [s]."""
+
+
+def gain_host(ports: Sequence[int]) -> None:
+    """Gain participants on ``ports``, in this one process, each its own server: the example
+    program's participant (``coupler.examples.gain``) in the participant runtime
+    (``coupler.server.ParticipantServer``, on uvloop as ``serve`` runs it); prints ``ready``
+    once all serve, stops on SIGTERM."""
+    import signal
+
+    from coupler.examples.gain import GainParticipant
+    from coupler.server import ParticipantServer, run
+
+    async def host() -> None:
+        servers = [ParticipantServer(GainParticipant(f"Gain{p}"), port=p) for p in ports]
+        stop = asyncio.Event()
+        asyncio.get_running_loop().add_signal_handler(signal.SIGTERM, stop.set)
+        await asyncio.gather(*(server.start() for server in servers))
+        print("ready", flush=True)
+        await stop.wait()
+        await asyncio.gather(*(server.stop(0) for server in servers))
+
+    run(host())
+
+
+async def many(
+    sizes: Sizes, log: Callable[[str], None], work: Path, rows: list[Row], extra: dict[str, Any]
+) -> None:
+    """MANY gain participants, PER_HOST to a process, stepped in lockstep by one run, against
+    MANY bare grpc.aio streams to trivial servers grouped the same way; and the time from
+    launching the participants' processes to the run's first communication point."""
+    log(f"{MANY} participants, {PER_HOST} to a process, against {MANY} bare grpc.aio streams")
+    ports, raw_ports = free_ports(MANY), free_ports(MANY)
+
+    def hosts(option: str, group: Sequence[int]) -> list[str]:
+        return [sys.executable, __file__, option, ",".join(str(p) for p in group)]
+
+    groups = [range(k, min(k + PER_HOST, MANY)) for k in range(0, MANY, PER_HOST)]
+    gain_hosts = [hosts("--gain-host", [ports[k] for k in g]) for g in groups]
+    raw_hosts = [hosts("--raw-server", [raw_ports[k] for k in g]) for g in groups]
+    launched = time.perf_counter()
+    started = _start_hosts(gain_hosts, work)
+    with contextlib.ExitStack() as stack:
+        for process in started:
+            stack.callback(_end, process)
+        for k, process in enumerate(started):
+            assert process.stdout is not None
+            line = await asyncio.to_thread(process.stdout.readline)
+            if line.strip() != b"ready":
+                why = (work / f"host-{k}.err").read_text()[-2000:]
+                raise RuntimeError(f"a participant host did not start: {process.args}: {why}")
+        log(f"  {MANY} participants serving after {time.perf_counter() - launched:.1f} s")
+        await serving(ports)  # every one answers its health check: SERVING
+        serving_s = time.perf_counter() - launched
+        log(f"  ... and answering health checks after {serving_s:.1f} s")
+        ssd = ring_ssd(work, ports, name="many")
+        steps = max(300, sizes.scale_steps)
+        first = await coupler_run(ssd, steps, work / "out")
+        assert first.first is not None
+        up_s = serving_s + (first.first - first.begun)
+        stack.enter_context(processes(raw_hosts))  # started once the participants are up
+
+        async def coupler_many() -> float:
+            return (await coupler_run(ssd, steps, work / "out")).rate
+
+        async def bare() -> float:
+            return await raw_floor(raw_ports, steps, stream=True)
+
+        coupler, floor = await interleaved(sizes.repeats, coupler_many, bare)
+    assert coupler is not None and floor is not None
+    rows.append(
+        Row(f"remote x{MANY}", coupler, f"raw grpc.aio stream x{MANY}", floor, 0.8,
+            note=f"{PER_HOST} participants to a process")
+    )  # fmt: skip
+    extra["many"] = {
+        "participants": MANY,
+        "per_process": PER_HOST,
+        "serving_s": round(serving_s, 2),
+        "up_s": round(up_s, 2),
+        "target_s": MANY_UP_TARGET,
+        "verdict": "PASS" if up_s < MANY_UP_TARGET else "FAIL",
+    }
+
+
+def _start_hosts(commands: Sequence[Sequence[str]], work: Path) -> list[subprocess.Popen[bytes]]:
+    """Processes whose stdout is read (a line when ready), stderr in ``work/host-K.err``."""
+    started = []
+    for k, command in enumerate(commands):
+        with (work / f"host-{k}.err").open("wb") as errors:
+            started.append(
+                subprocess.Popen(command, stdout=subprocess.PIPE, stderr=errors, cwd=ROOT)
+            )
+    return started
+
+
+def _end(process: subprocess.Popen[bytes]) -> None:
+    process.terminate()
+    try:
+        process.wait(10)
+    except subprocess.TimeoutExpired:
+        process.kill()
+
+
+def many_line(figures: dict[str, Any]) -> str:
+    """The ``many`` section's start-up figure, its target and verdict."""
+    return (
+        f"{figures['participants']} participants ({figures['per_process']} to a process) up in "
+        f"{figures['up_s']:.1f} s (launched -> all serving {figures['serving_s']:.1f} s -> the "
+        f"run's first step), target < {figures['target_s']:g} s: {figures['verdict']}"
+    )
+
+
 SECTIONS = (
     cli_start,
     watched_run,
@@ -1324,8 +1489,10 @@ SECTIONS = (
     openmcx,
     remotes,
     sockets,
+    participant_side,
     proxy_fmu,
     scale,
+    many,
     frames,
     memory,
 )
@@ -1419,7 +1586,10 @@ def main() -> int:
         help="run only these sections, comma-separated: " + ", ".join(s.__name__ for s in SECTIONS),
     )
     parser.add_argument("--raw-server", help=argparse.SUPPRESS)
-    parser.add_argument("--frames", choices=["in", "out"], default="", help=argparse.SUPPRESS)
+    parser.add_argument(
+        "--frames", choices=["in", "out", "minimal"], default="", help=argparse.SUPPRESS
+    )
+    parser.add_argument("--gain-host", help=argparse.SUPPRESS)
     parser.add_argument("--rss-probe", nargs=2, type=int, help=argparse.SUPPRESS)
     parser.add_argument("--replay-probe", nargs=2, help=argparse.SUPPRESS)
     args = parser.parse_args()
@@ -1428,6 +1598,9 @@ def main() -> int:
     configure_logging("ERROR")
     if args.raw_server:
         asyncio.run(raw_server(args.raw_server, args.frames))
+        return 0
+    if args.gain_host:
+        gain_host([int(p) for p in args.gain_host.split(",")])
         return 0
     unknown = sorted(set(args.sections) - {s.__name__ for s in SECTIONS})
     if unknown:
@@ -1473,6 +1646,8 @@ def main() -> int:
     print(table(rows))
     for sentence in extra.get("skipped", []):
         print(sentence)
+    if "many" in extra:
+        print(many_line(extra["many"]))
     if "time_to_first_step_s" in extra:
         print(f"time from run start to first step [s]: {extra['time_to_first_step_s']}")
         print(f"100 participants: {extra['scale_100']}")

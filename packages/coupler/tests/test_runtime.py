@@ -165,6 +165,48 @@ async def test_participant_exception_is_internal_and_server_keeps_serving() -> N
         await server.stop(grace=0.1)
 
 
+class Varying(GainParticipant):
+    """Answers with fewer outputs when ``n`` is 1 and a wrong type when ``n`` is 2."""
+
+    async def do_step(
+        self, time: float, step: float, inputs: Mapping[str, Value]
+    ) -> dict[str, Value]:
+        outputs = await super().do_step(time, step, inputs)
+        if inputs.get("n") == 1:
+            return {"y": outputs["y"]}
+        if inputs.get("n") == 2:
+            return {**outputs, "count": "three"}  # type: ignore[dict-item]
+        return outputs
+
+
+async def test_a_step_stream_answers_every_step_with_its_own_outputs() -> None:
+    """A stream's answers share one prepared message (coupler.wire.StepAnswers): each answer
+    still carries that step's outputs, when they change channels too, and each is checked."""
+    server = ParticipantServer(Varying())
+    await server.start()
+    try:
+        async with RemoteParticipant(server.address) as remote:  # streaming
+            await remote.initialize(setup())
+            first = await remote.do_step(0.0, 0.5, {"u": 1.0, "label": "a", "blob": b"ab"})
+            assert first == {"y": 2.0, "x": 0.5, "count": 0, "inverted": True, "echo": "a",
+                             "blob_out": b"ba"}  # fmt: skip
+            assert await remote.do_step(0.5, 0.5, {"u": 2.0, "n": 1}) == {"y": 4.0}
+            later = await remote.do_step(1.0, 0.5, {"u": 3.0, "n": 0, "label": "", "blob": b""})
+            assert later == {"y": 6.0, "x": 3.0, "count": 0, "inverted": True, "echo": "",
+                             "blob_out": b""}  # fmt: skip
+            again = await remote.do_step(1.5, 0.5, {"u": -1.0, "flag": True, "n": 5})
+            assert (again["y"], again["x"], again["count"], again["inverted"]) == (
+                -2.0, 2.5, 5, False
+            )  # fmt: skip
+            with pytest.raises(
+                ParticipantError, match="channel 'count' expects Integer, got String"
+            ) as info:
+                await remote.do_step(2.0, 0.5, {"n": 2})
+            assert info.value.status == "INVALID_ARGUMENT"
+    finally:
+        await server.stop(grace=0.1)
+
+
 class SlowToOpen(GainParticipant):
     def __init__(self) -> None:
         super().__init__()

@@ -159,3 +159,83 @@ def test_fits_fixed_step_means_whole_multiples() -> None:
     assert fits_fixed_step(0.1, 0.05) and fits_fixed_step(0.3, 0.1) and fits_fixed_step(1.0, 0)
     assert not fits_fixed_step(0.1, 0.2)
     assert not fits_fixed_step(0.15, 0.1)
+
+
+EVERY = Description(
+    name="P",
+    channels=(
+        REAL,
+        INT,
+        BIN,
+        Channel(name="on", causality=Causality.OUTPUT, type=ValueType.BOOLEAN),
+        Channel(name="label", causality=Causality.OUTPUT, type=ValueType.STRING),
+        Channel(name="mode", causality=Causality.OUTPUT, type=ValueType.ENUMERATION),
+        Channel(name="data", causality=Causality.OUTPUT, type=ValueType.BINARY),
+    ),
+)
+OUTPUTS = {"speed": 1, "count": -3, "on": True, "label": "ä", "mode": 2, "data": bytearray(b"x")}
+"""Every output type, two of them in a type ``check`` converts (int -> Real, bytearray)."""
+
+
+def test_a_step_answer_is_what_encode_makes() -> None:
+    """``step_response`` (bindings added into the message) and ``StepAnswers`` (one prepared
+    message, values set in place) give the bytes of the bindings ``Codec.encode`` makes."""
+    codec = wire.Codec(EVERY)
+    expected = wire.DoStepResponse(outputs=codec.encode(OUTPUTS)).SerializeToString()
+    assert wire.step_response(OUTPUTS, codec).SerializeToString() == expected
+    answers = wire.StepAnswers(codec)
+    assert answers.answer(OUTPUTS).SerializeToString() == expected
+    changed = {**OUTPUTS, "speed": 2.5, "label": "b", "data": b""}
+    again = answers.answer(changed)
+    assert codec.decode(again.outputs) == {**changed, "data": b""}
+    assert again.SerializeToString() == wire.step_response(changed, codec).SerializeToString()
+    fewer = answers.answer({"speed": 3.0})  # other channels: a message of its own
+    assert codec.decode(fewer.outputs) == {"speed": 3.0}
+    assert codec.decode(answers.answer(OUTPUTS).outputs) == codec.decode(codec.encode(OUTPUTS))
+
+
+@pytest.mark.parametrize(
+    ("values_", "message"),
+    [
+        ({"speed": math.nan}, "channel 'speed' expects a finite Real, got nan"),
+        ({"speed": True}, "channel 'speed' expects Real, got Boolean"),
+        ({"count": 2**31}, "channel 'count' expects Integer within int32"),
+        ({"count": 1.0}, "channel 'count' expects Integer, got Real"),
+        ({"on": 1}, "channel 'on' expects Boolean, got Integer"),
+        ({"label": b"x"}, "channel 'label' expects String, got Binary"),
+        ({"sped": 1.0}, "has no channel 'sped'"),
+    ],
+)
+def test_step_answers_are_checked(values_: dict[str, object], message: str) -> None:
+    """Every way an answer is made refuses a wrong value naming its channel, also after a
+    first answer prepared the message (the values then go into it in place)."""
+    codec = wire.Codec(EVERY)
+    answers = wire.StepAnswers(codec)
+    answers.answer({k: OUTPUTS[k] for k in ("speed", "count", "on", "label")})
+    for make in (lambda v: wire.step_response(v, codec), answers.answer):
+        with pytest.raises(ChannelValueError, match=message):
+            make(values_)
+    with pytest.raises(ChannelValueError, match=message):  # in place: the same channels
+        answers.answer({**{k: OUTPUTS[k] for k in ("speed", "count", "on", "label")}, **values_})
+
+
+def test_decoding_refuses_what_check_refuses() -> None:
+    """A binding's field fixes its Python type; a Real's finiteness, the channel, its field and
+    the message's size are still checked, naming the channel."""
+    codec = wire.Codec(EVERY, values.ValuePolicy(max_message_bytes=4))
+    ok = [wire.pb.VariableBinding(channel="speed", real=1.5)]
+    assert codec.decode(ok) == {"speed": 1.5}
+    for binding, message in [
+        (wire.pb.VariableBinding(channel="speed", real=math.inf), "expects a finite Real"),
+        (wire.pb.VariableBinding(channel="speed", integer=1), "expects Real, got Integer"),
+        (wire.pb.VariableBinding(channel="speed"), "expects Real, got no value"),
+        (wire.pb.VariableBinding(channel="nope", real=1.0), "has no channel 'nope'"),
+    ]:
+        with pytest.raises(ChannelValueError, match=message):
+            codec.decode([binding])
+    allowed = values.ValuePolicy(allow_nonfinite=True)
+    inf = wire.pb.VariableBinding(channel="speed", real=math.inf)
+    assert wire.Codec(EVERY, allowed).decode([inf]) == {"speed": math.inf}
+    with pytest.raises(MessageTooLarge, match="'label' carries 6 bytes"):
+        codec.decode([wire.pb.VariableBinding(channel="label", text="äää")])
+    assert codec.decode([wire.pb.VariableBinding(channel="label", text="ää")]) == {"label": "ää"}

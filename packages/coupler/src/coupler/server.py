@@ -177,6 +177,7 @@ class _Servicer(pb_grpc.GRPCComponentServiceServicer):
         context: grpc.aio.ServicerContext,
     ) -> AsyncIterator[wire.DoStepResponse]:
         carried: _Run | None = None
+        answers: wire.StepAnswers | None = None  # this stream's prepared answer
         try:
             async for request in request_iterator:
                 async with self._lock:
@@ -188,7 +189,9 @@ class _Servicer(pb_grpc.GRPCComponentServiceServicer):
                         and hmac.compare_digest(request.run_secret, run.secret)
                     ):
                         carried = run  # this stream belongs to the run's owner
-                    response = await self._step(request, context)
+                    if answers is None and self._codec is not None:
+                        answers = wire.StepAnswers(self._codec)
+                    response = await self._step(request, context, answers)
                 yield response
         finally:
             if carried is not None and carried is self.run:
@@ -196,9 +199,18 @@ class _Servicer(pb_grpc.GRPCComponentServiceServicer):
                 self._end_later(carried, "its step stream ended without Terminate")
 
     async def _step(
-        self, request: wire.DoStepRequest, context: grpc.aio.ServicerContext
+        self,
+        request: wire.DoStepRequest,
+        context: grpc.aio.ServicerContext,
+        answers: wire.StepAnswers | None = None,
     ) -> wire.DoStepResponse:
-        await _guard(context, lambda: self.codec)
+        """One step: the protocol's checks, the inputs decoded, the participant's step, its
+        outputs encoded (into ``answers``' prepared message on a stream). No lambdas, no
+        ``_guard`` per stage: one ``try`` around each stage that can fail, ``_refuse`` maps
+        what it raises (the per-step cost is docs/performance.md's profile)."""
+        codec = self._codec
+        if codec is None:
+            await _refuse(context, _NotReady())
         run = self.run
         if self.stopping:
             await _abort(
@@ -222,7 +234,10 @@ class _Servicer(pb_grpc.GRPCComponentServiceServicer):
             )
         if run.intrusion is not None or not hmac.compare_digest(request.run_secret, run.secret):
             await self._untrusted(run, request.run_secret, "DoStep", context)
-        step = await _guard(context, lambda: wire.step_from_pb(request, self.codec))
+        try:
+            step = wire.step_from_pb(request, codec)
+        except Exception as exc:
+            await _refuse(context, exc)
         if not (0 < step.step < math.inf and math.isfinite(step.time)):
             await _abort(
                 context,
@@ -232,20 +247,25 @@ class _Servicer(pb_grpc.GRPCComponentServiceServicer):
             )
         run.busy += 1
         try:
-            outputs = await _guard(
-                context, lambda: self.participant.do_step(step.time, step.step, step.inputs)
-            )
+            outputs = await self.participant.do_step(step.time, step.step, step.inputs)
         except EndRun as end:
             last, reason = end.outputs, end.reason
             log.info("run_end_requested", run_id=run.id, participant=self.name, reason=reason)
             return await _guard(
-                context, lambda: wire.step_response(last, self.codec, terminate_reason=reason)
+                context, lambda: wire.step_response(last, codec, terminate_reason=reason)
             )
+        except Exception as exc:
+            await _refuse(context, exc)
         finally:
             run.busy -= 1
             run.last_call = time.monotonic()
         run.reached = step.time + step.step
-        return await _guard(context, lambda: wire.step_response(outputs, self.codec))
+        try:
+            if answers is not None:
+                return answers.answer(outputs)
+            return wire.step_response(outputs, codec)
+        except Exception as exc:
+            await _refuse(context, exc)
 
     async def Terminate(
         self, request: wire.TerminateRequest, context: grpc.aio.ServicerContext
@@ -350,19 +370,26 @@ async def _guard(context: grpc.aio.ServicerContext, call: Callable[[], T | Await
         if isinstance(result, Awaitable):
             return await result
         return result
-    except _NotReady:
-        await _abort(context, grpc.StatusCode.UNAVAILABLE, "participant is starting; not ready yet")
-    except MessageTooLarge as exc:
-        await _abort(context, grpc.StatusCode.RESOURCE_EXHAUSTED, str(exc))
-    except (ChannelValueError, ScenarioError) as exc:
-        await _abort(context, grpc.StatusCode.INVALID_ARGUMENT, str(exc))
-    except ParticipantUnavailable as exc:  # the caller names the participant and the call
-        await _abort(context, grpc.StatusCode.UNAVAILABLE, exc.detail)
-    except (asyncio.CancelledError, EndRun):
+    except EndRun:
         raise
-    except Exception as exc:  # the participant's own failure: report it, keep serving
-        log.exception("participant_failed")
-        await _abort(context, grpc.StatusCode.INTERNAL, f"{type(exc).__name__}: {exc}")
+    except Exception as exc:
+        await _refuse(context, exc)
+
+
+async def _refuse(context: grpc.aio.ServicerContext, exc: Exception) -> NoReturn:
+    """Fails the call with the status code and message for ``exc``, raised by the runtime's or
+    the participant's code while serving it."""
+    if isinstance(exc, _NotReady):
+        await _abort(context, grpc.StatusCode.UNAVAILABLE, "participant is starting; not ready yet")
+    if isinstance(exc, MessageTooLarge):
+        await _abort(context, grpc.StatusCode.RESOURCE_EXHAUSTED, str(exc))
+    if isinstance(exc, ChannelValueError | ScenarioError):
+        await _abort(context, grpc.StatusCode.INVALID_ARGUMENT, str(exc))
+    if isinstance(exc, ParticipantUnavailable):  # the caller names the participant and the call
+        await _abort(context, grpc.StatusCode.UNAVAILABLE, exc.detail)
+    # the participant's own failure: report it, keep serving
+    log.exception("participant_failed", exc_info=exc)
+    await _abort(context, grpc.StatusCode.INTERNAL, f"{type(exc).__name__}: {exc}")
 
 
 async def _abort(

@@ -8,8 +8,10 @@ the rest of Coupler speaks Python values.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, NoReturn
 
 from coupler.channels import (
     Capabilities,
@@ -22,7 +24,19 @@ from coupler.channels import (
 )
 from coupler.errors import ChannelValueError, MessageTooLarge
 from coupler.v1 import component_pb2 as pb
-from coupler.values import DEFAULT_POLICY, MAX_MESSAGE_BYTES, ValuePolicy, check
+
+if TYPE_CHECKING:
+    from google.protobuf.internal.containers import RepeatedCompositeFieldContainer
+
+    RepeatedBindings = RepeatedCompositeFieldContainer[pb.VariableBinding]
+from coupler.values import (
+    DEFAULT_POLICY,
+    INT32_MAX,
+    INT32_MIN,
+    MAX_MESSAGE_BYTES,
+    ValuePolicy,
+    check,
+)
 
 _FIELD_OF_TYPE = {
     ValueType.REAL: "real",
@@ -55,6 +69,20 @@ _TYPE_TO_PB = {
 }
 _TYPE_FROM_PB = {v: k for k, v in _TYPE_TO_PB.items()}
 _SIZED = (ValueType.BINARY, ValueType.STRING)
+_PYTHON_TYPE: dict[ValueType, type] = {
+    ValueType.REAL: float,
+    ValueType.INTEGER: int,
+    ValueType.ENUMERATION: int,
+    ValueType.BOOLEAN: bool,
+    ValueType.STRING: str,
+    ValueType.BINARY: bytes,
+}
+_PLAIN, _FINITE, _INT32 = 0, 1, 2
+"""What a value of the right Python type still needs checked: nothing, that it is finite (a
+Real), that it fits int32 (an Integer or Enumeration)."""
+_LIMIT_OF_TYPE = {ValueType.REAL: _FINITE, ValueType.INTEGER: _INT32, ValueType.ENUMERATION: _INT32}
+_UTF8_MAX = 4
+"""Bytes of one character in UTF-8 at most: a text's length times this bounds its size."""
 
 # Message classes, re-exported so that server and client name them through this module.
 DescribeRequest = pb.DescribeRequest
@@ -79,8 +107,46 @@ def transport_options(limit: int = MAX_MESSAGE_BYTES) -> tuple[tuple[str, int], 
     return (("grpc.max_receive_message_length", size), ("grpc.max_send_message_length", size))
 
 
+@dataclass(frozen=True, slots=True)
+class _Slot:
+    """One channel as the codec reads and writes it, worked out once per participant."""
+
+    channel: Channel
+    field: str
+    """Its field of ``VariableBinding.value``."""
+    python: type
+    """The Python type of its values as they need no conversion (and as protobuf gives them)."""
+    limit: int
+    """``_PLAIN``, ``_FINITE`` or ``_INT32``: what such a value still needs checked."""
+    weight: int
+    """A value's length times this bounds its bytes in a message (0: not counted)."""
+
+    @classmethod
+    def of(cls, channel: Channel) -> _Slot:
+        weight = {ValueType.STRING: _UTF8_MAX, ValueType.BINARY: 1}.get(channel.type, 0)
+        return cls(
+            channel=channel,
+            field=_FIELD_OF_TYPE[channel.type],
+            python=_PYTHON_TYPE[channel.type],
+            limit=_LIMIT_OF_TYPE.get(channel.type, _PLAIN),
+            weight=weight,
+        )
+
+
+_Allowed = tuple[Causality, ...] | None
+_INPUTS, _OUTPUTS, _PARAMETERS = (Causality.INPUT,), (Causality.OUTPUT,), (Causality.PARAMETER,)
+
+
 class Codec:
-    """Encodes and decodes the bindings of one participant, checked against its channels."""
+    """Encodes and decodes the bindings of one participant, checked against its channels.
+
+    Per step it does no more than a step needs: each channel's field, Python type and limits
+    are worked out once (``_Slot``); a value of the right type within its limits is taken as
+    it is, anything else goes through ``coupler.values.check`` (which converts or names the
+    channel); a decoded value's type is the protobuf field's own, so only a Real's finiteness
+    is checked; and a message's size only when the lengths of its Binary and String values
+    could exceed the limit.
+    """
 
     def __init__(self, description: Description, policy: ValuePolicy = DEFAULT_POLICY) -> None:
         self.description = description
@@ -88,6 +154,8 @@ class Codec:
         self._channels = {c.name: c for c in description.channels}
         self._sized = any(c.type in _SIZED for c in description.channels)
         """Whether a message can grow: only Binary and String values count to its limit."""
+        self._tables: dict[_Allowed, dict[str, _Slot]] = {}
+        self._finite = not policy.allow_nonfinite
 
     def channel(self, name: str, allowed: Iterable[Causality] | None = None) -> Channel:
         """The channel ``name``, or ChannelValueError listing the channels there are."""
@@ -107,6 +175,18 @@ class Codec:
             )
         return channel
 
+    def _table(self, allowed: _Allowed) -> dict[str, _Slot]:
+        """The slots of the channels of the causalities ``allowed`` (every one: None)."""
+        table = self._tables.get(allowed)
+        if table is None:
+            table = {
+                c.name: _Slot.of(c)
+                for c in self.description.channels
+                if allowed is None or c.causality in allowed
+            }
+            self._tables[allowed] = table
+        return table
+
     def encode(
         self, values: Mapping[str, object], allowed: Iterable[Causality] | None = None
     ) -> list[pb.VariableBinding]:
@@ -116,6 +196,43 @@ class Codec:
         if self._sized:
             self._fits(values)
         return bindings
+
+    def encode_into(
+        self,
+        bindings: RepeatedBindings,
+        values: Mapping[str, object],
+        allowed: tuple[Causality, ...] | None = None,
+    ) -> None:
+        """Adds the bindings of ``values`` to the repeated field ``bindings`` of a message,
+        each checked against its channel (``encode``, without building each binding apart
+        and copying it into the message)."""
+        table = self._table(allowed)
+        add = bindings.add
+        size = 0
+        for name, value in values.items():
+            slot = table.get(name)
+            if slot is None:
+                self.channel(name, allowed)  # raises, naming the channels there are
+                raise AssertionError("unreachable")
+            binding = add()
+            binding.channel = name
+            setattr(binding, slot.field, self._checked(slot, value))
+            if slot.weight:
+                size += len(value) * slot.weight  # type: ignore[arg-type]
+        if size > self.policy.max_message_bytes:
+            self._fits(values)
+
+    def _checked(self, slot: _Slot, value: object) -> object:
+        """``value`` as its channel carries it (``check``), at once when it is already."""
+        if type(value) is slot.python:
+            if slot.limit == _PLAIN:
+                return value
+            if slot.limit == _FINITE:
+                if not self._finite or math.isfinite(value):  # type: ignore[arg-type]
+                    return value
+            elif INT32_MIN <= value <= INT32_MAX:
+                return value
+        return check(slot.channel, value, self.policy)
 
     def binding(self, channel: Channel, value: object) -> pb.VariableBinding:
         """One checked binding."""
@@ -129,21 +246,35 @@ class Codec:
     ) -> dict[str, Value]:
         """Python values of ``bindings``, each checked against its channel."""
         allowed = tuple(allowed) if allowed is not None else None
+        table = self._table(allowed)
         values: dict[str, Value] = {}
+        size = 0
         for binding in bindings:
-            channel = self.channel(binding.channel, allowed)
+            name = binding.channel
+            slot = table.get(name)
             field = binding.WhichOneof("value")
-            if field != _FIELD_OF_TYPE[channel.type]:
-                raise ChannelValueError(
-                    f"channel '{channel.name}' expects {channel.type}, got "
-                    f"{_KIND_OF_FIELD.get(field or '', 'no value')}",
-                    channel=channel.name,
-                    expected=str(channel.type),
-                )
-            values[channel.name] = check(channel, getattr(binding, field), self.policy)
-        if self._sized:
+            if slot is None or field != slot.field:
+                self._refuse(binding, allowed)
+            value = getattr(binding, field)
+            if slot.limit == _FINITE and self._finite and not math.isfinite(value):
+                check(slot.channel, value, self.policy)  # raises, naming the channel
+            elif slot.weight:
+                size += len(value) * slot.weight
+            values[name] = value
+        if size > self.policy.max_message_bytes:
             self._fits(values)
         return values
+
+    def _refuse(self, binding: pb.VariableBinding, allowed: _Allowed) -> NoReturn:
+        """ChannelValueError for a binding of no such channel or of the wrong type."""
+        channel = self.channel(binding.channel, allowed)
+        field = binding.WhichOneof("value")
+        raise ChannelValueError(
+            f"channel '{channel.name}' expects {channel.type}, got "
+            f"{_KIND_OF_FIELD.get(field or '', 'no value')}",
+            channel=channel.name,
+            expected=str(channel.type),
+        )
 
     def _fits(self, values: Mapping[str, object]) -> None:
         """MessageTooLarge naming the largest channel when the Binary and String ``values`` of
@@ -286,7 +417,9 @@ def initialize_from_pb(request: pb.InitializeRequest, codec: Codec) -> RunSetup:
 
 
 def initialize_response(outputs: Mapping[str, object], codec: Codec) -> pb.InitializeResponse:
-    return pb.InitializeResponse(outputs=codec.encode(outputs, (Causality.OUTPUT,)))
+    response = pb.InitializeResponse()
+    codec.encode_into(response.outputs, outputs, _OUTPUTS)
+    return response
 
 
 # --- DoStep ----------------------------------------------------------------------------------
@@ -319,18 +452,16 @@ class Step:
 def step_to_pb(
     run: RunKey, time: float, step: float, inputs: Mapping[str, object], codec: Codec
 ) -> pb.DoStepRequest:
-    return pb.DoStepRequest(
-        run_id=run.id,
-        run_secret=run.secret,
-        current_time=time,
-        step_size=step,
-        inputs=codec.encode(inputs, (Causality.INPUT,)),
+    request = pb.DoStepRequest(
+        run_id=run.id, run_secret=run.secret, current_time=time, step_size=step
     )
+    codec.encode_into(request.inputs, inputs, _INPUTS)
+    return request
 
 
 def step_from_pb(request: pb.DoStepRequest, codec: Codec) -> Step:
     """The step a DoStep request asks for, inputs checked."""
-    inputs = codec.decode(request.inputs, (Causality.INPUT,))
+    inputs = codec.decode(request.inputs, _INPUTS)
     return Step(request.run_id, request.current_time, request.step_size, inputs)
 
 
@@ -338,17 +469,57 @@ def step_response(
     outputs: Mapping[str, object], codec: Codec, *, terminate_reason: str | None = None
 ) -> pb.DoStepResponse:
     """The answer to a step; with ``terminate_reason`` it asks to end the run."""
-    response = pb.DoStepResponse(outputs=codec.encode(outputs, (Causality.OUTPUT,)))
+    response = pb.DoStepResponse()
+    codec.encode_into(response.outputs, outputs, _OUTPUTS)
     if terminate_reason is not None:
         response.terminate = True
         response.terminate_reason = terminate_reason
     return response
 
 
+class StepAnswers:
+    """The answers to the steps of one step stream, written into one prepared message.
+
+    The first answer is built as ``step_response`` builds it; while a step's outputs name the
+    same channels as the last one's, the next answer is the same message with the new values
+    set into its bindings in place, checked as ``Codec`` checks them. Safe because a stream
+    sends (serializes) each answer before the next is made; one object per stream.
+    """
+
+    def __init__(self, codec: Codec) -> None:
+        self._codec = codec
+        self._response: pb.DoStepResponse | None = None
+        self._bindings: dict[str, tuple[pb.VariableBinding, _Slot]] = {}
+
+    def answer(self, outputs: Mapping[str, object]) -> pb.DoStepResponse:
+        """The answer carrying ``outputs`` (each checked against its channel)."""
+        response, bindings = self._response, self._bindings
+        if response is None or outputs.keys() != bindings.keys():
+            return self._prepare(outputs)
+        codec = self._codec
+        size = 0
+        for name, value in outputs.items():
+            binding, slot = bindings[name]
+            setattr(binding, slot.field, codec._checked(slot, value))
+            if slot.weight:
+                size += len(value) * slot.weight  # type: ignore[arg-type]
+        if size > codec.policy.max_message_bytes:
+            codec._fits(outputs)
+        return response
+
+    def _prepare(self, outputs: Mapping[str, object]) -> pb.DoStepResponse:
+        self._response = None  # until the new one is complete
+        response = step_response(outputs, self._codec)
+        table = self._codec._table(_OUTPUTS)
+        self._bindings = {b.channel: (b, table[b.channel]) for b in response.outputs}
+        self._response = response
+        return response
+
+
 def outputs_from_pb(
     response: pb.InitializeResponse | pb.DoStepResponse, codec: Codec
 ) -> dict[str, Value]:
-    return codec.decode(response.outputs, (Causality.OUTPUT,))
+    return codec.decode(response.outputs, _OUTPUTS)
 
 
 def termination_requested(response: pb.DoStepResponse) -> str | None:
