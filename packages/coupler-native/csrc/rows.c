@@ -1,0 +1,268 @@
+/* The native CSV row: a results.csv line made in one pass over a row, in C.
+ *
+ * coupler_orchestrator.outputs.csv makes one RowFormat per run (the picked columns' indices in
+ * a row, a kind per column and, for the columns C does not format, a Python formatter) and
+ * calls its `line(time, row)` for every recorded row. The cells are exactly the ones Python's
+ * formatters make (tests/test_csv_rows.py compares them):
+ *
+ *   'r' Real         repr: a float through PyOS_double_to_string(x, 'r', 0, Py_DTSF_ADD_DOT_0),
+ *                    what float.__repr__ calls (the shortest text that reads back to the same
+ *                    double); any other object through its repr
+ *   'i' Integer, Enumeration, UInt64
+ *                    str: an int in a long long by snprintf, any other object through str
+ *   'b' Boolean      "1" or "0" by the value's truth
+ *   'o' other        the column's Python formatter (strings, binary values, frames), whose
+ *                    str is written as it is
+ *
+ * The time (the first cell) is a Real. A CPython extension of the stable ABI (Python 3.11 on).
+ */
+#define Py_LIMITED_API 0x030B0000
+#define PY_SSIZE_T_CLEAN
+#include <Python.h>
+
+#include <stdio.h>
+#include <string.h>
+
+typedef struct {
+    PyObject_HEAD
+    Py_ssize_t count;
+    Py_ssize_t *index; /* each cell's index in a row */
+    char *kind;        /* each cell's kind */
+    PyObject *formatters; /* a tuple: each cell's formatter, None but for kind 'o' */
+} RowFormat;
+
+/* A growing text; `stack` first, the heap once it is full. */
+typedef struct {
+    char *text;
+    Py_ssize_t size, capacity;
+    char stack[2048];
+} Text;
+
+static int reserve(Text *t, Py_ssize_t more) {
+    if (t->size + more <= t->capacity) return 0;
+    Py_ssize_t capacity = t->capacity;
+    while (capacity < t->size + more) capacity *= 2;
+    char *grown;
+    if (t->text == t->stack) {
+        grown = PyMem_Malloc((size_t)capacity);
+        if (grown != NULL) memcpy(grown, t->text, (size_t)t->size);
+    } else {
+        grown = PyMem_Realloc(t->text, (size_t)capacity);
+    }
+    if (grown == NULL) {
+        PyErr_NoMemory();
+        return -1;
+    }
+    t->text = grown, t->capacity = capacity;
+    return 0;
+}
+
+static int append(Text *t, const char *text, Py_ssize_t size) {
+    if (reserve(t, size + 1) < 0) return -1;
+    memcpy(t->text + t->size, text, (size_t)size);
+    t->size += size;
+    return 0;
+}
+
+/* The str of an object (repr with `repr`), appended. */
+static int append_text_of(Text *t, PyObject *value, int repr) {
+    PyObject *text = repr ? PyObject_Repr(value) : PyObject_Str(value);
+    if (text == NULL) return -1;
+    Py_ssize_t size;
+    const char *utf8 = PyUnicode_AsUTF8AndSize(text, &size);
+    int result = utf8 == NULL ? -1 : append(t, utf8, size);
+    Py_DECREF(text);
+    return result;
+}
+
+static int append_real(Text *t, PyObject *value) {
+    if (!PyFloat_CheckExact(value)) return append_text_of(t, value, 1);
+    char *text = PyOS_double_to_string(PyFloat_AsDouble(value), 'r', 0, Py_DTSF_ADD_DOT_0, NULL);
+    if (text == NULL) return -1;
+    int result = append(t, text, (Py_ssize_t)strlen(text));
+    PyMem_Free(text);
+    return result;
+}
+
+static int append_integer(Text *t, PyObject *value) {
+    if (PyLong_CheckExact(value)) {
+        int overflow = 0;
+        long long number = PyLong_AsLongLongAndOverflow(value, &overflow);
+        if (!overflow) {
+            if (number == -1 && PyErr_Occurred()) return -1;
+            char text[32];
+            int size = snprintf(text, sizeof text, "%lld", number);
+            return append(t, text, size);
+        }
+    }
+    return append_text_of(t, value, 0);
+}
+
+static int append_cell(Text *t, char kind, PyObject *value, PyObject *formatter) {
+    switch (kind) {
+    case 'r':
+        return append_real(t, value);
+    case 'i':
+        return append_integer(t, value);
+    case 'b': {
+        int truth = PyObject_IsTrue(value);
+        return truth < 0 ? -1 : append(t, truth ? "1" : "0", 1);
+    }
+    default: {
+        PyObject *text = PyObject_CallFunctionObjArgs(formatter, value, NULL);
+        if (text == NULL) return -1;
+        int result = -1;
+        if (!PyUnicode_Check(text)) {
+            PyErr_SetString(PyExc_TypeError, "a cell's formatter returned something not a str");
+        } else {
+            Py_ssize_t size;
+            const char *utf8 = PyUnicode_AsUTF8AndSize(text, &size);
+            if (utf8 != NULL) result = append(t, utf8, size);
+        }
+        Py_DECREF(text);
+        return result;
+    }
+    }
+}
+
+/* row[index]: a new reference (lists and tuples without PySequence's detour). */
+static PyObject *item(PyObject *row, Py_ssize_t index) {
+    PyObject *found;
+    if (PyList_CheckExact(row))
+        found = PyList_GetItem(row, index);
+    else if (PyTuple_CheckExact(row))
+        found = PyTuple_GetItem(row, index);
+    else
+        return PySequence_GetItem(row, index);
+    Py_XINCREF(found);
+    return found;
+}
+
+static PyObject *RowFormat_line(PyObject *self_, PyObject *const *args, Py_ssize_t nargs) {
+    RowFormat *self = (RowFormat *)self_;
+    if (nargs != 2) {
+        PyErr_SetString(PyExc_TypeError, "line(time, row) takes two arguments");
+        return NULL;
+    }
+    Text t;
+    t.text = t.stack, t.size = 0, t.capacity = sizeof t.stack;
+    PyObject *line = NULL;
+    if (append_real(&t, args[0]) < 0) goto done;
+    for (Py_ssize_t i = 0; i < self->count; i++) {
+        PyObject *value = item(args[1], self->index[i]);
+        if (value == NULL) goto done;
+        int result = append(&t, ",", 1);
+        if (result == 0)
+            result = append_cell(&t, self->kind[i], value,
+                                 PyTuple_GetItem(self->formatters, i));
+        Py_DECREF(value);
+        if (result < 0) goto done;
+    }
+    if (append(&t, "\n", 1) < 0) goto done;
+    line = PyUnicode_FromStringAndSize(t.text, t.size);
+done:
+    if (t.text != t.stack) PyMem_Free(t.text);
+    return line;
+}
+
+static void RowFormat_dealloc(PyObject *self_) {
+    RowFormat *self = (RowFormat *)self_;
+    PyTypeObject *type = Py_TYPE(self_);
+    PyMem_Free(self->index);
+    PyMem_Free(self->kind);
+    Py_XDECREF(self->formatters);
+    freefunc release = (freefunc)PyType_GetSlot(type, Py_tp_free);
+    release(self_);
+    Py_DECREF(type);
+}
+
+/* RowFormat(indices, kinds, formatters): sequences of one entry per cell after the time. */
+static PyObject *RowFormat_new(PyTypeObject *type, PyObject *args, PyObject *kwargs) {
+    PyObject *indices, *kinds, *formatters;
+    if (kwargs != NULL && PyObject_Length(kwargs) > 0) {
+        PyErr_SetString(PyExc_TypeError, "RowFormat takes no keyword arguments");
+        return NULL;
+    }
+    if (!PyArg_ParseTuple(args, "OUO!", &indices, &kinds, &PyTuple_Type, &formatters))
+        return NULL;
+    Py_ssize_t count = PyObject_Length(indices);
+    if (count < 0) return NULL;
+    Py_ssize_t size;
+    const char *kind = PyUnicode_AsUTF8AndSize(kinds, &size);
+    if (kind == NULL) return NULL;
+    if (size != count || PyTuple_Size(formatters) != count) {
+        PyErr_SetString(PyExc_ValueError, "one index, kind and formatter per cell");
+        return NULL;
+    }
+    allocfunc alloc = (allocfunc)PyType_GetSlot(type, Py_tp_alloc);
+    RowFormat *self = (RowFormat *)alloc(type, 0);
+    if (self == NULL) return NULL;
+    self->count = count;
+    self->index = PyMem_Malloc(sizeof(Py_ssize_t) * (size_t)(count ? count : 1));
+    self->kind = PyMem_Malloc((size_t)(count ? count : 1));
+    Py_INCREF(formatters);
+    self->formatters = formatters;
+    if (self->index == NULL || self->kind == NULL) {
+        Py_DECREF(self);
+        return PyErr_NoMemory();
+    }
+    memcpy(self->kind, kind, (size_t)count);
+    for (Py_ssize_t i = 0; i < count; i++) {
+        if (strchr("rib", kind[i]) == NULL &&
+            !PyCallable_Check(PyTuple_GetItem(formatters, i))) {
+            PyErr_SetString(PyExc_TypeError, "a cell of kind 'o' needs a callable formatter");
+            Py_DECREF(self);
+            return NULL;
+        }
+        PyObject *number = PySequence_GetItem(indices, i);
+        if (number == NULL) {
+            Py_DECREF(self);
+            return NULL;
+        }
+        self->index[i] = PyLong_AsSsize_t(number);
+        Py_DECREF(number);
+        if (self->index[i] == -1 && PyErr_Occurred()) {
+            Py_DECREF(self);
+            return NULL;
+        }
+    }
+    return (PyObject *)self;
+}
+
+static PyMethodDef RowFormat_methods[] = {
+    {"line", (PyCFunction)(void (*)(void))RowFormat_line, METH_FASTCALL,
+     "line(time, row) -> str: the CSV line of the picked cells of row, with its newline"},
+    {NULL, NULL, 0, NULL},
+};
+
+static PyType_Slot RowFormat_slots[] = {
+    {Py_tp_new, RowFormat_new},
+    {Py_tp_dealloc, RowFormat_dealloc},
+    {Py_tp_methods, RowFormat_methods},
+    {Py_tp_doc, "RowFormat(indices, kinds, formatters): results.csv lines of a run's rows"},
+    {0, NULL},
+};
+
+static PyType_Spec RowFormat_spec = {
+    "coupler_native._rows.RowFormat", sizeof(RowFormat), 0, Py_TPFLAGS_DEFAULT, RowFormat_slots,
+};
+
+static int exec_module(PyObject *module) {
+    PyObject *type = PyType_FromSpec(&RowFormat_spec);
+    if (type == NULL) return -1;
+    int result = PyModule_AddObjectRef(module, "RowFormat", type);
+    Py_DECREF(type);
+    return result;
+}
+
+static PyModuleDef_Slot module_slots[] = {
+    {Py_mod_exec, exec_module},
+    {0, NULL},
+};
+
+static struct PyModuleDef module_def = {
+    PyModuleDef_HEAD_INIT, "coupler_native._rows",
+    "The native CSV row of results.csv (csrc/rows.c)", 0, NULL, module_slots, NULL, NULL, NULL,
+};
+
+PyMODINIT_FUNC PyInit__rows(void) { return PyModuleDef_Init(&module_def); }
