@@ -11,24 +11,39 @@
  *   'i' Integer, Enumeration, UInt64
  *                    str: an int in a long long by snprintf, any other object through str
  *   'b' Boolean      "1" or "0" by the value's truth
- *   'o' other        the column's Python formatter (strings, binary values, frames), whose
- *                    str is written as it is
+ *   's' String       a str as it is, quoted as the csv module quotes a field (when it holds a
+ *                    comma, a quote or a newline); any other object through the formatter
+ *   'o' other        the column's Python formatter (binary values, frames), whose str is
+ *                    written as it is
  *
- * The time (the first cell) is a Real. A CPython extension of the stable ABI (Python 3.11 on).
+ * A Real or Integer cell whose value is the one of the row before (the same bits) reuses its
+ * text: constant outputs cost a comparison. The time (the first cell) is a Real. A CPython
+ * extension of the stable ABI (Python 3.11 on).
  */
 #define Py_LIMITED_API 0x030B0000
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
 
-#include <stdio.h>
+#include <stdbool.h>
 #include <string.h>
+
+/* A cell's last number and its text. */
+typedef struct {
+    union {
+        double real;
+        long long integer;
+    } last;
+    int size; /* of text; 0: nothing yet */
+    char text[40];
+} Last;
 
 typedef struct {
     PyObject_HEAD
     Py_ssize_t count;
-    Py_ssize_t *index; /* each cell's index in a row */
-    char *kind;        /* each cell's kind */
-    PyObject *formatters; /* a tuple: each cell's formatter, None but for kind 'o' */
+    Py_ssize_t *index;    /* each cell's index in a row */
+    char *kind;           /* each cell's kind */
+    Last *last;           /* each cell's last number, for kinds 'r' and 'i' */
+    PyObject *formatters; /* a tuple: each cell's formatter, None for kinds 'r', 'i', 'b' */
 } RowFormat;
 
 /* A growing text; `stack` first, the heap once it is full. */
@@ -75,53 +90,105 @@ static int append_text_of(Text *t, PyObject *value, int repr) {
     return result;
 }
 
-static int append_real(Text *t, PyObject *value) {
+static int append_real(Text *t, PyObject *value, Last *last) {
     if (!PyFloat_CheckExact(value)) return append_text_of(t, value, 1);
-    char *text = PyOS_double_to_string(PyFloat_AsDouble(value), 'r', 0, Py_DTSF_ADD_DOT_0, NULL);
+    double number = PyFloat_AsDouble(value);
+    if (last != NULL && last->size && memcmp(&last->last.real, &number, sizeof number) == 0)
+        return append(t, last->text, last->size);
+    char *text = PyOS_double_to_string(number, 'r', 0, Py_DTSF_ADD_DOT_0, NULL);
     if (text == NULL) return -1;
-    int result = append(t, text, (Py_ssize_t)strlen(text));
+    Py_ssize_t size = (Py_ssize_t)strlen(text);
+    int result = append(t, text, size);
+    if (last != NULL && size < (Py_ssize_t)sizeof last->text) {
+        memcpy(last->text, text, (size_t)size);
+        last->last.real = number, last->size = (int)size;
+    }
     PyMem_Free(text);
     return result;
 }
 
-static int append_integer(Text *t, PyObject *value) {
+static int append_integer(Text *t, PyObject *value, Last *last) {
     if (PyLong_CheckExact(value)) {
         int overflow = 0;
         long long number = PyLong_AsLongLongAndOverflow(value, &overflow);
         if (!overflow) {
             if (number == -1 && PyErr_Occurred()) return -1;
-            char text[32];
-            int size = snprintf(text, sizeof text, "%lld", number);
-            return append(t, text, size);
+            if (last->size && last->last.integer == number)
+                return append(t, last->text, last->size);
+            /* the digits from the right, then the sign */
+            char digits[24];
+            char *at = digits + sizeof digits;
+            unsigned long long rest =
+                number < 0 ? 0ULL - (unsigned long long)number : (unsigned long long)number;
+            do {
+                *--at = (char)('0' + rest % 10);
+                rest /= 10;
+            } while (rest);
+            if (number < 0) *--at = '-';
+            last->size = (int)(digits + sizeof digits - at);
+            memcpy(last->text, at, (size_t)last->size);
+            last->last.integer = number;
+            return append(t, at, last->size);
         }
     }
     return append_text_of(t, value, 0);
 }
 
-static int append_cell(Text *t, char kind, PyObject *value, PyObject *formatter) {
+/* A str as a CSV field: quoted, its quotes doubled, when it holds a comma, a quote or a
+ * newline (what outputs.csv.csv_field and the csv module write). */
+static int append_field(Text *t, PyObject *value) {
+    Py_ssize_t size;
+    const char *text = PyUnicode_AsUTF8AndSize(value, &size);
+    if (text == NULL) return -1;
+    Py_ssize_t quotes = 0;
+    bool plain = true;
+    for (Py_ssize_t i = 0; i < size; i++) {
+        char c = text[i];
+        if (c == '"') quotes++;
+        if (c == ',' || c == '"' || c == '\n') plain = false;
+    }
+    if (plain) return append(t, text, size);
+    if (reserve(t, size + quotes + 3) < 0) return -1;
+    t->text[t->size++] = '"';
+    for (Py_ssize_t i = 0; i < size; i++) {
+        if (text[i] == '"') t->text[t->size++] = '"';
+        t->text[t->size++] = text[i];
+    }
+    t->text[t->size++] = '"';
+    return 0;
+}
+
+/* The text the cell's Python formatter makes of it, appended. */
+static int append_formatted(Text *t, PyObject *value, PyObject *formatter) {
+    PyObject *text = PyObject_CallFunctionObjArgs(formatter, value, NULL);
+    if (text == NULL) return -1;
+    int result = -1;
+    if (!PyUnicode_Check(text)) {
+        PyErr_SetString(PyExc_TypeError, "a cell's formatter returned something not a str");
+    } else {
+        Py_ssize_t size;
+        const char *utf8 = PyUnicode_AsUTF8AndSize(text, &size);
+        if (utf8 != NULL) result = append(t, utf8, size);
+    }
+    Py_DECREF(text);
+    return result;
+}
+
+static int append_cell(Text *t, char kind, PyObject *value, PyObject *formatter, Last *last) {
     switch (kind) {
     case 'r':
-        return append_real(t, value);
+        return append_real(t, value, last);
     case 'i':
-        return append_integer(t, value);
+        return append_integer(t, value, last);
     case 'b': {
         int truth = PyObject_IsTrue(value);
         return truth < 0 ? -1 : append(t, truth ? "1" : "0", 1);
     }
-    default: {
-        PyObject *text = PyObject_CallFunctionObjArgs(formatter, value, NULL);
-        if (text == NULL) return -1;
-        int result = -1;
-        if (!PyUnicode_Check(text)) {
-            PyErr_SetString(PyExc_TypeError, "a cell's formatter returned something not a str");
-        } else {
-            Py_ssize_t size;
-            const char *utf8 = PyUnicode_AsUTF8AndSize(text, &size);
-            if (utf8 != NULL) result = append(t, utf8, size);
-        }
-        Py_DECREF(text);
-        return result;
-    }
+    case 's':
+        if (PyUnicode_CheckExact(value)) return append_field(t, value);
+        return append_formatted(t, value, formatter);
+    default:
+        return append_formatted(t, value, formatter);
     }
 }
 
@@ -147,14 +214,14 @@ static PyObject *RowFormat_line(PyObject *self_, PyObject *const *args, Py_ssize
     Text t;
     t.text = t.stack, t.size = 0, t.capacity = sizeof t.stack;
     PyObject *line = NULL;
-    if (append_real(&t, args[0]) < 0) goto done;
+    if (append_real(&t, args[0], NULL) < 0) goto done;
     for (Py_ssize_t i = 0; i < self->count; i++) {
         PyObject *value = item(args[1], self->index[i]);
         if (value == NULL) goto done;
         int result = append(&t, ",", 1);
         if (result == 0)
-            result = append_cell(&t, self->kind[i], value,
-                                 PyTuple_GetItem(self->formatters, i));
+            result = append_cell(&t, self->kind[i], value, PyTuple_GetItem(self->formatters, i),
+                                 &self->last[i]);
         Py_DECREF(value);
         if (result < 0) goto done;
     }
@@ -170,6 +237,7 @@ static void RowFormat_dealloc(PyObject *self_) {
     PyTypeObject *type = Py_TYPE(self_);
     PyMem_Free(self->index);
     PyMem_Free(self->kind);
+    PyMem_Free(self->last);
     Py_XDECREF(self->formatters);
     freefunc release = (freefunc)PyType_GetSlot(type, Py_tp_free);
     release(self_);
@@ -200,9 +268,10 @@ static PyObject *RowFormat_new(PyTypeObject *type, PyObject *args, PyObject *kwa
     self->count = count;
     self->index = PyMem_Malloc(sizeof(Py_ssize_t) * (size_t)(count ? count : 1));
     self->kind = PyMem_Malloc((size_t)(count ? count : 1));
+    self->last = PyMem_Calloc((size_t)(count ? count : 1), sizeof(Last));
     Py_INCREF(formatters);
     self->formatters = formatters;
-    if (self->index == NULL || self->kind == NULL) {
+    if (self->index == NULL || self->kind == NULL || self->last == NULL) {
         Py_DECREF(self);
         return PyErr_NoMemory();
     }
@@ -210,7 +279,7 @@ static PyObject *RowFormat_new(PyTypeObject *type, PyObject *args, PyObject *kwa
     for (Py_ssize_t i = 0; i < count; i++) {
         if (strchr("rib", kind[i]) == NULL &&
             !PyCallable_Check(PyTuple_GetItem(formatters, i))) {
-            PyErr_SetString(PyExc_TypeError, "a cell of kind 'o' needs a callable formatter");
+            PyErr_SetString(PyExc_TypeError, "a cell of kind 's' or 'o' needs a formatter");
             Py_DECREF(self);
             return NULL;
         }

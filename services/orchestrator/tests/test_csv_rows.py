@@ -96,6 +96,22 @@ def test_any_row_is_the_same_text(case: Any) -> None:
     assert native_line == python_line
 
 
+def test_a_cell_repeated_from_the_row_before_is_its_own_text() -> None:
+    """C reuses a Real's or an Integer's text when the row before had the same value (the
+    same bits): 0.0 after -0.0, True after 1 or 1 after 1.0 are not the same."""
+    sequences = {
+        "Real": [0.0, 0.0, -0.0, -0.0, 0.0, math.nan, math.nan, 1.0, 1, 1.0, True, 1e16, 1e16],
+        "Integer": [1, 1, True, 1, -1, -1, 2**63, 2**63, 2**63 - 1, 0, False, 0],
+    }
+    for kind, values in sequences.items():
+        columns = [Column(name="C.v", unit="", type=kind), Column(name="C.w", unit="", type=kind)]
+        made = native_row_formatter(columns, [0, 1])
+        assert made is not None
+        python = row_formatter(columns, [0, 1])
+        for value, other in zip(values, reversed(values), strict=True):
+            assert made(0.5, [value, other]) == python(0.5, [value, other])
+
+
 def test_a_cell_that_cannot_be_written_raises_as_in_python() -> None:
     """An int past Python's limit for str (4300 digits) and a row too short raise the
     same errors in C as in Python: no crash, no half line."""

@@ -5,7 +5,8 @@ from typing import Any
 
 class RowFormat:
     """The lines of a run's rows: per cell after the time, its index in a row, its kind
-    ('r' Real, 'i' Integer, 'b' Boolean, 'o' other) and, for kind 'o', its formatter."""
+    ('r' Real, 'i' Integer, 'b' Boolean, 's' String, 'o' other) and, for kinds 's' and
+    'o', its formatter."""
 
     def __init__(
         self,

@@ -10,8 +10,8 @@ flushed at least once a second and on every exit path, so a crash loses at most 
 and an interrupted or failed run keeps every completed row.
 
 A row's line is made in one pass in C by the native CSV row (``coupler_native._rows``:
-``packages/coupler-native/csrc/rows.c``): the Real, Integer and Boolean cells there, the other
-columns' cells by their Python formatters; the same text as ``row_formatter``'s %-format, which
+``packages/coupler-native/csrc/rows.c``): the Real, Integer, Boolean and String cells there,
+the other columns' cells by their Python formatters; the same text as ``row_formatter``'s %-format, which
 makes it where coupler-native is not installed (``tests/test_csv_rows.py`` compares them).
 """
 
@@ -71,9 +71,10 @@ PLAIN = {"Real": "%r", "Integer": "%s", "Enumeration": "%s", "UInt64": "%s"}
 written by a %-format."""
 
 
-KINDS = {"Real": "r", "Integer": "i", "Enumeration": "i", "UInt64": "i", "Boolean": "b"}
-"""Column types whose cells the native CSV row makes itself (csrc/rows.c), by its kind codes;
-it hands every other column's value to that column's ``formatter``."""
+KINDS = {"Real": "r", "Integer": "i", "Enumeration": "i", "UInt64": "i", "Boolean": "b", "String": "s"}
+"""Column types whose cells the native CSV row makes itself (csrc/rows.c), by its kind codes
+(a String cell that is not a str goes to its ``formatter``); it hands every other column's
+value to that column's ``formatter``."""
 
 
 def native_row_formatter(
@@ -84,7 +85,7 @@ def native_row_formatter(
     if native is None:
         return None
     kinds = "".join(KINDS.get(columns[i].type, "o") for i in picked)
-    cells = tuple(None if k != "o" else formatter(columns[i]) for k, i in zip(kinds, picked))
+    cells = tuple(formatter(columns[i]) if k in "so" else None for k, i in zip(kinds, picked))
     line: Callable[[float, Sequence[Value]], str] = native.RowFormat(list(picked), kinds, cells).line
     return line
 
