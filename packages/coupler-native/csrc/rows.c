@@ -1,4 +1,5 @@
-/* The native CSV row: a results.csv line made in one pass over a row, in C.
+/* The native CSV row: a results.csv line made in one pass over a row, in C; and the row
+ * itself read in one pass from the native FMU step's arrays (RowRead, below).
  *
  * coupler_orchestrator.outputs.csv makes one RowFormat per run (the picked columns' indices in
  * a row, a kind per column and, for the columns C does not format, a Python formatter) and
@@ -316,12 +317,144 @@ static PyType_Spec RowFormat_spec = {
     "coupler_native._rows.RowFormat", sizeof(RowFormat), 0, Py_TPFLAGS_DEFAULT, RowFormat_slots,
 };
 
-static int exec_module(PyObject *module) {
-    PyObject *type = PyType_FromSpec(&RowFormat_spec);
+/* --- RowRead: a row of Values from the native FMU step's output arrays ------------------- */
+
+/* RowRead(addresses, codes): per column, the address of its output's slot in the native FMU
+ * step's arrays (coupler_orchestrator.master.native_fmu_step) and its C type:
+ *   'd' double -> float          'i' int (32 bits) -> int      'q' int64 -> int
+ *   'b' int (32 bits) -> bool    '?' bool -> bool
+ *   's' char * -> str (UTF-8, errors replaced; NULL or "" -> "")
+ * `row()` makes the list the arrays' slices, converted and picked in column order, made in
+ * Python. The arrays belong to whoever made it (the kernel), which keeps them alive. */
+typedef struct {
+    PyObject_HEAD
+    Py_ssize_t count;
+    const void **address;
+    char *code;
+} RowRead;
+
+static PyObject *value_at(char code, const void *at) {
+    switch (code) {
+    case 'd':
+        return PyFloat_FromDouble(*(const double *)at);
+    case 'i':
+        return PyLong_FromLong(*(const int *)at);
+    case 'q':
+        return PyLong_FromLongLong(*(const long long *)at);
+    case 'b':
+        return PyBool_FromLong(*(const int *)at != 0);
+    case '?':
+        return PyBool_FromLong(*(const bool *)at);
+    default: {
+        const char *text = *(const char *const *)at;
+        if (text == NULL || text[0] == '\0') return PyUnicode_FromStringAndSize("", 0);
+        return PyUnicode_DecodeUTF8(text, (Py_ssize_t)strlen(text), "replace");
+    }
+    }
+}
+
+static PyObject *RowRead_row(PyObject *self_, PyObject *unused) {
+    (void)unused;
+    RowRead *self = (RowRead *)self_;
+    PyObject *row = PyList_New(self->count);
+    if (row == NULL) return NULL;
+    for (Py_ssize_t i = 0; i < self->count; i++) {
+        PyObject *value = value_at(self->code[i], self->address[i]);
+        if (value == NULL || PyList_SetItem(row, i, value) < 0) {
+            Py_DECREF(row);
+            return NULL;
+        }
+    }
+    return row;
+}
+
+static void RowRead_dealloc(PyObject *self_) {
+    RowRead *self = (RowRead *)self_;
+    PyTypeObject *type = Py_TYPE(self_);
+    PyMem_Free(self->address);
+    PyMem_Free(self->code);
+    freefunc release = (freefunc)PyType_GetSlot(type, Py_tp_free);
+    release(self_);
+    Py_DECREF(type);
+}
+
+static PyObject *RowRead_new(PyTypeObject *type, PyObject *args, PyObject *kwargs) {
+    PyObject *addresses, *codes;
+    if (kwargs != NULL && PyObject_Length(kwargs) > 0) {
+        PyErr_SetString(PyExc_TypeError, "RowRead takes no keyword arguments");
+        return NULL;
+    }
+    if (!PyArg_ParseTuple(args, "OU", &addresses, &codes)) return NULL;
+    Py_ssize_t count = PyObject_Length(addresses);
+    if (count < 0) return NULL;
+    Py_ssize_t size;
+    const char *code = PyUnicode_AsUTF8AndSize(codes, &size);
+    if (code == NULL) return NULL;
+    if (size != count) {
+        PyErr_SetString(PyExc_ValueError, "one address and one code per column");
+        return NULL;
+    }
+    for (Py_ssize_t i = 0; i < count; i++) {
+        if (strchr("diqb?s", code[i]) == NULL || code[i] == '\0') {
+            PyErr_Format(PyExc_ValueError, "no C type %c", code[i]);
+            return NULL;
+        }
+    }
+    allocfunc alloc = (allocfunc)PyType_GetSlot(type, Py_tp_alloc);
+    RowRead *self = (RowRead *)alloc(type, 0);
+    if (self == NULL) return NULL;
+    self->count = count;
+    self->address = PyMem_Malloc(sizeof(void *) * (size_t)(count ? count : 1));
+    self->code = PyMem_Malloc((size_t)(count ? count : 1));
+    if (self->address == NULL || self->code == NULL) {
+        Py_DECREF(self);
+        return PyErr_NoMemory();
+    }
+    memcpy(self->code, code, (size_t)count);
+    for (Py_ssize_t i = 0; i < count; i++) {
+        PyObject *number = PySequence_GetItem(addresses, i);
+        if (number == NULL) {
+            Py_DECREF(self);
+            return NULL;
+        }
+        self->address[i] = PyLong_AsVoidPtr(number);
+        Py_DECREF(number);
+        if (PyErr_Occurred()) {
+            Py_DECREF(self);
+            return NULL;
+        }
+    }
+    return (PyObject *)self;
+}
+
+static PyMethodDef RowRead_methods[] = {
+    {"row", RowRead_row, METH_NOARGS, "row() -> list: the columns' values as they are now"},
+    {NULL, NULL, 0, NULL},
+};
+
+static PyType_Slot RowRead_slots[] = {
+    {Py_tp_new, RowRead_new},
+    {Py_tp_dealloc, RowRead_dealloc},
+    {Py_tp_methods, RowRead_methods},
+    {Py_tp_doc, "RowRead(addresses, codes): rows of Values from the native FMU step's arrays"},
+    {0, NULL},
+};
+
+static PyType_Spec RowRead_spec = {
+    "coupler_native._rows.RowRead", sizeof(RowRead), 0, Py_TPFLAGS_DEFAULT, RowRead_slots,
+};
+
+static int add_type(PyObject *module, PyType_Spec *spec, const char *name) {
+    PyObject *type = PyType_FromSpec(spec);
     if (type == NULL) return -1;
-    int result = PyModule_AddObjectRef(module, "RowFormat", type);
+    int result = PyModule_AddObjectRef(module, name, type);
     Py_DECREF(type);
     return result;
+}
+
+static int exec_module(PyObject *module) {
+    if (add_type(module, &RowFormat_spec, "RowFormat") < 0) return -1;
+    return add_type(module, &RowRead_spec, "RowRead");
 }
 
 static PyModuleDef_Slot module_slots[] = {
@@ -331,7 +464,8 @@ static PyModuleDef_Slot module_slots[] = {
 
 static struct PyModuleDef module_def = {
     PyModuleDef_HEAD_INIT, "coupler_native._rows",
-    "The native CSV row of results.csv (csrc/rows.c)", 0, NULL, module_slots, NULL, NULL, NULL,
+    "results.csv's rows made, and the native FMU step's rows read, in C (csrc/rows.c)", 0, NULL,
+    module_slots, NULL, NULL, NULL,
 };
 
 PyMODINIT_FUNC PyInit__rows(void) { return PyModuleDef_Init(&module_def); }

@@ -1,4 +1,5 @@
-"""The CPython extension of csrc/rows.c: results.csv's lines (compiled; see coupler_native)."""
+"""The CPython extension of csrc/rows.c: results.csv's lines, and the rows of the native FMU
+step read from its arrays (compiled; see coupler_native)."""
 
 from collections.abc import Callable, Sequence
 from typing import Any
@@ -16,3 +17,11 @@ class RowFormat:
     ) -> None: ...
     def line(self, time: float, row: Sequence[Any]) -> str:
         """The CSV line of the picked cells of ``row``, with its newline."""
+
+class RowRead:
+    """Rows of Values read from memory: per column, its slot's address and its C type ('d'
+    double, 'i' int, 'q' int64, 'b' int as a Boolean, '?' bool, 's' char * as a str)."""
+
+    def __init__(self, addresses: Sequence[int], codes: str) -> None: ...
+    def row(self) -> list[Any]:
+        """The columns' values as they are now."""
