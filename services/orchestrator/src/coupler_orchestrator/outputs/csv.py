@@ -11,8 +11,9 @@ and an interrupted or failed run keeps every completed row.
 
 A row's line is made in one pass in C by the native CSV row (``coupler_native._rows``:
 ``packages/coupler-native/csrc/rows.c``): the Real, Integer, Boolean and String cells there,
-the other columns' cells by their Python formatters; the same text as ``row_formatter``'s %-format, which
-makes it where coupler-native is not installed (``tests/test_csv_rows.py`` compares them).
+the other columns' cells by their Python formatters; the same text as ``row_formatter``'s
+%-format, which makes it where coupler-native is not installed (``tests/test_csv_rows.py``
+compares them).
 """
 
 from __future__ import annotations
@@ -71,7 +72,14 @@ PLAIN = {"Real": "%r", "Integer": "%s", "Enumeration": "%s", "UInt64": "%s"}
 written by a %-format."""
 
 
-KINDS = {"Real": "r", "Integer": "i", "Enumeration": "i", "UInt64": "i", "Boolean": "b", "String": "s"}
+KINDS = {
+    "Real": "r",
+    "Integer": "i",
+    "Enumeration": "i",
+    "UInt64": "i",
+    "Boolean": "b",
+    "String": "s",
+}
 """Column types whose cells the native CSV row makes itself (csrc/rows.c), by its kind codes
 (a String cell that is not a str goes to its ``formatter``); it hands every other column's
 value to that column's ``formatter``."""
@@ -85,8 +93,11 @@ def native_row_formatter(
     if native is None:
         return None
     kinds = "".join(KINDS.get(columns[i].type, "o") for i in picked)
-    cells = tuple(formatter(columns[i]) if k in "so" else None for k, i in zip(kinds, picked))
-    line: Callable[[float, Sequence[Value]], str] = native.RowFormat(list(picked), kinds, cells).line
+    cells = tuple(
+        formatter(columns[i]) if k in "so" else None for k, i in zip(kinds, picked, strict=True)
+    )
+    made = native.RowFormat(list(picked), kinds, cells)
+    line: Callable[[float, Sequence[Value]], str] = made.line
     return line
 
 

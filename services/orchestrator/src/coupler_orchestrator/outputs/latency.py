@@ -32,7 +32,7 @@ class LatencyStats:
         log, base = math.log, self._BASE
         floor, per_bucket = log(base), 1 / self._WIDTH
         self._buckets.update(  # Counter counts an iterable in C
-            [int((log(seconds) - floor) * per_bucket) if seconds > base else 0 for seconds in samples]
+            [int((log(s) - floor) * per_bucket) if s > base else 0 for s in samples]
         )
 
     def percentile(self, q: float) -> float:
