@@ -34,6 +34,7 @@ from coupler_orchestrator import native
 from coupler_orchestrator.cli.main import main
 from coupler_orchestrator.master import native_fmu_step as kernel
 from coupler_orchestrator.master import native_step_channel as steps
+from coupler_orchestrator.outputs import csv as csv_output
 
 REPO = Path(__file__).resolve().parents[3]
 DATA = Path(__file__).parent / "data"
@@ -151,6 +152,7 @@ def without_coupler_native(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setattr(sys, "meta_path", [_Uninstalled(), *sys.meta_path])
     monkeypatch.setattr(kernel, "library", native.NativeModule("_fmu_steps", "the FMU step"))
     monkeypatch.setattr(steps, "library", native.NativeModule("_step_streams", "the channel"))
+    monkeypatch.setattr(csv_output, "native_rows", native.NativeModule("_rows", "the CSV row"))
 
 
 @pytest.fixture(params=["native", "grpc.aio"])

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -205,3 +206,35 @@ def test_without_coupler_native_fmus_step_in_python_and_say_why(
             "path": "Python",
             "reason": f"in-process; not in C: {native.MISSING}",
         }
+
+
+def test_the_row_read_in_c_is_the_row_sliced_in_python(
+    coupler: Coupler,
+    fmus: Mapping[str, Path],
+    tmp_path: Path,
+    prepared: list[kernel.Kernel | None],
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """At every communication point, the row RowRead reads from the arrays in C is the list of
+    values the slices of the arrays make in Python (FMI 2 and 3: Reals, Integers, Booleans
+    and Strings)."""
+    require_native(kernel.rows)
+    compared = []
+    read = kernel.Kernel.row
+
+    def both(self: kernel.Kernel) -> list[Any]:
+        row = read(self)
+        sliced = self.sliced_row()
+        assert [(type(v), v) for v in row] == [(type(v), v) for v in sliced]
+        compared.append(row)
+        return row
+
+    monkeypatch.setattr(kernel.Kernel, "row", both)
+    for source in ("Source2", "Source3"):
+        (tmp_path / source).mkdir()
+        ssd = chain(tmp_path / source, fmus, source, ROUTES)
+        outcome = coupler("run", ssd, "--out", tmp_path / source / "out", *PARAMS)
+        assert outcome.code == 0, outcome.err
+    assert all(made is not None and made._read is not None for made in prepared)
+    assert len(compared) == 2 * 201  # t = 0 .. 2 s, twice
+    assert {type(v) for v in compared[-1]} == {float, int, bool, str}

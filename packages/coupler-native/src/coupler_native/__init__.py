@@ -4,13 +4,16 @@
   a cffi API-mode module whose ``ffi`` declares the structs of ``csrc/fmu_steps.h``;
 - ``coupler_native._step_streams``: remote members' StepStream over C++ gRPC
   (``csrc/step_streams.cc``, declared by ``csrc/step_streams.h``);
+- ``coupler_native._rows``: results.csv's lines made in one pass (``csrc/rows.c``, a CPython
+  extension of the stable ABI);
 - ``PROXY``: the folder of the proxy FMU's binaries (``CouplerProxy.so``, FMI 2 and 3, its
   gRPC client library and every library they load), which ``coupler export-fmu`` copies
   into each FMU's ``binaries/<platform>/``.
 
 The orchestrator imports the modules when it steps (``native_fmu_step`` and
-``native_step_channel`` in ``coupler_orchestrator.master``); nothing here is loaded from
-outside the installed package.
+``native_step_channel`` in ``coupler_orchestrator.master``) and records
+(``coupler_orchestrator.outputs.csv``); nothing here is loaded from outside the installed
+package.
 """
 
 from __future__ import annotations

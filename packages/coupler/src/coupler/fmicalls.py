@@ -80,7 +80,7 @@ class NativeParts:
 
 
 CONVERT: dict[str, Callable[[Any], list[Value]]] = {
-    "Boolean": lambda buffer: [bool(v) for v in buffer],
+    "Boolean": lambda buffer: list(map(bool, buffer)),
     "String": lambda buffer: [v.decode("utf-8", "replace") if v else "" for v in buffer],
 }
 """FMI type -> its buffer's values as Values, for the types whose ctypes values are not."""

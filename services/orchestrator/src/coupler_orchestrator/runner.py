@@ -142,12 +142,14 @@ async def run_scenario(
                 on_results(out_dir)
             csv_path, summary_path = out_dir / "results.csv", out_dir / "summary.json"
             recordings = recorders_of(plan, roster.described(), out_dir, options)
+            selection = Selection(patterns=options.output_variables, every=checked.record_every)
+            results = CsvRecorder(csv_path, selection)
             extra = _extra(checked, roster.described())
+            extra["results_rows"] = results.rows
             if recordings:
                 extra["recordings"] = {r.component: f"recordings/{r.path.name}" for r in recordings}
             summary = SummaryWriter(summary_path, extra=extra)
-            selection = Selection(patterns=options.output_variables, every=checked.record_every)
-            recorders: list[Observer] = [CsvRecorder(csv_path, selection), summary]
+            recorders: list[Observer] = [results, summary]
             if options.parquet:
                 recorders.append(ParquetRecorder(out_dir / "results.parquet", selection))
             recorders.extend(recordings)

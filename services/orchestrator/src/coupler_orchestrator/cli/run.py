@@ -148,6 +148,7 @@ async def run(args: argparse.Namespace, options: RunOptions, out: TextIO, sessio
     if getattr(args, "verbose", False):
         for name, stepped in end.step_paths.items():
             print(f"stepped: {name}: {stepped.path} ({stepped.reason})", file=out)
+        print(f"results.csv rows made {outcome.summary.get('results_rows')}", file=out)
     for recording in outcome.recordings:
         print(f"recording: {recording}", file=out)
     if outcome.openmcx_files:

@@ -4,8 +4,9 @@ Stepping an FMU from Python costs a ctypes call per FMI call (setters, DoStep, a
 type), each far dearer than the FMU's own work for a small model. The native FMU step
 (``coupler_native._fmu_steps``: ``packages/coupler-native/csrc/fmu_steps.c``) runs the loop
 over them in C instead: each member's inputs copied from the outputs they are
-connected to, set, stepped, every output read into one array per type. Python then reads a
-step's results row with one slice per array.
+connected to, set, stepped, every output read into one array per type. The step's results row
+is then read from those arrays in one call into C too (``coupler_native._rows.RowRead``), or
+with one slice per array where that module is missing.
 
 It is used when it means exactly what the step in Python means: every member an in-process FMU
 with prepared calls (``coupler.fmicalls``: FMI 2.0/3.0 scalars), stepping every base step
@@ -42,6 +43,8 @@ OFF = "native steps are off (--no-native-steps or COUPLER_NATIVE_STEPS=0)"
 
 library = NativeModule("_fmu_steps", "the native FMU step")
 """``library()``: the native FMU step (``ffi``, ``lib``), or None (why is said once)."""
+rows = NativeModule("_rows", "the native row reader")
+"""``rows()``: the module whose ``RowRead`` reads a row from the arrays, or None."""
 
 
 def _address(pointer: Any) -> int:
@@ -122,6 +125,8 @@ class Kernel:
                 self._slot[(name, channel)] = (plane, first + j, group)
         columns = [self._slot[(m.name, c.name)] for m in plan.members for c in m.outputs]
         self._row = _row_getter([plane.start + index for plane, index, _ in columns])
+        self._read = _reader(columns)
+        """Reads the row in C, when every column's type allows it; else None."""
 
         feeds: dict[str, list[tuple[str, tuple[str, str]]]] = {}
         for link in plan.links:
@@ -235,6 +240,12 @@ class Kernel:
 
     def row(self) -> list[Value]:
         """Every member's outputs, in the results' column order."""
+        if self._read is not None:
+            return self._read()
+        return self.sliced_row()
+
+    def sliced_row(self) -> list[Value]:
+        """``row`` read in Python: one slice per array, converted, picked."""
         values: list[Value] = []
         for plane in self._planes:
             values += plane.values()
@@ -281,6 +292,30 @@ class Kernel:
 
 class _Unsuitable(Exception):
     """A connection the native FMU step cannot copy (found while preparing it)."""
+
+
+CODES = {ctypes.c_double: "d", ctypes.c_int: "i", ctypes.c_int64: "q", ctypes.c_bool: "?"}
+"""The C type of an output's slot as ``RowRead`` names it (a Boolean held in an int: "b", a
+String's char *: "s")."""
+
+
+def _reader(columns: Sequence[tuple[_Plane, int, Group]]) -> Callable[[], list[Value]] | None:
+    """``RowRead(...).row`` over the columns' slots; None without the module, or for a C type
+    it does not read."""
+    native = rows()
+    if native is None:
+        return None
+    codes = []
+    for plane, _, group in columns:
+        code = "s" if group.kind == "String" else CODES.get(plane.element)
+        if code == "i" and group.kind == "Boolean":
+            code = "b"
+        if code is None:
+            return None
+        codes.append(code)
+    addresses = [plane.address(index) for plane, index, _ in columns]
+    read: Callable[[], list[Value]] = native.RowRead(addresses, "".join(codes)).row
+    return read
 
 
 def _row_getter(positions: Sequence[int]) -> Callable[[list[Value]], list[Value]]:

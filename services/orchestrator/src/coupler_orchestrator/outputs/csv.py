@@ -8,6 +8,12 @@ names a registered protobuf message (``coupler.messages``), else as hex. Camera 
 PNG files whose names the cells hold (``outputs.frames``). Rows are buffered and
 flushed at least once a second and on every exit path, so a crash loses at most the last second
 and an interrupted or failed run keeps every completed row.
+
+A row's line is made in one pass in C by the native CSV row (``coupler_native._rows``:
+``packages/coupler-native/csrc/rows.c``): the Real, Integer, Boolean and String cells there,
+the other columns' cells by their Python formatters; the same text as ``row_formatter``'s
+%-format, which makes it where coupler-native is not installed (``tests/test_csv_rows.py``
+compares them).
 """
 
 from __future__ import annotations
@@ -23,12 +29,17 @@ from typing import IO, Any
 
 from coupler import messages
 from coupler.channels import Value
+from coupler_orchestrator.native import NativeModule
 from coupler_orchestrator.observer import Column, Observer, RunEnd, RunInfo
 from coupler_orchestrator.outputs.files import write_failed
 from coupler_orchestrator.outputs.frames import FrameStore, is_frame
 
 FLUSH_EVERY_S = 1.0
 """Longest time a written row may stay in the buffer [s]."""
+
+native_rows = NativeModule("_rows", "the native CSV row")
+"""``native_rows()``: the native CSV row (its ``RowFormat``), or None (why is said once)."""
+IN_C = "in C (the native CSV row)"
 
 
 def format_value(value: Value, column: Column | None = None) -> str:
@@ -61,10 +72,40 @@ PLAIN = {"Real": "%r", "Integer": "%s", "Enumeration": "%s", "UInt64": "%s"}
 written by a %-format."""
 
 
+KINDS = {
+    "Real": "r",
+    "Integer": "i",
+    "Enumeration": "i",
+    "UInt64": "i",
+    "Boolean": "b",
+    "String": "s",
+}
+"""Column types whose cells the native CSV row makes itself (csrc/rows.c), by its kind codes
+(a String cell that is not a str goes to its ``formatter``); it hands every other column's
+value to that column's ``formatter``."""
+
+
+def native_row_formatter(
+    columns: Sequence[Column], picked: Sequence[int]
+) -> Callable[[float, Sequence[Value]], str] | None:
+    """``row_formatter``'s lines made in one pass in C; None without coupler-native."""
+    native = native_rows()
+    if native is None:
+        return None
+    kinds = "".join(KINDS.get(columns[i].type, "o") for i in picked)
+    cells = tuple(
+        formatter(columns[i]) if k in "so" else None for k, i in zip(kinds, picked, strict=True)
+    )
+    made = native.RowFormat(list(picked), kinds, cells)
+    line: Callable[[float, Sequence[Value]], str] = made.line
+    return line
+
+
 def row_formatter(columns: Sequence[Column], picked: Sequence[int]) -> Callable[..., str]:
     """``(time, row) -> line``: the CSV line of the ``picked`` columns of a row, exactly the
     cells ``formatter`` makes, through one %-format made once (the columns of PLAIN types go
-    in as they are, the others through their formatter first)."""
+    in as they are, the others through their formatter first). Python's way, where
+    coupler-native is not installed (``native_row_formatter`` makes the same lines)."""
     template = ",".join(["%r", *(PLAIN.get(columns[i].type, "%s") for i in picked)]) + "\n"
     special = [
         (j, formatter(columns[i])) for j, i in enumerate(picked) if columns[i].type not in PLAIN
@@ -126,6 +167,8 @@ class CsvRecorder(Observer):
     def __init__(self, path: Path, selection: Selection | None = None) -> None:
         self.path = path
         self.selection = selection or Selection()
+        self.rows = IN_C if native_rows() is not None else f"in Python: {native_rows.problem}"
+        """How its lines are made (summary.json's ``results_rows``, ``coupler run -v``)."""
         self._file: IO[str] | None = None
         self._line: Callable[[float, Sequence[Value]], str] = row_formatter([], [])
         self._count = 0
@@ -140,7 +183,9 @@ class CsvRecorder(Observer):
         picked = self.selection.columns(info.columns)
         columns = [info.columns[i] for i in picked]
         self._frames = [(i, info.columns[i].name) for i in picked if is_frame(info.columns[i])]
-        self._line = row_formatter(info.columns, picked)
+        self._line = native_row_formatter(info.columns, picked) or row_formatter(
+            info.columns, picked
+        )
         try:
             self.path.parent.mkdir(parents=True, exist_ok=True)
             self._file = self.path.open("w", encoding="utf-8", newline="", buffering=1 << 16)

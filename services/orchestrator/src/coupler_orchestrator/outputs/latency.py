@@ -4,6 +4,7 @@ what a run of ten does."""
 from __future__ import annotations
 
 import math
+from collections import Counter
 from collections.abc import Sequence
 
 
@@ -18,7 +19,7 @@ class LatencyStats:
         self.count = 0
         self.total = 0.0
         self.maximum = 0.0
-        self._buckets: dict[int, int] = {}
+        self._buckets: Counter[int] = Counter()
 
     def add_all(self, samples: Sequence[float]) -> None:
         """Count a batch of samples (one call per batch: the step loop's samples are folded in
@@ -28,11 +29,11 @@ class LatencyStats:
         self.count += len(samples)
         self.total += sum(samples)
         self.maximum = max(self.maximum, *samples)
-        buckets, log, base = self._buckets, math.log, self._BASE
+        log, base = math.log, self._BASE
         floor, per_bucket = log(base), 1 / self._WIDTH
-        for seconds in samples:
-            bucket = int((log(seconds) - floor) * per_bucket) if seconds > base else 0
-            buckets[bucket] = buckets.get(bucket, 0) + 1
+        self._buckets.update(  # Counter counts an iterable in C
+            [int((log(s) - floor) * per_bucket) if s > base else 0 for s in samples]
+        )
 
     def percentile(self, q: float) -> float:
         """The ``q`` quantile (0..1) [s], within 1 %."""
