@@ -95,6 +95,7 @@ class OpenMcxMaster(Master):
                 inputs[link.input] = link.convert(raw) if link.convert else raw
             setup = RunSetup(
                 run_id=self.plan.run_id,
+                run_secret=self.plan.run_secret,
                 start_time=grid.start,
                 step_size=m.step,
                 stop_time=grid.stop,
