@@ -773,7 +773,9 @@ async def coupler_frames(ssd: Path, steps: int, out: Path) -> float:
         run_id=f"bench-{time.time_ns()}",
         output_variables=("OpenRails.distance",),
     )
-    outcome = await run_scenario(ssd, options, out_dir=out, observers=[clock.observer])
+    outcome = await run_scenario(  # runs repeat into one folder: each replaces the last
+        ssd, options, out_dir=out, replace=True, observers=[clock.observer]
+    )
     if outcome.end.status != "completed":
         raise RuntimeError(f"{ssd.name}: {outcome.end.status}: {outcome.end.reason}")
     return clock.rate

@@ -2,7 +2,8 @@
 // coupler_orchestrator/master/native_step_channel.py calls it through the cffi binding of that
 // header): a remote member's StepStream driven from the calling thread through a completion
 // queue of its own, without gRPC's asyncio integration in between. Messages stay serialized (the Python side encodes DoStepRequest and decodes
-// DoStepResponse), so this file knows the protocol only by the method's name.
+// DoStepResponse), so this file knows the protocol only by the method's name; a request's
+// pieces are sent from the caller's memory, so a camera frame is not copied on its way out.
 //
 // A step is split in two, so that the requests of every member are on the wire before any
 // answer is awaited: cs_send() writes a request and asks for the answer; cs_receive() waits
@@ -146,12 +147,16 @@ cs_stream* cs_open(const char* target, int tls, const char* roots, const char* k
 
 const char* cs_error(cs_stream* s) { return s->error.c_str(); }
 
-// Writes one serialized DoStepRequest and asks for the answer; CS_FAILED when the stream has
-// ended (cs_receive then tells its status) or the previous answer was not received.
-int cs_send(cs_stream* s, const char* data, size_t size) {
+// Writes one serialized DoStepRequest, given as `count` pieces whose concatenation is the
+// message (not copied: gRPC sends from them), and asks for the answer; CS_FAILED when the stream
+// has ended (cs_receive then tells its status) or the previous answer was not received.
+int cs_send(cs_stream* s, const char* const* pieces, const size_t* sizes, int count) {
   if (!s->call || s->broken || s->pending > 0 || s->finishing) return CS_FAILED;
-  grpc::Slice slice(data, size);
-  s->request = grpc::ByteBuffer(&slice, 1);
+  std::vector<grpc::Slice> slices;
+  slices.reserve(count);
+  for (int i = 0; i < count; ++i)
+    slices.emplace_back(pieces[i], sizes[i], grpc::Slice::STATIC_SLICE);
+  s->request = grpc::ByteBuffer(slices.data(), slices.size());
   s->read_done = false;
   s->pending += 2;
   s->call->Write(s->request, tag(WRITE));

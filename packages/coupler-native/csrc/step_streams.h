@@ -24,9 +24,11 @@ cs_stream *cs_open(const char *target, int tls, const char *roots, const char *k
 /* Why the stream failed (empty while it is fine); valid until the next call on it. */
 const char *cs_error(cs_stream *s);
 
-/* Writes one serialized DoStepRequest and asks for the answer; CS_FAILED when the stream has
- * ended (cs_receive then tells its status) or the previous answer was not received. */
-int cs_send(cs_stream *s, const char *data, size_t size);
+/* Writes one serialized DoStepRequest, given as `count` pieces whose concatenation is the
+ * message, and asks for the answer; CS_FAILED when the stream has ended (cs_receive then tells
+ * its status) or the previous answer was not received. The pieces are not copied: the caller
+ * keeps them unchanged until its next cs_send() or cs_close() on this stream. */
+int cs_send(cs_stream *s, const char *const *pieces, const size_t *sizes, int count);
 
 /* Waits up to `timeout` seconds for the answer to cs_send(): CS_OK with the serialized
  * DoStepResponse in (*data, *size), valid until the next call on this stream; CS_FAILED with

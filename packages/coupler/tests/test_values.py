@@ -4,6 +4,7 @@ import math
 
 import pytest
 from google.protobuf import source_context_pb2
+from google.protobuf.message import DecodeError
 
 from coupler import messages, values, wire
 from coupler.channels import Causality, Channel, Description, ValueType, fits_fixed_step
@@ -239,3 +240,96 @@ def test_decoding_refuses_what_check_refuses() -> None:
     with pytest.raises(MessageTooLarge, match="'label' carries 6 bytes"):
         codec.decode([wire.pb.VariableBinding(channel="label", text="äää")])
     assert codec.decode([wire.pb.VariableBinding(channel="label", text="ää")]) == {"label": "ää"}
+
+
+FRAMES = Description(
+    name="Camera",
+    channels=(
+        REAL,
+        BIN,
+        Channel(name="gain", causality=Causality.INPUT, type=ValueType.REAL),
+        Channel(name="frame", causality=Causality.OUTPUT, type=ValueType.BINARY),
+        Channel(name="depth", causality=Causality.OUTPUT, type=ValueType.BINARY),
+        Channel(name="label", causality=Causality.OUTPUT, type=ValueType.STRING),
+    ),
+)
+FRAME = bytes(range(256)) * (wire.LARGE_BYTES // 256 + 3)
+"""A Binary value long enough to travel apart."""
+
+
+def test_a_request_in_pieces_is_the_request() -> None:
+    """``step_pieces``: the concatenation parses as ``step_to_pb``'s request, a long Binary
+    input is one of the pieces itself (not copied), short ones stay in the message."""
+    codec = wire.Codec(FRAMES)
+    run = wire.RunKey("run-1", bytes(range(32)))
+    for inputs in ({"blob": FRAME, "gain": 2.0}, {"blob": b"short", "gain": 2.0}, {"gain": 1.0}):
+        pieces = wire.step_pieces(run, 1.5, 0.2, inputs, codec)
+        parsed = wire.DoStepRequest.FromString(b"".join(pieces))
+        expected = wire.step_to_pb(run, 1.5, 0.2, inputs, codec)
+        assert codec.decode(parsed.inputs) == codec.decode(expected.inputs) == inputs
+        assert (parsed.run_id, parsed.run_secret, parsed.current_time, parsed.step_size) == (
+            expected.run_id,
+            expected.run_secret,
+            expected.current_time,
+            expected.step_size,
+        )
+        assert any(p is FRAME for p in pieces) == (inputs.get("blob") is FRAME)
+
+
+def test_a_request_in_pieces_is_checked() -> None:
+    """Long values apart or not: a wrong channel or type, or a message over the limit, is
+    refused naming the channel."""
+    run = wire.RunKey("run-1", bytes(32))
+    codec = wire.Codec(FRAMES)
+    with pytest.raises(ChannelValueError, match="no input channel 'speed'"):
+        wire.step_pieces(run, 0.0, 0.2, {"speed": FRAME}, codec)
+    with pytest.raises(ChannelValueError, match="channel 'gain' expects Real, got Binary"):
+        wire.step_pieces(run, 0.0, 0.2, {"gain": FRAME}, codec)
+    small = wire.Codec(FRAMES, values.ValuePolicy(max_message_bytes=len(FRAME) - 1))
+    with pytest.raises(MessageTooLarge, match=f"'blob' carries {len(FRAME)} bytes"):
+        wire.step_pieces(run, 0.0, 0.2, {"blob": FRAME, "gain": 1.0}, small)
+
+
+def test_an_answer_with_long_values_decodes_as_protobuf_decodes_it() -> None:
+    """``step_answer`` cuts long Binary outputs out of the bytes; what it gives is what
+    protobuf's own parsing gives, also for bindings it leaves to protobuf."""
+    codec = wire.Codec(FRAMES)
+    outputs = {"speed": 3.0, "frame": FRAME, "depth": FRAME[:100], "label": "ä"}
+    response = wire.step_response(outputs, codec)
+    response.terminate, response.terminate_reason = True, "done"
+    odd = response.outputs.add(channel="frame", binary=FRAME[::-1])  # the same channel again
+    odd.real = 1.0  # oneof: now a Real, a binding step_answer leaves to protobuf
+    parsed, large = wire.step_answer(response.SerializeToString())
+    assert [name for name, _ in large] == ["frame"]
+    assert wire.termination_requested(parsed) == "done"
+    with pytest.raises(ChannelValueError, match="channel 'frame' expects Binary, got Real"):
+        wire.outputs_from_pb(parsed, codec, large)
+    del response.outputs[-1]
+    data = response.SerializeToString()
+    parsed, large = wire.step_answer(memoryview(data))
+    assert wire.outputs_from_pb(parsed, codec, large) == outputs
+    assert wire.outputs_from_pb(wire.DoStepResponse.FromString(data), codec) == outputs
+
+
+def test_a_long_value_cut_out_of_an_answer_is_checked() -> None:
+    """A long Binary answer for a channel that is not a Binary output, or over the limit, is
+    refused as the same value parsed by protobuf would be; bytes that are not a message are
+    left to protobuf, which says so."""
+    response = wire.DoStepResponse()
+    response.outputs.add(channel="speed", binary=FRAME)
+    parsed, large = wire.step_answer(response.SerializeToString())
+    assert large
+    with pytest.raises(ChannelValueError, match="channel 'speed' expects Real, got Binary"):
+        wire.outputs_from_pb(parsed, wire.Codec(FRAMES), large)
+    response.outputs[0].channel = "blob"  # an input
+    parsed, large = wire.step_answer(response.SerializeToString())
+    with pytest.raises(ChannelValueError, match="no output channel 'blob'"):
+        wire.outputs_from_pb(parsed, wire.Codec(FRAMES), large)
+    response.outputs[0].channel = "frame"
+    small = wire.Codec(FRAMES, values.ValuePolicy(max_message_bytes=len(FRAME) - 1))
+    parsed, large = wire.step_answer(response.SerializeToString())
+    with pytest.raises(MessageTooLarge, match=f"'frame' carries {len(FRAME)} bytes"):
+        wire.outputs_from_pb(parsed, small, large)
+    truncated = response.SerializeToString()[:-1]
+    with pytest.raises(DecodeError):
+        wire.step_answer(truncated)

@@ -460,6 +460,32 @@ def test_a_deadline_without_a_ceiling_is_refused_by_the_fmu(
     )
 
 
+def test_values_up_to_couplers_message_limit_pass_the_fmu(
+    exported: dict[int, Path], gain: ParticipantServer, tmp_path: Path
+) -> None:
+    """A 6 MB String, over gRPC's 4 MiB default, goes into the participant (the label input)
+    and back out of it (its echo output) through the FMU: the proxy's channel has Coupler's
+    message limit, which the export writes into coupler-proxy.txt. Without that line the same
+    FMU refuses the answer (gRPC's default), so the line is what lets the value through."""
+    label = "frame " * 1_000_000
+    run = gain_run(exported[2]) | {"start_values": {**STARTS, "label": label}}
+    env = {"COUPLER_PROXY_ADDRESS": address(gain)}
+    answer, printed = drive(tmp_path, [run], env=env)
+    assert "results" in answer, printed
+    assert answer["results"][0]["y"][-1] == Y
+    without = tmp_path / "Without.fmu"
+    with zipfile.ZipFile(exported[2]) as original, zipfile.ZipFile(without, "w") as copy:
+        for item in original.infolist():
+            data = original.read(item)
+            if item.filename == "resources/coupler-proxy.txt":
+                assert b"\nmax_message\t" in data
+                data = re.sub(rb"\nmax_message\t[0-9]+", b"", data)
+            copy.writestr(item, data)
+    answer, printed = drive(tmp_path, [run | {"fmu": str(without)}], env=env)
+    assert "error" in answer, printed
+    assert "RESOURCE_EXHAUSTED" in printed
+
+
 def test_libcosim_runs_the_exported_fmu(
     exported: dict[int, Path], gain: ParticipantServer, tmp_path: Path
 ) -> None:

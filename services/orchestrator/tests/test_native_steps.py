@@ -170,6 +170,13 @@ async def test_a_step_in_two_halves() -> None:
         for k in range(3):
             halves.send(k * 0.1, 0.1, {"u": float(k)})
             assert halves.receive() == await aio.do_step(k * 0.1, 0.1, {"u": float(k)})
+        for k in range(3, 6):  # frames: sent from pieces, cut out of the answer (wire)
+            frame = bytes(range(256)) * (5_000 + k) + bytes([k])
+            inputs = {"u": 1.0, "blob": frame}
+            halves.send(k * 0.1, 0.1, inputs)
+            outputs = halves.receive()
+            assert outputs["blob_out"] == frame[::-1]
+            assert outputs == await aio.do_step(k * 0.1, 0.1, inputs)
         for p in (native, aio):
             await p.terminate("done")
             await p.close()

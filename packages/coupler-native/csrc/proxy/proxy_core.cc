@@ -217,6 +217,7 @@ bool Proxy::load(const std::string& resources) {
     else if (f[0] == "fingerprint") fingerprint_ = f[1];
     else if (f[0] == "timeout") timeout_ = to_double(f[1]);
     else if (f[0] == "step_size") step_size_ = to_double(f[1]);
+    else if (f[0] == "max_message") max_message_ = std::atoi(f[1].c_str());
     else if (f[0] == "time_vr")
       time_vr_ = static_cast<unsigned>(std::strtoul(f[1].c_str(), nullptr, 10));
     else if (f[0] == "channel" && f.size() >= 8) {
@@ -318,7 +319,12 @@ bool Proxy::set_address(const std::string& address) {
       token_ = token;
     }
   }
-  channel_ = grpc::CreateChannel(target, credentials);
+  grpc::ChannelArguments arguments;
+  if (max_message_ > 0) {
+    arguments.SetMaxReceiveMessageSize(max_message_);
+    arguments.SetMaxSendMessageSize(max_message_);
+  }
+  channel_ = grpc::CreateCustomChannel(target, credentials, arguments);
   stub_ = pb::GRPCComponentService::NewStub(channel_);
   pb::DescribeRequest request;
   pb::DescribeResponse description;

@@ -116,6 +116,9 @@ class Proxy {
   std::string fingerprint_;
   double timeout_ = 30.0;
   double step_size_ = 0.0;
+  // Bytes a message may have either way (coupler-proxy.txt's max_message: Coupler's message
+  // limit plus its framing, as `coupler run` sets it); 0: gRPC's own (4 MiB received).
+  int max_message_ = 0;
   std::vector<Channel> channels_;
   std::map<unsigned, size_t> by_vr_;
   std::map<std::string, size_t> by_name_;

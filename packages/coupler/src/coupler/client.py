@@ -248,6 +248,16 @@ class RemoteParticipant(Participant):
             "DoStep", lambda: wire.step_to_pb(self._run, time, step, inputs, self.codec)
         )
 
+    def step_request_pieces(
+        self, time: float, step: float, inputs: Mapping[str, Value]
+    ) -> list[bytes]:
+        """``step_request`` serialized as pieces whose concatenation is the message, each long
+        Binary input a piece of its own (``wire.step_pieces``): for a transport that sends from
+        them without copying."""
+        return self._request(
+            "DoStep", lambda: wire.step_pieces(self._run, time, step, inputs, self.codec)
+        )
+
     async def do_step(self, time: float, step: float, inputs: Mapping[str, Value]) -> Values:
         request = self.step_request(time, step, inputs)
         if self._stream is not None:

@@ -27,6 +27,7 @@ from coupler.v1 import component_pb2 as pb
 
 if TYPE_CHECKING:
     from google.protobuf.internal.containers import RepeatedCompositeFieldContainer
+    from google.protobuf.message import Message
 
     RepeatedBindings = RepeatedCompositeFieldContainer[pb.VariableBinding]
 from coupler.values import (
@@ -241,10 +242,39 @@ class Codec:
         setattr(binding, _FIELD_OF_TYPE[channel.type], checked)
         return binding
 
+    def encode_apart(
+        self,
+        bindings: RepeatedBindings,
+        values: Mapping[str, object],
+        allowed: tuple[Causality, ...] | None = None,
+    ) -> list[tuple[str, bytes]]:
+        """``encode_into`` for every value but the long Binary ones (``LARGE_BYTES`` or more),
+        which are returned by channel, checked, for the caller to write apart (``step_pieces``)."""
+        table = self._table(allowed)
+        large = [
+            (name, value)
+            for name, value in values.items()
+            if type(value) is bytes
+            and len(value) >= LARGE_BYTES
+            and (slot := table.get(name)) is not None
+            and slot.field == "binary"
+        ]
+        if not large:
+            self.encode_into(bindings, values, allowed)
+            return large
+        apart = {name for name, _ in large}
+        self.encode_into(bindings, {n: v for n, v in values.items() if n not in apart}, allowed)
+        self._fits(values)
+        return large
+
     def decode(
-        self, bindings: Iterable[pb.VariableBinding], allowed: Iterable[Causality] | None = None
+        self,
+        bindings: Iterable[pb.VariableBinding],
+        allowed: Iterable[Causality] | None = None,
+        large: Iterable[tuple[str, bytes]] = (),
     ) -> dict[str, Value]:
-        """Python values of ``bindings``, each checked against its channel."""
+        """Python values of ``bindings``, and of the Binary values ``large`` (by channel: those
+        ``step_answer`` cut out of a message), each checked against its channel."""
         allowed = tuple(allowed) if allowed is not None else None
         table = self._table(allowed)
         values: dict[str, Value] = {}
@@ -261,6 +291,12 @@ class Codec:
             elif slot.weight:
                 size += len(value) * slot.weight
             values[name] = value
+        for name, data in large:
+            slot = table.get(name)
+            if slot is None or slot.field != "binary":
+                self._refuse(pb.VariableBinding(channel=name, binary=b""), allowed)
+            size += len(data)
+            values[name] = data
         if size > self.policy.max_message_bytes:
             self._fits(values)
         return values
@@ -517,9 +553,12 @@ class StepAnswers:
 
 
 def outputs_from_pb(
-    response: pb.InitializeResponse | pb.DoStepResponse, codec: Codec
+    response: pb.InitializeResponse | pb.DoStepResponse,
+    codec: Codec,
+    large: Iterable[tuple[str, bytes]] = (),
 ) -> dict[str, Value]:
-    return codec.decode(response.outputs, _OUTPUTS)
+    """The outputs an answer carries, with those ``step_answer`` cut out of it (``large``)."""
+    return codec.decode(response.outputs, _OUTPUTS, large)
 
 
 def termination_requested(response: pb.DoStepResponse) -> str | None:
@@ -527,6 +566,148 @@ def termination_requested(response: pb.DoStepResponse) -> str | None:
     if not response.terminate:
         return None
     return response.terminate_reason or "the participant asked to end the run"
+
+
+# --- Long Binary values, not copied more than needed ------------------------------------------
+#
+# A camera frame (1.44 MB) would be copied three times on its way into a request (into the
+# message, into its serialization, into the transport's buffer) and four times on its way out
+# of an answer. Protobuf's encoding lets a message be written in pieces (its fields in any
+# order, each a key, a length and the bytes), so the native step channel sends a request from
+# pieces, a long Binary value one of them as it is, and takes such values out of an answer's
+# bytes with one copy each; everything else is protobuf's own work.
+
+LARGE_BYTES = 64 * 1024
+"""A Binary value this long or longer travels apart: written into a request without a copy
+(``step_pieces``), cut out of an answer with one (``step_answer``)."""
+_LEN = 2
+"""The wire type of a length-delimited field."""
+
+
+def _key(message: type[Message], name: str) -> int:
+    """The key of the length-delimited field ``name`` of ``message``."""
+    return int(message.DESCRIPTOR.fields_by_name[name].number) << 3 | _LEN
+
+
+_INPUTS_KEY = _key(pb.DoStepRequest, "inputs")
+_OUTPUTS_KEY = _key(pb.DoStepResponse, "outputs")
+_CHANNEL_KEY = _key(pb.VariableBinding, "channel")
+_BINARY_KEY = _key(pb.VariableBinding, "binary")
+
+
+def _varint(value: int) -> bytes:
+    out = bytearray()
+    while value > 0x7F:
+        out.append(value & 0x7F | 0x80)
+        value >>= 7
+    out.append(value)
+    return bytes(out)
+
+
+def _read_varint(data: memoryview, at: int) -> tuple[int, int]:
+    """The varint at ``at`` and where it ends; IndexError or ValueError when there is none."""
+    value = shift = 0
+    while True:
+        byte = data[at]
+        at += 1
+        value |= (byte & 0x7F) << shift
+        if byte < 0x80:
+            return value, at
+        shift += 7
+        if shift > 63:
+            raise ValueError("varint longer than 10 bytes")
+
+
+def step_pieces(
+    run: RunKey, time: float, step: float, inputs: Mapping[str, object], codec: Codec
+) -> list[bytes]:
+    """``step_to_pb``'s request serialized as pieces whose concatenation is the message: the
+    request without its long Binary inputs, then for each of them a binding's key, lengths and
+    channel, and the value itself (the same object, not copied)."""
+    request = pb.DoStepRequest(
+        run_id=run.id, run_secret=run.secret, current_time=time, step_size=step
+    )
+    large = codec.encode_apart(request.inputs, inputs, _INPUTS)
+    pieces = [request.SerializeToString()]
+    for name, value in large:
+        channel = name.encode()
+        head = (
+            _varint(_CHANNEL_KEY)
+            + _varint(len(channel))
+            + channel
+            + _varint(_BINARY_KEY)
+            + _varint(len(value))
+        )
+        pieces += [_varint(_INPUTS_KEY) + _varint(len(head) + len(value)) + head, value]
+    return pieces
+
+
+def step_answer(data: bytes | memoryview) -> tuple[pb.DoStepResponse, list[tuple[str, bytes]]]:
+    """A serialized DoStepResponse parsed, its long Binary outputs cut out with one copy each
+    (by channel; ``outputs_from_pb`` takes them): protobuf would copy them into the message
+    and again out of it. A message that is not as expected is left whole to protobuf, which
+    parses it or says what is wrong."""
+    view = memoryview(data)
+    if len(view) < LARGE_BYTES:
+        return pb.DoStepResponse.FromString(bytes(view)), []
+    try:
+        rest, large = _cut(view)
+    except (IndexError, ValueError):
+        rest, large = bytes(view), []
+    return pb.DoStepResponse.FromString(rest), large
+
+
+def _cut(data: memoryview) -> tuple[bytes, list[tuple[str, bytes]]]:
+    """``data`` without its ``outputs`` that carry a long Binary value, and those values."""
+    kept: list[memoryview] = []
+    large: list[tuple[str, bytes]] = []
+    start = at = 0
+    while at < len(data):
+        key, body = _read_varint(data, at)
+        kind = key & 7
+        if kind == _LEN:
+            size, body = _read_varint(data, body)
+            after = body + size
+        elif kind == 0:
+            after = _read_varint(data, body)[1]
+        elif kind in (1, 5):
+            after = body + (8 if kind == 1 else 4)
+        else:
+            raise ValueError("a group")
+        if after > len(data):
+            raise ValueError("truncated")
+        if key == _OUTPUTS_KEY and after - body >= LARGE_BYTES:
+            binding = _binary_binding(data[body:after])
+            if binding is not None:
+                kept.append(data[start:at])
+                large.append(binding)
+                start = after
+        at = after
+    kept.append(data[start:])
+    return b"".join(kept), large
+
+
+def _binary_binding(data: memoryview) -> tuple[str, bytes] | None:
+    """The channel and value of a serialized VariableBinding made of a channel and a Binary
+    value only (each once); None for any other."""
+    fields: dict[int, memoryview] = {}
+    at = 0
+    while at < len(data):
+        key, body = _read_varint(data, at)
+        if key not in (_CHANNEL_KEY, _BINARY_KEY) or key in fields:
+            return None
+        size, body = _read_varint(data, body)
+        at = body + size
+        if at > len(data):
+            return None
+        fields[key] = data[body:at]
+    if len(fields) != 2:
+        return None
+    try:
+        name = str(fields[_CHANNEL_KEY], "utf-8")
+    except UnicodeDecodeError:
+        return None
+    return name, bytes(fields[_BINARY_KEY])
 
 
 # --- Terminate -------------------------------------------------------------------------------

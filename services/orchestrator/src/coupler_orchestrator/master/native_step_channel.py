@@ -29,7 +29,6 @@ from coupler.client import RemoteParticipant, translate, uses_tls
 from coupler.errors import ParticipantError, ParticipantTimeout
 from coupler.participant import EndRun, Values
 from coupler.security import read_secret
-from coupler.v1 import component_pb2 as pb
 from coupler_orchestrator.native import NativeModule
 
 ENVIRONMENT = "COUPLER_NATIVE_STEPS"
@@ -80,6 +79,8 @@ class NativeRemote(RemoteParticipant):
             self._data = native.ffi.new("const char **")
             self._size = native.ffi.new("size_t *")
             self._code = native.ffi.new("int *")
+        self._sent: list[Any] = []
+        """The pieces of the request under way (``send``)."""
 
     async def initialize(self, setup: RunSetup) -> Values:
         outputs = await super().initialize(setup)
@@ -123,8 +124,11 @@ class NativeRemote(RemoteParticipant):
     def send(self, time: float, step: float, inputs: Mapping[str, Value]) -> None:
         """Put a step's request on its way; ``receive()`` takes the answer."""
         assert self._lib is not None and self._native is not None
-        data = self.step_request(time, step, inputs).SerializeToString()
-        if self._lib.cs_send(self._native, data, len(data)) != self._lib.CS_OK:
+        pieces = self.step_request_pieces(time, step, inputs)
+        # sent from these objects, not copied: kept until the next step or the stream's end
+        self._sent = [self._ffi.from_buffer(piece) for piece in pieces]
+        sizes = [len(piece) for piece in pieces]
+        if self._lib.cs_send(self._native, self._sent, sizes, len(pieces)) != self._lib.CS_OK:
             self.receive()  # the stream has ended: its status says why
             raise ParticipantError(
                 "a step was sent before the previous answer was received",
@@ -153,8 +157,10 @@ class NativeRemote(RemoteParticipant):
                 call="DoStep",
                 address=self.address,
             )
-        response = pb.DoStepResponse.FromString(self._ffi.unpack(self._data[0], self._size[0]))
-        outputs = self._response("DoStep", lambda: wire.outputs_from_pb(response, self.codec))
+        response, large = wire.step_answer(self._ffi.buffer(self._data[0], self._size[0]))
+        outputs = self._response(
+            "DoStep", lambda: wire.outputs_from_pb(response, self.codec, large)
+        )
         reason = wire.termination_requested(response)
         if reason is not None:
             raise EndRun(reason, outputs)
@@ -182,3 +188,4 @@ class NativeRemote(RemoteParticipant):
         stream, self._native = self._native, None
         if stream is not None and self._lib is not None:
             self._lib.cs_close(stream, timeout)
+        self._sent = []

@@ -10,8 +10,9 @@ run a Coupler participant as if it were an FMU. The FMU holds:
   not part of the base system (``$ORIGIN`` run path), so the FMU runs where gRPC is not
   installed: the folder ``coupler_native.PROXY``, compiled from ``csrc/proxy/`` when the
   coupler-native wheel was built and copied here as it is (no compiler at export time);
-- ``resources/coupler-proxy.txt``: the address, the call deadline, the description's
-  fingerprint and one line per channel, read by the binary at instantiation.
+- ``resources/coupler-proxy.txt``: the address, the call deadline, the message limit (Coupler's,
+  not gRPC's 4 MiB default), the description's fingerprint and one line per channel, read by
+  the binary at instantiation.
 
 The GUID (FMI 3: instantiation token) is ``{coupler-proxy-<fingerprint>}``; the binary asks the
 participant for its description at instantiation and refuses one that changed since the export,
@@ -32,6 +33,7 @@ from coupler.client import RemoteParticipant, parse_address
 from coupler.errors import CouplerError
 from coupler.fmubuild import write_archive
 from coupler.security import ClientSecurity
+from coupler.values import MAX_MESSAGE_BYTES
 
 __all__ = [
     "MODEL_IDENTIFIER",
@@ -288,6 +290,7 @@ def _resources(
         f"timeout\t{call_timeout!r}",
         f"step_size\t{description.capabilities.fixed_step_size!r}",
         f"time_vr\t{len(exported) + 1}",
+        f"max_message\t{MAX_MESSAGE_BYTES + wire.FRAMING_BYTES}",
     ]
     shown = {c.name for _, c in exported}
     codes = {c.name: c for c in wire.description_to_pb(description).channels}
