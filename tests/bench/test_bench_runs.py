@@ -14,6 +14,7 @@ import pytest
 ROOT = Path(__file__).resolve().parents[2]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("case", ["chain2", "remote3"])
 def test_a_bench_case_runs(case: str) -> None:
     done = subprocess.run(

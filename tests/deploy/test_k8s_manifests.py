@@ -68,6 +68,7 @@ PARTICIPANTS = {  # Deployment -> (environment prefix, gRPC port)
 }
 
 
+@pytest.mark.slow
 def test_participants_serve_tls_and_are_probed_on_their_health_port(
     railway: list[dict[str, Any]],
 ) -> None:

@@ -96,6 +96,7 @@ async def command(argv: list[str], **options: Any) -> subprocess.CompletedProces
     )
 
 
+@pytest.mark.slow
 async def test_bridge_exported_under_fmpy_drives_the_train_as_coupler_run_does(
     tmp_path: Path, proxy_binaries: Path
 ) -> None:

@@ -101,6 +101,7 @@ def results(out: Path) -> list[dict[str, str]]:
         return list(csv.DictReader(file))
 
 
+@pytest.mark.slow
 def test_coupler_runs_the_node_participant(env: dict[str, str], tmp_path: Path) -> None:
     done = subprocess.run(
         [COUPLER, "run", tmp_path / "node.ssd", "--out", tmp_path / "o", "--step", "0.5"],
@@ -117,6 +118,7 @@ def test_coupler_runs_the_node_participant(env: dict[str, str], tmp_path: Path) 
     assert [int(r["Scale.steps"]) for r in rows] == list(range(41))
 
 
+@pytest.mark.slow
 def test_a_strangers_secretless_dostep_is_refused_and_fails_the_run(
     env: dict[str, str], scale: int, tmp_path: Path
 ) -> None:

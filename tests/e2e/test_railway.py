@@ -176,6 +176,7 @@ def readings_of(rows: list[dict[str, str]]) -> list[tuple[float, int, int, float
     return found
 
 
+@pytest.mark.slow
 async def test_train_passes_every_balise_in_order(
     fleet: Fleet, ports: dict[str, int], tmp_path: Path
 ) -> None:
@@ -302,6 +303,7 @@ async def coupler_run(out: Path, *options: str) -> tuple[int, str]:
     return process.returncode, err.decode()
 
 
+@pytest.mark.slow
 async def test_two_runs_against_one_fleet_are_identical(fleet: Fleet, tmp_path: Path) -> None:
     """The bridge resets OpenRails at Initialize: a second ``coupler run`` against the fleet
     that is still up starts from the scenario's start again, and records the same bytes."""
@@ -317,6 +319,7 @@ async def test_two_runs_against_one_fleet_are_identical(fleet: Fleet, tmp_path: 
     assert second == first
 
 
+@pytest.mark.slow
 async def test_without_reset_the_second_run_is_refused(
     ports: dict[str, int], monkeypatch: pytest.MonkeyPatch, tmp_path: Path
 ) -> None:
@@ -337,6 +340,7 @@ async def test_without_reset_the_second_run_is_refused(
     assert summary["status"] == "failed" and "Restart OpenRails" in summary["reason"]
 
 
+@pytest.mark.slow
 async def test_replayed_openrails_gives_the_same_results(
     ports: dict[str, int], monkeypatch: pytest.MonkeyPatch, tmp_path: Path
 ) -> None:

@@ -16,6 +16,7 @@ from coupler_orchestrator.tools.campaign import CampaignSpec, run_campaign
 ROOT = Path(__file__).resolve().parents[2]
 
 
+@pytest.mark.slow
 async def test_the_railway_campaign_on_a_short_stop_time(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:

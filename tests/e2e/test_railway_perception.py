@@ -138,6 +138,7 @@ async def observe(url: str, process: subprocess.Popen[str], browser: bool) -> An
     return await watch(url) if browser else None
 
 
+@pytest.mark.slow
 def test_the_perception_variant_end_to_end(tmp_path: Path) -> None:
     for fmu in ("Driver2.fmu", "TrackBalises.fmu"):
         if not (FMUS / fmu).exists():

@@ -127,6 +127,7 @@ def refusal(command: list[str], port: int) -> str:
     return done.stderr
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("service", SERVICES)
 def test_a_taken_port_is_refused_naming_its_holder(
     service: str, holder: Holder, recording: Path, tmp_path: Path

@@ -72,6 +72,7 @@ SSD = """<?xml version="1.0" encoding="UTF-8"?>
 """
 
 
+@pytest.mark.slow
 async def test_host_under_coupler_run_equals_fmpy(tmp_path: Path) -> None:
     if not SOURCE_FMU.exists():
         pytest.fail(f"{SOURCE_FMU} is missing: run 'make setup' (make test does)")

@@ -84,6 +84,7 @@ def coupler(*args: str | Path, env: dict[str, str] | None = None) -> str:
     return done.stdout
 
 
+@pytest.mark.slow
 def test_coupler_run_reaches_a_participant_on_its_unix_socket(folder: Path, tmp_path: Path) -> None:
     """The ramp-gain example with its Gain on a socket (the SSD's source, or ``--address``)
     and on TCP: the same bytes in results.csv, over the native step channel and grpc.aio."""
@@ -131,6 +132,7 @@ def recording(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return folder / "out" / "recordings" / "Source.crec"
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("service", SERVICES)
 def test_a_live_socket_is_refused_naming_its_holder(
     service: str, folder: Path, recording: Path
@@ -185,6 +187,7 @@ def test_a_socket_path_that_cannot_be_one_is_refused(folder: Path) -> None:
     assert (folder / "file.txt").read_text() == "mine"  # never removed
 
 
+@pytest.mark.slow
 def test_the_railway_fleet_records_the_same_bytes_on_unix_sockets_and_on_tcp(
     tmp_path: Path,
 ) -> None:

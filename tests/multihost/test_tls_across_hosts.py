@@ -411,6 +411,7 @@ def step_latency(scenario: str, summary: dict[str, Any]) -> str:
     return " ".join(f"{name} {ms:.2f}" for name, ms in p50.items())
 
 
+@pytest.mark.slow
 def test_tls_across_hosts_gives_the_loopback_results(
     hosts: Hosts, pki: DevPki, reference: Runs, tmp_path: Path, report: Any
 ) -> None:
@@ -457,6 +458,7 @@ def test_tls_across_hosts_gives_the_loopback_results(
     report.publish("multihost-rtt.txt", "\n".join(table))
 
 
+@pytest.mark.slow
 def test_link_down_mid_run_fails_within_the_deadline(
     hosts: Hosts, pki: DevPki, tmp_path: Path, report: Any
 ) -> None:

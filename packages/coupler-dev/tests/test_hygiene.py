@@ -59,6 +59,7 @@ def running_with(tag: str) -> list[str]:
 SLEEPER = "import time; time.sleep(300)  # {tag}"
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     "how",
     [
@@ -103,6 +104,7 @@ def test_a_forgotten_process_fails_its_test_named_and_is_ended(tmp_path: Path, h
     assert running_with(tag) == []
 
 
+@pytest.mark.slow
 def test_a_forgotten_server_port_fails_its_test_named(tmp_path: Path) -> None:
     code, out = pytest_on(
         tmp_path,
@@ -191,6 +193,7 @@ def test_a_forgotten_network_and_volume_fail_their_test_named(tmp_path: Path) ->
             subprocess.run(["docker", kind, "rm", f"{tag}-{kind[:3]}"], capture_output=True)
 
 
+@pytest.mark.slow
 def test_what_a_test_owns_passes_and_wider_fixtures_are_checked_when_torn_down(
     tmp_path: Path,
 ) -> None:

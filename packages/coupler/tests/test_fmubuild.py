@@ -52,6 +52,7 @@ def _instance(
         fmu.freeInstance()
 
 
+@pytest.mark.slow
 def test_every_example_is_built(built: dict[str, Path]) -> None:
     for name in ("Source", "Feedthrough", "Integrator"):
         assert f"{name}2" in built

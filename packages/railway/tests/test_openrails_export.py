@@ -163,6 +163,7 @@ def scenario(tmp_path_factory: pytest.TempPathFactory) -> Route:
     return read(out, "annaberg-schwarzenberg")
 
 
+@pytest.mark.slow
 def test_junction_nodes_and_pins(junction: Route) -> None:
     assert kinds(junction) == ["vector"] * 3 + ["junction"] + ["end"] * 3
     switch = junction.nodes[3]
@@ -243,6 +244,7 @@ def test_junction_paths_both_ways(junction: Route) -> None:
     assert junction.paths["W-E"][0][:5] == pytest.approx(junction.paths["E-W"][-1][:5])
 
 
+@pytest.mark.slow
 def test_scenario_route_as_exported(scenario: Route) -> None:
     assert kinds(scenario) == ["vector", "end", "end"]
     infra = load_network(SCENARIO).lines[0]
@@ -318,6 +320,7 @@ def test_railml_without_geometry_is_one_clear_error(tmp_path: Path) -> None:
     assert not (tmp_path / "route").exists()  # nothing half-written
 
 
+@pytest.mark.slow
 def test_switch_to_nowhere_is_one_clear_error(tmp_path: Path) -> None:
     text = JUNCTION.read_text(encoding="utf-8").replace('ref="b1c"', 'ref="nowhere"')
     bad = tmp_path / "bad-switch.railml"

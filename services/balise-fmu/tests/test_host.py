@@ -144,6 +144,7 @@ async def test_served_fmu_gives_the_same_outputs_as_fmpy(
     assert [o["passed_in_step"] for o in outputs] == [r["passed_in_step"] for r in rows]
 
 
+@pytest.mark.slow
 async def test_service_command_serves_an_fmu(fmus: dict[int, Path]) -> None:
     process = await asyncio.create_subprocess_exec(
         sys.executable,

@@ -20,6 +20,7 @@ pytestmark = pytest.mark.skipif(
 )
 
 
+@pytest.mark.slow
 async def test_train_moves_and_readings_appear_in_chromium(
     service: MapService, run: Run, browser: Any
 ) -> None:

@@ -7,8 +7,10 @@ import re
 import sys
 
 import aiohttp
+import pytest
 
 
+@pytest.mark.slow
 async def test_on_ipv6_it_prints_addresses_with_brackets() -> None:
     """``--grpc-host ::1 --http-host ::1``: the printed map URL is one a browser opens (it was
     http://::1:PORT/) and the participant's address one gRPC reads (grpc://[::1]:PORT)."""

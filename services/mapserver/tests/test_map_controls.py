@@ -67,6 +67,7 @@ def settings(tiles: TileServer) -> MapServerSettings:
     )
 
 
+@pytest.mark.slow
 async def test_basemap_scale_bar_and_following(
     service: MapService, run: Run, tiles: TileServer, browser: Any
 ) -> None:

@@ -124,6 +124,7 @@ def settings() -> MapServerSettings:
     )
 
 
+@pytest.mark.slow
 async def test_slow_browser_does_not_slow_the_run(service: MapService, run: Run) -> None:
     chunk = 500
     many = "101:10:100;102:10:103;201:20:600"  # three readings a step: a busy stream

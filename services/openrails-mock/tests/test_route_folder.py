@@ -329,6 +329,7 @@ def _cut() -> str:
     return text[: text.index("TrackNode ( 4")]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("corrupted", "message"),
     [

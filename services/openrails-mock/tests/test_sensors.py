@@ -167,6 +167,7 @@ def test_bad_depth_range_duplicate_names_and_shapes_are_refused(tmp_path: Path) 
         load_sensors(tmp_path / "missing.json", train_name="PLAYER")
 
 
+@pytest.mark.slow
 def test_the_mock_refuses_a_bad_sensor_file_at_start_without_a_traceback(tmp_path: Path) -> None:
     path = sensors_file(tmp_path, [{**SENSORS[0], "sensorType": "lidar"}])
     done = subprocess.run(

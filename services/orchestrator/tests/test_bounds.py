@@ -23,6 +23,7 @@ COUPLER = str(Path(sys.executable).with_name("coupler"))
 SECONDS = "must be a number of seconds > 0 and <= 86400 (24 h)"
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("option", "value", "says"),
     [

@@ -96,6 +96,7 @@ def ramp_gain(fmus: dict[str, Path], monkeypatch: pytest.MonkeyPatch) -> Path:
     return EXAMPLE
 
 
+@pytest.mark.slow
 def test_a_3x3_campaign_runs_in_parallel_and_a_second_run_skips_it(
     ramp_gain: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
@@ -124,6 +125,7 @@ def test_a_3x3_campaign_runs_in_parallel_and_a_second_run_skips_it(
     assert table(out / "campaign.csv") == rows
 
 
+@pytest.mark.slow
 async def test_the_same_campaign_on_a_dask_local_cluster(ramp_gain: Path, tmp_path: Path) -> None:
     spec = CampaignSpec.load(campaign_file(tmp_path, GRID))
     result = await run_campaign(spec, jobs=2, scheduler="local")
@@ -135,6 +137,7 @@ async def test_the_same_campaign_on_a_dask_local_cluster(ramp_gain: Path, tmp_pa
     assert result.table_parquet is not None and result.table_parquet.is_file()
 
 
+@pytest.mark.slow
 @pytest.mark.timeout(600)  # a Dask cluster and two fleets, from a process of its own
 def test_a_campaign_on_dask_prints_only_its_own_lines_and_leaves_no_logs_behind(
     ramp_gain: Path, tmp_path: Path
@@ -159,6 +162,7 @@ def test_a_campaign_on_dask_prints_only_its_own_lines_and_leaves_no_logs_behind(
     assert after == before
 
 
+@pytest.mark.slow
 def test_a_failing_run_is_a_row_and_the_others_complete(
     ramp_gain: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
@@ -212,6 +216,7 @@ def gain_pool(fmus: dict[str, Path]) -> Iterator[list[int]]:
         yield ports
 
 
+@pytest.mark.slow
 def test_a_pool_of_running_participants_serves_one_run_each(
     ramp_gain: Path, gain_pool: list[int], tmp_path: Path
 ) -> None:

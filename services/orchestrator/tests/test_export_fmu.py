@@ -327,6 +327,7 @@ def test_a_changed_participant_is_refused_at_instantiation(
     assert "export the FMU again" in printed
 
 
+@pytest.mark.slow
 def test_a_participant_that_is_down_is_an_error_naming_its_address(
     exported: dict[int, Path], tmp_path: Path
 ) -> None:
@@ -571,6 +572,7 @@ class UnaryGain(GainParticipant):
         return replace(described, capabilities=Capabilities(streaming=False))
 
 
+@pytest.mark.slow
 def test_a_step_that_outlives_the_deadline_is_an_error_not_a_hang(
     exported: dict[int, Path], tmp_path: Path
 ) -> None:

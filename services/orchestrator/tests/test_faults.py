@@ -264,6 +264,7 @@ def wait_for_rows(out: Path, count: int, within: float = 20.0) -> None:
     )
 
 
+@pytest.mark.slow
 @pytest.mark.known_leak(
     temp="coupler-run-*",
     reason="SIGKILL of `coupler run`: no code of it runs after it, so the run's scratch folder "
@@ -291,6 +292,7 @@ def test_a_killed_orchestrator_leaves_a_summary_and_frees_its_participants(
         assert time.monotonic() - started < 30
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
 def test_an_interrupted_orchestrator_ends_cleanly(
     coupler: Coupler, ssd: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, sig: int
@@ -386,6 +388,7 @@ def intrude(port: int, run_id: str, guesses: list[bytes]) -> list[tuple[grpc.Sta
     return answers
 
 
+@pytest.mark.slow
 @pytest.mark.usefixtures("step_path")
 def test_a_stranger_with_the_run_id_cannot_change_the_run_and_the_run_fails_naming_it(
     ssd: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
@@ -525,6 +528,7 @@ def test_a_full_disk_fails_the_run_keeping_whole_rows(
         subprocess.run(["umount", str(full)], check=False)
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(os.geteuid() != 0, reason="mounting a small tmpfs needs root")
 def test_a_full_disk_leaves_no_unreadable_parquet_behind(
     ssd: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
@@ -590,6 +594,7 @@ def faulty_ssd(
     return path
 
 
+@pytest.mark.slow
 def test_an_isolated_fmu_that_crashes_fails_the_run_naming_how(
     coupler: Coupler, faulty_ssd: Path, tmp_path: Path
 ) -> None:
@@ -605,6 +610,7 @@ def test_an_isolated_fmu_that_crashes_fails_the_run_naming_how(
     assert len(assert_rows_kept(out)) == 11
 
 
+@pytest.mark.slow
 def test_an_isolated_fmu_that_hangs_fails_within_the_deadline(
     coupler: Coupler, faulty_ssd: Path, tmp_path: Path
 ) -> None:
@@ -642,6 +648,7 @@ def test_an_fmu_hanging_in_process_ends_the_run_at_its_deadline(
     assert "error: run failed: Faulty.DoStep [DEADLINE_EXCEEDED]" in err
 
 
+@pytest.mark.slow
 @pytest.mark.usefixtures("fmu_path")
 def test_an_interrupt_reaches_an_orchestrator_blocked_in_an_fmu(
     faulty_ssd: Path, tmp_path: Path

@@ -160,6 +160,7 @@ def test_fleet_file_ports_come_from_the_environment(fleet_dir: Path) -> None:
     assert default.services[0].needed_ports() == (50051,)
 
 
+@pytest.mark.slow
 def test_a_second_fleet_is_refused_and_the_first_is_untouched(
     fleet_dir: Path, env: dict[str, str], consoles: list[Console]
 ) -> None:
@@ -200,6 +201,7 @@ def test_a_second_fleet_is_refused_and_the_first_is_untouched(
     assert port_is_free(port)
 
 
+@pytest.mark.slow
 def test_results_directory_of_a_running_fleet_is_refused(
     fleet_dir: Path, env: dict[str, str], consoles: list[Console]
 ) -> None:
@@ -219,6 +221,7 @@ def test_results_directory_of_a_running_fleet_is_refused(
     assert "--out" in second.stderr
 
 
+@pytest.mark.slow
 def test_ctrl_c_during_a_run_says_where_and_when_it_stopped(
     fleet_dir: Path, env: dict[str, str], consoles: list[Console]
 ) -> None:

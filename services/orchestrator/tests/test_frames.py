@@ -178,6 +178,7 @@ async def test_the_monitor_serves_the_latest_frame_and_keeps_no_frame_history(
     assert len(kept) == 4 and not any(isinstance(v, bytes) for row in kept for v in row)
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(not CHROMIUM.exists(), reason="Debian's chromium is not installed")
 async def test_the_monitor_page_shows_the_latest_frame(
     ssd: Path,

@@ -51,6 +51,7 @@ def run(stop: float, rtf: float | None, monitor: MonitorServer, out: Path) -> An
     return run_scenario(DATA / "mixed.ssd", options, out_dir=out, observers=[monitor.state])
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(not CHROMIUM.exists(), reason="Debian's chromium is not installed")
 async def test_the_page_charts_a_picked_channel_and_each_participants_latency(
     fmus: dict[str, Path], gain_server: ParticipantServer, tmp_path: Path

@@ -45,6 +45,7 @@ def run_case(coupler: Coupler, case: str, out: Path, *options: str) -> None:
     assert outcome.code == 0, outcome.err
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("case", sorted(p.name for p in (CASES / "expected").iterdir()))
 def test_equal_to_openmcx(coupler: Coupler, tmp_path: Path, case: str) -> None:
     """Each model, run by ``coupler run --openmcx-results``, writes the files OpenMCx wrote."""

@@ -12,9 +12,12 @@ import json
 import os
 from pathlib import Path
 
+import pytest
+
 from .conftest import Coupler
 
 
+@pytest.mark.slow
 def test_three_runs_without_out_leave_three_intact_folders(
     fmus: dict[str, Path], tmp_path: Path
 ) -> None:
@@ -37,6 +40,7 @@ def test_three_runs_without_out_leave_three_intact_folders(
     assert os.readlink(base / "latest") == folders[-1].name  # relative: the folder may move
 
 
+@pytest.mark.slow
 def test_out_holding_an_earlier_run_is_refused_and_force_replaces_it(
     fmus: dict[str, Path], tmp_path: Path
 ) -> None:

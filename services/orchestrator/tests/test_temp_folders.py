@@ -88,6 +88,7 @@ FAULTS = {
 }
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("isolated", [False, True], ids=["in-process", "isolated"])
 @pytest.mark.parametrize("fault", sorted(FAULTS))
 @pytest.mark.parametrize("form", ["ssd", "ssp"])
@@ -109,6 +110,7 @@ def test_a_failing_fmu_run_leaves_no_temporary_folder(
     assert_nothing_left(tmpdir_of_run)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("isolated", [False, True], ids=["in-process", "isolated"])
 def test_sigterm_during_a_hang_leaves_no_temporary_folder(
     faulty_ssd: Path, tmp_path: Path, tmpdir_of_run: Path, isolated: bool
