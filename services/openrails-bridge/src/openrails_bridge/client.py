@@ -158,8 +158,10 @@ class OpenRailsClient:
             f"the {self.max_body_bytes} bytes the bridge reads (OPENRAILS_BRIDGE_MAX_BODY_BYTES)",
         )
         declared = response.content_length
+        if declared is not None and declared <= cap:
+            return await response.read()  # a declared length is all aiohttp reads: one buffer
         body = bytearray()
-        if declared is None or declared <= cap:
+        if declared is None:
             async for chunk in response.content.iter_chunked(CHUNK_BYTES):
                 body += chunk
                 if len(body) > cap:
