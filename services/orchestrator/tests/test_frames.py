@@ -14,6 +14,7 @@ import asyncio
 import io
 import zlib
 from collections.abc import Mapping
+from dataclasses import replace
 from pathlib import Path
 
 import aiohttp
@@ -22,6 +23,7 @@ from PIL import Image as Pillow
 
 from coupler.channels import Causality, Channel, Description, RunSetup, Value, ValueType
 from coupler.participant import Values
+from coupler.testing import remote
 from coupler.v1.sensors_pb2 import Image
 from coupler_orchestrator.options import RunOptions
 from coupler_orchestrator.outputs.monitor import MonitorServer
@@ -44,10 +46,8 @@ RED = (
 
 @pytest.fixture
 def ssd(tmp_path: Path) -> Path:
-    path = tmp_path / "frames.ssd"
-    depth = '<ssd:Connector name="frame" kind="output"/><ssd:Connector name="depth" kind="output"/>'
-    path.write_text(SSD.replace('<ssd:Connector name="frame" kind="output"/>', depth))
-    return path
+    camera = remote("Camera", "grpc://127.0.0.1:${CAMERA_PORT}", outputs=["frame", "depth"])
+    return replace(SSD, components=[camera, *SSD.components[1:]]).write(tmp_path / "frames.ssd")
 
 
 def frame(step: int) -> bytes:

@@ -38,9 +38,7 @@ def native() -> Iterator[None]:
 
 @pytest.fixture
 def ssd(tmp_path: Path) -> Path:
-    path = tmp_path / "faults.ssd"
-    path.write_text(SSD)
-    return path
+    return SSD.write(tmp_path / "faults.ssd")
 
 
 def component(source: str = "grpc://127.0.0.1:1") -> ssp.Component:

@@ -10,6 +10,8 @@
 - ``free_port()``: a port nothing listens on now (for programs that must be given one).
 - ``process_group(command)``: a process in a process group of its own, ended on every path out
   (passed, failed, timed out, interrupted) with everything it started, and waited for.
+- ``SystemStructure`` with ``fmu(...)`` and ``remote(...)`` components: a small SSD written for
+  ``coupler run`` (``coupler.testing.ssd``).
 
 No pytest needed: these are context managers and functions a test of any framework can use.
 """
@@ -30,6 +32,15 @@ from typing import TYPE_CHECKING, Any, TypeVar
 from coupler.errors import CouplerError
 from coupler.participant import Participant
 from coupler.server import ParticipantServer
+from coupler.testing.ssd import (
+    Annotation,
+    Component,
+    Connection,
+    Connector,
+    SystemStructure,
+    fmu,
+    remote,
+)
 
 if TYPE_CHECKING:
     from coupler.security import ClientSecurity
@@ -37,10 +48,17 @@ if TYPE_CHECKING:
 T = TypeVar("T")
 
 __all__ = [
+    "Annotation",
+    "Component",
+    "Connection",
+    "Connector",
+    "SystemStructure",
     "end_group",
     "eventually",
+    "fmu",
     "free_port",
     "process_group",
+    "remote",
     "served",
     "served_in_thread",
     "wait_until",
