@@ -35,6 +35,7 @@ from .conftest import DATA, Coupler, Stepper, project_fmu, serving
 
 pytestmark = pytest.mark.usefixtures("fmus")
 
+
 def ssd(
     tmp_path: Path,
     components: Sequence[Component],
@@ -152,9 +153,7 @@ def test_connector_missing_on_the_participant(coupler: Coupler, tmp_path: Path) 
 
 
 def test_type_mismatch_with_the_participant(coupler: Coupler, tmp_path: Path) -> None:
-    path = ssd(
-        tmp_path, [project_fmu("Source", "Source2", connector("ramp", "output", "Integer"))]
-    )
+    path = ssd(tmp_path, [project_fmu("Source", "Source2", connector("ramp", "output", "Integer"))])
     assert_refused(
         coupler,
         path,
