@@ -91,7 +91,7 @@ def test_progress_lines_when_not_on_a_terminal(tmp_path: Path) -> None:
 # The first hour's papercuts: what a new user typed, and what the command must say.
 
 
-def chain(fmus: dict[str, Path], *, ramp: bool = False, step: float | None = None) -> str:
+def chain(fmus: dict[str, Path], *, ramp: bool = False) -> str:
     """A (Source2) --ramp--> B (Integrator2); A's ``ramp`` connector declared or not."""
     return SystemStructure(
         "T",
@@ -101,7 +101,6 @@ def chain(fmus: dict[str, Path], *, ramp: bool = False, step: float | None = Non
         ],
         connections=[("A.ramp", "B.u")],
         stop_time=1,
-        step_size=step,
     ).xml()
 
 
@@ -125,7 +124,7 @@ def test_a_step_size_in_the_default_experiment_says_where_a_step_goes(
     coupler: Coupler, fmus: dict[str, Path], tmp_path: Path
 ) -> None:
     ssd = tmp_path / "t.ssd"
-    ssd.write_text(chain(fmus, step=0.1))
+    ssd.write_text(chain(fmus).replace('stopTime="1"/>', 'stopTime="1" stepSize="0.1"/>'))
     outcome = coupler("validate", ssd)
     assert outcome.code == 1
     assert (

@@ -34,6 +34,7 @@ from coupler.participant import Participant
 from coupler.server import ParticipantServer
 from coupler.testing.ssd import (
     Annotation,
+    Binding,
     Component,
     Connection,
     Connector,
@@ -49,6 +50,7 @@ T = TypeVar("T")
 
 __all__ = [
     "Annotation",
+    "Binding",
     "Component",
     "Connection",
     "Connector",

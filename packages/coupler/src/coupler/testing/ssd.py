@@ -29,6 +29,7 @@ __all__ = [
     "FMU",
     "GRPC",
     "Annotation",
+    "Binding",
     "Component",
     "Connection",
     "Connector",
@@ -61,6 +62,23 @@ class Annotation:
 
 
 @dataclass(frozen=True)
+class Binding:
+    """A ``<ssd:ParameterBinding>`` that reads a parameter file (``.ssv``, relative to the SSD),
+    its names mapped by ``mapping`` (an ``.ssm``) when given."""
+
+    source: str
+    mapping: str = ""
+
+    def xml(self) -> str:
+        if not self.mapping:
+            return f"<ssd:ParameterBinding source={quoteattr(self.source)}/>"
+        return (
+            f"<ssd:ParameterBinding source={quoteattr(self.source)}>"
+            f"<ssd:ParameterMapping source={quoteattr(self.mapping)}/></ssd:ParameterBinding>"
+        )
+
+
+@dataclass(frozen=True)
 class Connector:
     """One ``<ssd:Connector>``; ``type`` (Real, Integer, Boolean, String, Binary; SSP 2.0's
     names too) and ``unit`` are left out when empty: the participant declares them."""
@@ -82,13 +100,14 @@ class Connector:
 class Component:
     """One ``<ssd:Component>``; ``type`` "" leaves the attribute out (an FMU, SSP's default);
     ``parameters`` are bound inline (a ``bool`` as Boolean, an ``int`` as Integer, a ``float``
-    as Real, a ``str`` as String)."""
+    as Real, a ``str`` as String), ``bindings`` from files."""
 
     name: str
     source: str
     type: str = ""
     connectors: Sequence[Connector] = ()
     parameters: Mapping[str, Parameter] = field(default_factory=dict)
+    bindings: Sequence[Binding] = ()
     annotations: Sequence[Annotation] = ()
 
     def lines(self) -> list[str]:
@@ -98,7 +117,7 @@ class Component:
         attributes += f" source={quoteattr(self.source)}"
         inner = [
             *_block("ssd:Connectors", [c.xml() for c in self.connectors]),
-            *_bindings(self.parameters),
+            *_bindings(self.parameters, self.bindings),
             *_block("ssd:Annotations", [a.xml() for a in self.annotations]),
         ]
         if not inner:
@@ -130,23 +149,20 @@ class Connection:
 
 @dataclass(frozen=True)
 class SystemStructure:
-    """An SSD: its system's components and connections and its ``DefaultExperiment``
-    (``stop_time`` None: none; ``step_size``: its ``stepSize`` attribute), its ``units`` (a name
-    to the exponents of its base unit: ``{"km": {"m": 1, "factor": 1000}}``)."""
+    """An SSD: its system's components and connections, its ``units`` (a name to the exponents
+    of its base unit: ``{"km": {"m": 1, "factor": 1000}}``) and its ``DefaultExperiment``
+    (none when ``stop_time`` is None)."""
 
     name: str
     components: Sequence[Component]
     connections: Sequence[Connection | tuple[str, str]] = ()
     start_time: float = 0.0
     stop_time: float | None = 1.0
-    step_size: float | None = None
     units: Mapping[str, Mapping[str, float]] = field(default_factory=dict)
     version: str = "1.0"
 
     def xml(self) -> str:
-        connections = [
-            c if isinstance(c, Connection) else Connection(*c) for c in self.connections
-        ]
+        connections = [c if isinstance(c, Connection) else Connection(*c) for c in self.connections]
         system = [
             *_block("ssd:Elements", [line for c in self.components for line in c.lines()]),
             *_block("ssd:Connections", [line for c in connections for line in c.lines()]),
@@ -185,10 +201,9 @@ class SystemStructure:
     def _experiment(self) -> list[str]:
         if self.stop_time is None:
             return []
-        step = "" if self.step_size is None else f' stepSize="{_number(self.step_size)}"'
         return [
             f'<ssd:DefaultExperiment startTime="{_number(self.start_time)}" '
-            f'stopTime="{_number(self.stop_time)}"{step}/>'
+            f'stopTime="{_number(self.stop_time)}"/>'
         ]
 
 
@@ -199,6 +214,7 @@ def fmu(
     inputs: Sequence[str] = (),
     outputs: Sequence[str] = (),
     parameters: Mapping[str, Parameter] | None = None,
+    bindings: Sequence[Binding] = (),
     annotations: Sequence[Annotation] = (),
 ) -> Component:
     """An FMU component (``source``: its path, ``${VAR}`` allowed); its connectors are
@@ -208,6 +224,7 @@ def fmu(
         str(source),
         connectors=_connectors(connectors, inputs, outputs),
         parameters=parameters or {},
+        bindings=bindings,
         annotations=annotations,
     )
 
@@ -219,6 +236,7 @@ def remote(
     inputs: Sequence[str] = (),
     outputs: Sequence[str] = (),
     parameters: Mapping[str, Parameter] | None = None,
+    bindings: Sequence[Binding] = (),
     annotations: Sequence[Annotation] = (),
 ) -> Component:
     """A participant served over gRPC at ``address`` (``grpc://HOST:PORT``, ``grpcs://``,
@@ -229,6 +247,7 @@ def remote(
         type=GRPC,
         connectors=_connectors(connectors, inputs, outputs),
         parameters=parameters or {},
+        bindings=bindings,
         annotations=annotations,
     )
 
@@ -243,9 +262,9 @@ def _connectors(
     )
 
 
-def _bindings(parameters: Mapping[str, Parameter]) -> list[str]:
+def _bindings(parameters: Mapping[str, Parameter], files: Sequence[Binding]) -> list[str]:
     if not parameters:
-        return []
+        return _block("ssd:ParameterBindings", [b.xml() for b in files])
     values = [
         f"<ssv:Parameter name={quoteattr(name)}><ssv:{_kind(value)} "
         f"value={quoteattr(_text(value))}/></ssv:Parameter>"
@@ -256,7 +275,9 @@ def _bindings(parameters: Mapping[str, Parameter]) -> list[str]:
         '  <ssv:ParameterSet version="1.0" name="parameters"><ssv:Parameters>',
         *_indent(_indent(values)),
         "  </ssv:Parameters></ssv:ParameterSet>",
-        "</ssd:ParameterValues></ssd:ParameterBinding></ssd:ParameterBindings>",
+        "</ssd:ParameterValues></ssd:ParameterBinding>",
+        *(b.xml() for b in files),
+        "</ssd:ParameterBindings>",
     ]
 
 
