@@ -7,7 +7,6 @@ served by a real ParticipantServer, driven through a RemoteParticipant.
 from __future__ import annotations
 
 import copy
-import socket
 from collections.abc import AsyncIterator, Awaitable, Callable
 from contextlib import AbstractAsyncContextManager, asynccontextmanager
 from typing import Any
@@ -17,6 +16,7 @@ from aiohttp import web
 
 from coupler.client import RemoteParticipant
 from coupler.server import ParticipantServer
+from coupler.testing import free_port
 from openrails_bridge.__main__ import build
 from openrails_bridge.config import BridgeSettings
 from openrails_mock.api import create_app
@@ -158,7 +158,4 @@ def bridge() -> Bridge:
 @pytest.fixture
 def closed_port() -> int:
     """A port nothing listens on."""
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        port: int = s.getsockname()[1]
-    return port
+    return free_port()

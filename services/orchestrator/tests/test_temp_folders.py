@@ -50,8 +50,10 @@ def faulty_ssd(
 def archive(tmp_path: Path, fmus: dict[str, Path], faulty_fmus: dict[str, Path]) -> Path:
     """The faulty scenario as an .ssp holding both FMUs."""
     path = tmp_path / "faulty.ssp"
-    ssd = FAULTY_SSD.xml().replace("${COUPLER_FMU_DIR}", "resources").replace(
-        "${FAULTY_FMU_DIR}", "resources"
+    ssd = (
+        FAULTY_SSD.xml()
+        .replace("${COUPLER_FMU_DIR}", "resources")
+        .replace("${FAULTY_FMU_DIR}", "resources")
     )
     with zipfile.ZipFile(path, "w") as zf:
         zf.writestr("SystemStructure.ssd", ssd)
