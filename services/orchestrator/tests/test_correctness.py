@@ -56,6 +56,13 @@ def write(
     return system.write(tmp_path / "t.ssd")
 
 
+def speedo_to_integrator(tmp_path: Path, port: int) -> Path:
+    """Speedo (gRPC at ``port``) --y--> Integ.u (Integrator2 FMU)."""
+    speedo = served_at("Speedo", port, outputs=["y"])
+    integ = project_fmu("Integ", "Integrator2", inputs=["u"])
+    return write(tmp_path, [speedo, integ], [("Speedo.y", "Integ.u")])
+
+
 class Source(Participant):
     """One output ``y`` with a unit, constant ``value``; records what it is asked to do."""
 
@@ -96,14 +103,7 @@ def test_kmh_from_a_participant_arrive_as_ms_at_an_fmu(coupler: Coupler, tmp_pat
     initial output).
     """
     with serving(Source("km/h")) as server:
-        path = write(
-            tmp_path,
-            [
-                served_at("Speedo", server.port, outputs=["y"]),
-                project_fmu("Integ", "Integrator2", inputs=["u"]),
-            ],
-            [("Speedo.y", "Integ.u")],
-        )
+        path = speedo_to_integrator(tmp_path, server.port)
         outcome = coupler("run", path, "--step", "0.25", "--out", tmp_path / "o")
     assert outcome.code == 0, outcome.err
     assert coupler.column(tmp_path / "o", "Integ.x") == [0.0, 2.5, 5.0, 7.5, 10.0]
@@ -111,14 +111,7 @@ def test_kmh_from_a_participant_arrive_as_ms_at_an_fmu(coupler: Coupler, tmp_pat
 
 def test_m_to_s_is_refused_naming_both_ends(coupler: Coupler, tmp_path: Path) -> None:
     with serving(Source("m")) as server:
-        path = write(
-            tmp_path,
-            [
-                served_at("Speedo", server.port, outputs=["y"]),
-                project_fmu("Integ", "Integrator2", inputs=["u"]),
-            ],
-            [("Speedo.y", "Integ.u")],
-        )
+        path = speedo_to_integrator(tmp_path, server.port)
         outcome = coupler("validate", path, "--step", "0.25")
     assert outcome.code == 1
     assert (
@@ -129,14 +122,7 @@ def test_m_to_s_is_refused_naming_both_ends(coupler: Coupler, tmp_path: Path) ->
 
 def test_a_unit_nobody_understands_is_warned_not_ignored(coupler: Coupler, tmp_path: Path) -> None:
     with serving(Source("parsecs per fortnite")) as server:
-        path = write(
-            tmp_path,
-            [
-                served_at("Speedo", server.port, outputs=["y"]),
-                project_fmu("Integ", "Integrator2", inputs=["u"]),
-            ],
-            [("Speedo.y", "Integ.u")],
-        )
+        path = speedo_to_integrator(tmp_path, server.port)
         validated = coupler("validate", path, "--step", "0.25")
         ran = coupler("run", path, "--step", "0.25", "--out", tmp_path / "o")
     message = "unit 'parsecs per fortnite' is not understood"
