@@ -46,6 +46,7 @@ DECLARED = {
         "SecuritySettings",
         "serve",
         "ServerSecurity",
+        "StepTransport",
         "ValidationError",
         "Value",
         "Values",

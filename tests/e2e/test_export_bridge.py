@@ -24,7 +24,7 @@ from typing import Any
 
 import pytest
 
-from coupler.testing import free_port
+from coupler.testing import Connector, SystemStructure, free_port, remote
 from coupler_orchestrator.tools import export_fmu as export
 from coupler_orchestrator.tools.fleet import Fleet, FleetSpec
 
@@ -34,30 +34,21 @@ DRIVER = ROOT / "services" / "orchestrator" / "tests" / "fmpy_driver.py"
 STARTS = {"throttle": 0.8, "brake": 0.0, "direction": 1}
 STOP, STEP = 60.0, 1.0  # whole multiples of the lockstep 0.2 s, exact in binary
 
-BRIDGE_SSD = """<?xml version="1.0" encoding="UTF-8"?>
-<ssd:SystemStructureDescription version="1.0" name="Bridge"
-    xmlns:ssd="http://ssp-standard.org/SSP1/SystemStructureDescription"
-    xmlns:ssc="http://ssp-standard.org/SSP1/SystemStructureCommon">
-  <ssd:System name="Bridge">
-    <ssd:Elements>
-      <ssd:Component name="OpenRails" type="application/x-coupler-grpc" source="{address}">
-        <ssd:Connectors>
-          <ssd:Connector name="throttle" kind="input"><ssc:Real/></ssd:Connector>
-          <ssd:Connector name="brake" kind="input"><ssc:Real/></ssd:Connector>
-          <ssd:Connector name="direction" kind="input"><ssc:Integer/></ssd:Connector>
-          <ssd:Connector name="distance" kind="output"><ssc:Real unit="m"/></ssd:Connector>
-          <ssd:Connector name="speed" kind="output"><ssc:Real unit="m/s"/></ssd:Connector>
-        </ssd:Connectors>
-      </ssd:Component>
-    </ssd:Elements>
-  </ssd:System>
-  <ssd:Units>
-    <ssc:Unit name="m"><ssc:BaseUnit m="1"/></ssc:Unit>
-    <ssc:Unit name="m/s"><ssc:BaseUnit m="1" s="-1"/></ssc:Unit>
-  </ssd:Units>
-  <ssd:DefaultExperiment startTime="0.0" stopTime="{stop}"/>
-</ssd:SystemStructureDescription>
-"""
+BRIDGE_CONNECTORS = [
+    Connector("throttle", "input", "Real"),
+    Connector("brake", "input", "Real"),
+    Connector("direction", "input", "Integer"),
+    Connector("distance", "output", "Real", "m"),
+    Connector("speed", "output", "Real", "m/s"),
+]
+
+
+def bridge_ssd(address: str) -> SystemStructure:
+    """The OpenRails bridge alone at ``address`` (a gRPC address or an exported FMU)."""
+    bridge = remote("OpenRails", address, *BRIDGE_CONNECTORS)
+    units = {"m": {"m": 1}, "m/s": {"m": 1, "s": -1}}
+    return SystemStructure("Bridge", [bridge], start_time=0.0, stop_time=STOP, units=units)
+
 
 pytestmark = pytest.mark.timeout(300)
 
@@ -133,8 +124,7 @@ async def test_bridge_exported_under_fmpy_drives_the_train_as_coupler_run_does(
     fmpy = answer["results"][0]
 
     async with openrails(tmp_path) as bridge:
-        ssd = tmp_path / "bridge.ssd"
-        ssd.write_text(BRIDGE_SSD.format(address=bridge, stop=STOP))
+        ssd = bridge_ssd(bridge).write(tmp_path / "bridge.ssd")
         params = [f"--param=OpenRails.{k}={v}" for k, v in STARTS.items()]
         run = await command(
             [

@@ -24,6 +24,7 @@ from pathlib import Path
 import grpc
 import pytest
 
+from coupler.testing import SystemStructure, fmu, remote
 from coupler.v1 import component_pb2 as pb
 from coupler.v1 import component_pb2_grpc as pb_grpc
 from coupler_orchestrator.master import native_step_channel as steps
@@ -32,30 +33,15 @@ from coupler_orchestrator.native import MISSING
 ROOT = Path(__file__).resolve().parents[2]
 EXAMPLE = ROOT / "examples" / "participant-node"
 COUPLER = str(Path(sys.executable).with_name("coupler"))
-SSD = f"""<?xml version="1.0" encoding="UTF-8"?>
-<ssd:SystemStructureDescription version="1.0" name="Node"
-    xmlns:ssd="http://ssp-standard.org/SSP1/SystemStructureDescription">
-  <ssd:System name="Node">
-    <ssd:Elements>
-      <ssd:Component name="Source" source="{ROOT / "build" / "fmus" / "Source2.fmu"}">
-        <ssd:Connectors><ssd:Connector name="ramp" kind="output"/></ssd:Connectors>
-      </ssd:Component>
-      <ssd:Component name="Scale" type="application/x-coupler-grpc"
-                     source="grpc://127.0.0.1:${{SCALE_PORT}}">
-        <ssd:Connectors>
-          <ssd:Connector name="u" kind="input"/><ssd:Connector name="y" kind="output"/>
-          <ssd:Connector name="steps" kind="output"/>
-        </ssd:Connectors>
-      </ssd:Component>
-    </ssd:Elements>
-    <ssd:Connections>
-      <ssd:Connection startElement="Source" startConnector="ramp"
-                      endElement="Scale" endConnector="u"/>
-    </ssd:Connections>
-  </ssd:System>
-  <ssd:DefaultExperiment startTime="0" stopTime="20"/>
-</ssd:SystemStructureDescription>
-"""
+SSD = SystemStructure(
+    "Node",
+    components=[
+        fmu("Source", ROOT / "build" / "fmus" / "Source2.fmu", outputs=["ramp"]),
+        remote("Scale", "grpc://127.0.0.1:${SCALE_PORT}", inputs=["u"], outputs=["y", "steps"]),
+    ],
+    connections=[("Source.ramp", "Scale.u")],
+    stop_time=20,
+)
 KEY = bytes(range(32))
 PACED = ("--realtime-factor", "5")
 
@@ -91,7 +77,7 @@ def env(request: pytest.FixtureRequest, scale: int, tmp_path: Path) -> dict[str,
         if steps.library.problem == MISSING:
             pytest.skip(MISSING)
         pytest.fail(f"the native step channel: {steps.library.problem}")
-    (tmp_path / "node.ssd").write_text(SSD)
+    SSD.write(tmp_path / "node.ssd")
     native = "1" if request.param == "native" else "0"
     return {**os.environ, "SCALE_PORT": str(scale), steps.ENVIRONMENT: native}
 

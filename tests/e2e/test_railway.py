@@ -26,6 +26,7 @@ import aiohttp
 import pytest
 
 from coupler.testing import free_port
+from coupler_dev.browser import CHROMIUM, chromium
 from coupler_orchestrator.options import RunOptions
 from coupler_orchestrator.runner import RunOutcome, run_scenario
 from coupler_orchestrator.tools.fleet import Fleet, FleetSpec, ServiceSpec
@@ -42,19 +43,8 @@ STOP_DISTANCE = 25908.3  # parameters.ssv: Driver.stop_distance
 STEP = 1.0
 SHORT = ("--stop-time", "120")
 """A short run: the first balises are passed within it."""
-CHROMIUM = Path("/usr/bin/chromium")
 HAVE_CHROMIUM = CHROMIUM.exists()  # Debian's chromium: .ci/run installs it, else no browser part
 ARTIFACT = ROOT / "test-artifacts" / "railway-map.png"
-BROWSER_ARGS = [
-    "--headless=new",
-    "--no-sandbox",
-    "--disable-gpu",
-    "--disable-background-networking",
-    "--disable-component-update",
-    "--disable-sync",
-    "--no-first-run",
-    "--disable-quic",
-]
 
 pytestmark = pytest.mark.timeout(300)
 
@@ -246,37 +236,29 @@ setInterval(() => {
 async def watch_in_chromium(url: str, start: Callable[[], Awaitable[RunOutcome]]) -> RunOutcome:
     """Debian's Chromium on the map during the run: the train moves across it while the run
     goes on, rows appear in order."""
-    from playwright.async_api import async_playwright
-
-    async with async_playwright() as playwright:
-        browser = await playwright.chromium.launch(executable_path=str(CHROMIUM), args=BROWSER_ARGS)
+    async with chromium() as browser:
+        page = await browser.new_page(viewport={"width": 1280, "height": 760})
+        await page.goto(url)
+        await page.wait_for_function("window.coupler && window.coupler.ready")
+        # the page samples the marker itself, from before the run starts: this test's
+        # event loop is the run's, which lets it in only between steps (a few turns every
+        # 20 ms when no step awaits)
+        await page.evaluate(SAMPLE_TRAIN)
+        run = asyncio.ensure_future(start())
         try:
-            page = await browser.new_page(viewport={"width": 1280, "height": 760})
-            await page.goto(url)
-            await page.wait_for_function("window.coupler && window.coupler.ready")
-            # the page samples the marker itself, from before the run starts: this test's
-            # event loop is the run's, which lets it in only between steps (a few turns every
-            # 20 ms when no step awaits)
-            await page.evaluate(SAMPLE_TRAIN)
-            run = asyncio.ensure_future(start())
-            try:
-                await page.wait_for_function(
-                    "window.coupler.readingIds().length >= 3", timeout=120_000
-                )
-                await asyncio.wait_for(asyncio.shield(run), timeout=280)
-            finally:
-                outcome = await run
-            expected = [b.code for b in load_infrastructure(RAILML).balises]
-            await page.wait_for_function(
-                f"window.coupler.readingIds().length >= {len(expected)}", timeout=30_000
-            )
-            late = await page.evaluate("window.coupler.trainLatLng()")
-            seen = await page.evaluate("window.trainSeen")
-            shown = await page.evaluate("window.coupler.readingIds()")
-            ARTIFACT.parent.mkdir(exist_ok=True)
-            await page.screenshot(path=str(ARTIFACT))
+            await page.wait_for_function("window.coupler.readingIds().length >= 3", timeout=120_000)
+            await asyncio.wait_for(asyncio.shield(run), timeout=280)
         finally:
-            await browser.close()
+            outcome = await run
+        expected = [b.code for b in load_infrastructure(RAILML).balises]
+        await page.wait_for_function(
+            f"window.coupler.readingIds().length >= {len(expected)}", timeout=30_000
+        )
+        late = await page.evaluate("window.coupler.trainLatLng()")
+        seen = await page.evaluate("window.trainSeen")
+        shown = await page.evaluate("window.coupler.readingIds()")
+        ARTIFACT.parent.mkdir(exist_ok=True)
+        await page.screenshot(path=str(ARTIFACT))
     assert len(seen) >= 3, f"the train was shown at {len(seen)} places during the run: {seen}"
     assert seen[-1] == [late["lat"], late["lng"]]
     return outcome

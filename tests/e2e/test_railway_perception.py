@@ -22,7 +22,6 @@ import csv
 import io
 import json
 import os
-import socket
 import subprocess
 import sys
 import time
@@ -34,30 +33,19 @@ import numpy as np
 import pytest
 from PIL import Image
 
+from coupler.testing import free_ports
+from coupler_dev.browser import CHROMIUM, chromium
+
 ROOT = Path(__file__).resolve().parents[2]
 FLEET = ROOT / "scenarios" / "railway" / "perception-fleet.toml"
 FMUS = ROOT / "build" / "fmus"
 COUPLER = Path(sys.executable).parent / "coupler"
 STOP_TIME = "40"
-CHROMIUM = Path("/usr/bin/chromium")
 ARTIFACT = ROOT / "test-artifacts" / "railway-perception-map.png"
-BROWSER_ARGS = ["--headless=new", "--no-sandbox", "--disable-gpu", "--no-first-run",
-                "--disable-background-networking", "--disable-component-update"]  # fmt: skip
 PORTS = ("MOCK_PORT", "BRIDGE_PORT", "BALISE_PORT", "PERCEPTION_PORT", "MAP_PORT",
          "MAP_HTTP_PORT", "MONITOR_PORT")  # fmt: skip
 
 pytestmark = pytest.mark.timeout(600)
-
-
-def free_ports(names: tuple[str, ...]) -> dict[str, str]:
-    sockets = [socket.socket() for _ in names]
-    try:
-        for s in sockets:
-            s.bind(("127.0.0.1", 0))
-        return {name: str(s.getsockname()[1]) for name, s in zip(names, sockets, strict=True)}
-    finally:
-        for s in sockets:
-            s.close()
 
 
 SHOWN = """() => {
@@ -108,24 +96,18 @@ async def wait_for_map(url: str, process: subprocess.Popen[str], within: float =
 async def watch(url: str) -> dict[str, Any]:
     """The map in Chromium until it shows a frame with a balise detected within 25 m: the
     screenshot, and the frame (JPEG from the map) with its boxes."""
-    from playwright.async_api import async_playwright
-
-    async with async_playwright() as playwright:
-        browser = await playwright.chromium.launch(executable_path=str(CHROMIUM), args=BROWSER_ARGS)
-        try:
-            page = await browser.new_page(viewport={"width": 1280, "height": 900})
-            errors: list[str] = []
-            page.on("pageerror", lambda exc: errors.append(str(exc)))
-            await page.goto(url)
-            # one evaluation: the camera state, its boxes and the very picture shown with them
-            # (the map keeps only its last few frames: fetched later, another one may come)
-            shown_now = await page.wait_for_function(SHOWN, timeout=240_000)
-            seen = await shown_now.json_value()
-            ARTIFACT.parent.mkdir(parents=True, exist_ok=True)
-            await page.screenshot(path=str(ARTIFACT))
-            assert errors == []
-        finally:
-            await browser.close()
+    async with chromium() as browser:
+        page = await browser.new_page(viewport={"width": 1280, "height": 900})
+        errors: list[str] = []
+        page.on("pageerror", lambda exc: errors.append(str(exc)))
+        await page.goto(url)
+        # one evaluation: the camera state, its boxes and the very picture shown with them
+        # (the map keeps only its last few frames: fetched later, another one may come)
+        shown_now = await page.wait_for_function(SHOWN, timeout=240_000)
+        seen = await shown_now.json_value()
+        ARTIFACT.parent.mkdir(parents=True, exist_ok=True)
+        await page.screenshot(path=str(ARTIFACT))
+        assert errors == []
     camera, shown, boxes = seen["camera"], seen["width"], seen["boxes"]
     png = base64.b64decode(seen["png"].split(",", 1)[1])
     picture = np.asarray(Image.open(io.BytesIO(png)).convert("RGB"))
@@ -144,7 +126,7 @@ def test_the_perception_variant_end_to_end(tmp_path: Path) -> None:
         if not (FMUS / fmu).exists():
             pytest.fail(f"{FMUS / fmu} is missing: run 'make setup' (make test does)")
     out = tmp_path / "run"
-    ports = free_ports(PORTS)
+    ports = {name: str(port) for name, port in zip(PORTS, free_ports(len(PORTS)), strict=True)}
     env = {**os.environ, **ports}
     map_url = f"http://127.0.0.1:{ports['MAP_HTTP_PORT']}/"
     command = [str(COUPLER), "fleet", str(short_fleet(tmp_path, out)), "--exit",

@@ -18,24 +18,14 @@ from pathlib import Path
 
 import pytest
 
+from coupler.testing import SystemStructure, fmu
+
 ROOT = Path(__file__).resolve().parents[2]
 HERE = Path(__file__).parent
 PY = sys.executable
 COUPLER = str(Path(sys.executable).with_name("coupler"))
 SOURCE_FMU = ROOT / "build" / "fmus" / "Source2.fmu"
-SSD = f"""<?xml version="1.0" encoding="UTF-8"?>
-<ssd:SystemStructureDescription version="1.0" name="Ramp"
-    xmlns:ssd="http://ssp-standard.org/SSP1/SystemStructureDescription">
-  <ssd:System name="Ramp">
-    <ssd:Elements>
-      <ssd:Component name="Source" source="{SOURCE_FMU}">
-        <ssd:Connectors><ssd:Connector name="ramp" kind="output"/></ssd:Connectors>
-      </ssd:Component>
-    </ssd:Elements>
-  </ssd:System>
-  <ssd:DefaultExperiment startTime="0" stopTime="1"/>
-</ssd:SystemStructureDescription>
-"""
+SSD = SystemStructure("Ramp", [fmu("Source", SOURCE_FMU, outputs=["ramp"])], stop_time=1)
 SERVICES = {
     "coupler.examples": [PY, "-m", "coupler.examples", "gain", "--port", "{port}"],
     "coupler.examples --health-port": [
@@ -97,7 +87,7 @@ def holder() -> Iterator[Holder]:
 def recording(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A recording of an FMU's outputs, made by ``coupler run --record``."""
     folder = tmp_path_factory.mktemp("recorded")
-    (folder / "ramp.ssd").write_text(SSD)
+    SSD.write(folder / "ramp.ssd")
     subprocess.run(
         [
             COUPLER,
@@ -132,7 +122,7 @@ def refusal(command: list[str], port: int) -> str:
 def test_a_taken_port_is_refused_naming_its_holder(
     service: str, holder: Holder, recording: Path, tmp_path: Path
 ) -> None:
-    (tmp_path / "ramp.ssd").write_text(SSD)
+    SSD.write(tmp_path / "ramp.ssd")
     values = {
         "port": str(holder.port),
         "recording": str(recording),

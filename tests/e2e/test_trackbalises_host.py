@@ -20,7 +20,8 @@ import numpy as np
 import pytest
 
 from balise_fmu.build import build_track_balises
-from coupler.testing import free_port
+from coupler.testing import Component, Connector, SystemStructure, free_port, remote
+from coupler.testing.ssd import FMU
 from coupler_orchestrator.options import RunOptions
 from coupler_orchestrator.runner import run_scenario
 from coupler_orchestrator.tools.fleet import Fleet, FleetSpec, ServiceSpec
@@ -38,38 +39,25 @@ OUTPUTS = (
     "longitude",
 )
 
-SSD = """<?xml version="1.0" encoding="UTF-8"?>
-<ssd:SystemStructureDescription version="1.0" name="HostCheck"
-    xmlns:ssd="http://ssp-standard.org/SSP1/SystemStructureDescription"
-    xmlns:ssc="http://ssp-standard.org/SSP1/SystemStructureCommon"
-    xmlns:ssv="http://ssp-standard.org/SSP1/SystemStructureParameterValues">
-  <ssd:System name="HostCheck">
-    <ssd:Elements>
-      <ssd:Component name="Source" type="application/x-fmu-sharedlibrary" source="Source2.fmu">
-        <ssd:Connectors>
-          <ssd:Connector name="ramp" kind="output"><ssc:Real/></ssd:Connector>
-        </ssd:Connectors>
-        <ssd:ParameterBindings><ssd:ParameterBinding><ssd:ParameterValues>
-          <ssv:ParameterSet version="1.0" name="p"><ssv:Parameters>
-            <ssv:Parameter name="slope"><ssv:Real value="SLOPE"/></ssv:Parameter>
-          </ssv:Parameters></ssv:ParameterSet>
-        </ssd:ParameterValues></ssd:ParameterBinding></ssd:ParameterBindings>
-      </ssd:Component>
-      <ssd:Component name="TrackBalises" type="application/x-coupler-grpc"
-                     source="grpc://127.0.0.1:PORT">
-        <ssd:Connectors>
-          <ssd:Connector name="position" kind="input"><ssc:Real unit="m"/></ssd:Connector>
-        </ssd:Connectors>
-      </ssd:Component>
-    </ssd:Elements>
-    <ssd:Connections>
-      <ssd:Connection startElement="Source" startConnector="ramp"
-                      endElement="TrackBalises" endConnector="position"/>
-    </ssd:Connections>
-  </ssd:System>
-  <ssd:Units><ssc:Unit name="m"><ssc:BaseUnit m="1"/></ssc:Unit></ssd:Units>
-</ssd:SystemStructureDescription>
-"""
+
+def host_check(port: int) -> SystemStructure:
+    """Source2 (slope SLOPE, in-process) --ramp--> TrackBalises.position [m], served at ``port``."""
+    source = Component(
+        "Source",
+        "Source2.fmu",
+        type=FMU,
+        connectors=[Connector("ramp", "output", "Real")],
+        parameters={"slope": SLOPE},
+    )
+    position = Connector("position", "input", "Real", "m")
+    balises = remote("TrackBalises", f"grpc://127.0.0.1:{port}", position)
+    return SystemStructure(
+        "HostCheck",
+        [source, balises],
+        [("Source.ramp", "TrackBalises.position")],
+        stop_time=None,
+        units={"m": {"m": 1}},
+    )
 
 
 @pytest.mark.slow
@@ -79,8 +67,7 @@ async def test_host_under_coupler_run_equals_fmpy(tmp_path: Path) -> None:
     fmu = build_track_balises(TEST_LINE, tmp_path / "TrackBalises.fmu")
     shutil.copy(SOURCE_FMU, tmp_path / "Source2.fmu")
     port = free_port()
-    ssd = tmp_path / "SystemStructure.ssd"
-    ssd.write_text(SSD.replace("SLOPE", repr(SLOPE)).replace("PORT", str(port)))
+    ssd = host_check(port).write(tmp_path / "SystemStructure.ssd")
 
     # one sample per communication point, each exactly what the Source FMU computes
     times = np.arange(0.0, STOP + STEP, STEP)

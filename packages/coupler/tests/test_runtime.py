@@ -21,6 +21,7 @@ from coupler.errors import ParticipantError, ParticipantUnavailable, ScenarioErr
 from coupler.examples.gain import GainParticipant
 from coupler.participant import EndRun, HealthReport, Values
 from coupler.server import ParticipantServer
+from coupler.testing import served
 from coupler.v1 import component_pb2 as pb
 from coupler.v1 import component_pb2_grpc as pb_grpc
 
@@ -139,9 +140,7 @@ class Faulty(GainParticipant):
 
 
 async def test_participant_exception_is_internal_and_server_keeps_serving() -> None:
-    server = ParticipantServer(Faulty())
-    await server.start()
-    try:
+    async with served(Faulty()) as server:
         async with RemoteParticipant(server.address, streaming=False) as remote:
             await remote.initialize(setup())
             with pytest.raises(
@@ -161,8 +160,6 @@ async def test_participant_exception_is_internal_and_server_keeps_serving() -> N
             await eventually(lambda: remote.initialize(setup("next")))
             assert (await remote.do_step(0.0, 0.5, {"u": 1.0}))["x"] == 0.5
             await remote.terminate()
-    finally:
-        await server.stop(grace=0.1)
 
 
 class Varying(GainParticipant):
@@ -256,9 +253,7 @@ class WrapsASimulator(GainParticipant):
 
 async def test_health_carries_the_participants_reason() -> None:
     participant = WrapsASimulator()
-    server = ParticipantServer(participant)
-    await server.start()
-    try:
+    async with served(participant) as server:
         remote = RemoteParticipant(server.address, connect_timeout=0.3)
         with pytest.raises(ParticipantUnavailable) as waiting:
             await remote.open()
@@ -268,8 +263,6 @@ async def test_health_carries_the_participants_reason() -> None:
         await participant.report(None)
         async with RemoteParticipant(server.address, connect_timeout=2.0) as remote:
             assert (await remote.initialize(setup(gain=2.0)))["y"] == 0.0
-    finally:
-        await server.stop(grace=0.1)
     reason = "health is NOT_SERVING: simulator at http://sim:1 is down"
     assert reason in str(waiting.value) and reason in str(probed.value)
 
@@ -375,18 +368,16 @@ class Emptying(GainParticipant):
 
 @pytest.mark.parametrize("streaming", [False, True])
 async def test_a_participant_may_end_the_run(streaming: bool) -> None:
-    server = ParticipantServer(Emptying())
-    await server.start()
-    try:
-        async with RemoteParticipant(server.address, streaming=streaming) as remote:
-            await remote.initialize(setup())
-            assert (await remote.do_step(0.0, 0.5, {"u": 1.0}))["x"] == 0.5
-            with pytest.raises(EndRun, match="tank empty at t=1") as info:
-                await remote.do_step(0.5, 0.5, {"u": 1.0})
-            assert info.value.outputs["x"] == 1.0
-            await remote.terminate("participant asked")
-    finally:
-        await server.stop(grace=0.1)
+    async with (
+        served(Emptying()) as server,
+        RemoteParticipant(server.address, streaming=streaming) as remote,
+    ):
+        await remote.initialize(setup())
+        assert (await remote.do_step(0.0, 0.5, {"u": 1.0}))["x"] == 0.5
+        with pytest.raises(EndRun, match="tank empty at t=1") as info:
+            await remote.do_step(0.5, 0.5, {"u": 1.0})
+        assert info.value.outputs["x"] == 1.0
+        await remote.terminate("participant asked")
 
 
 @pytest.mark.parametrize(

@@ -19,6 +19,7 @@ from coupler.examples.gain import GainParticipant
 from coupler.health import probe
 from coupler.security import ClientSecurity, ServerSecurity
 from coupler.server import ParticipantServer
+from coupler.testing import served
 from coupler_dev.devcerts import DevPki, write_pki
 
 SETUP = RunSetup(run_id="tls", start_time=0.0, step_size=0.5)
@@ -35,21 +36,13 @@ def other_pki(tmp_path_factory: pytest.TempPathFactory) -> DevPki:
     return write_pki(tmp_path_factory.mktemp("other"))
 
 
-async def started(security: ServerSecurity) -> ParticipantServer:
-    server = ParticipantServer(GainParticipant(), security=security)
-    await server.start()
-    return server
-
-
 @pytest.fixture
 async def mtls_server(pki: DevPki) -> AsyncIterator[ParticipantServer]:
-    server = await started(
-        ServerSecurity(
-            cert=pki.server_cert, key=pki.server_key, client_ca=pki.ca, token_file=pki.token
-        )
+    security = ServerSecurity(
+        cert=pki.server_cert, key=pki.server_key, client_ca=pki.ca, token_file=pki.token
     )
-    yield server
-    await server.stop(grace=0.1)
+    async with served(GainParticipant(), security=security) as server:
+        yield server
 
 
 async def one_step(address: str, security: ClientSecurity) -> float:
@@ -61,12 +54,10 @@ async def one_step(address: str, security: ClientSecurity) -> float:
 
 
 async def test_tls_with_the_right_ca(pki: DevPki) -> None:
-    server = await started(ServerSecurity(cert=pki.server_cert, key=pki.server_key))
-    try:
+    security = ServerSecurity(cert=pki.server_cert, key=pki.server_key)
+    async with served(GainParticipant(), security=security) as server:
         assert server.address.startswith("grpcs://127.0.0.1:")
         assert await one_step(server.address, ClientSecurity(ca=pki.ca)) == 3.0
-    finally:
-        await server.stop(grace=0.1)
 
 
 async def test_mutual_tls_and_token_accepted(mtls_server: ParticipantServer, pki: DevPki) -> None:
@@ -115,28 +106,22 @@ async def test_a_client_certificate_from_another_ca_is_refused(
 async def test_a_missing_or_wrong_token_is_unauthenticated(
     pki: DevPki, tmp_path: Path, token: str | None, message: str
 ) -> None:
-    server = await started(ServerSecurity(token_file=pki.token))
     token_file = None
     if token is not None:
         token_file = tmp_path / "token"
         token_file.write_text(token)
-    try:
+    async with served(GainParticipant(), security=ServerSecurity(token_file=pki.token)) as server:
         await probe(server.address)  # health answers without a token
         with pytest.raises(ParticipantError, match=message) as info:
             await one_step(server.address, ClientSecurity(token_file=token_file))
         assert info.value.status == "UNAUTHENTICATED"
         assert await one_step(server.address, ClientSecurity(token_file=pki.token)) == 3.0
-    finally:
-        await server.stop(grace=0.1)
 
 
 async def test_a_token_is_checked_on_the_step_stream_too(pki: DevPki, tmp_path: Path) -> None:
     """The stream is opened after Initialize: a stolen Initialize does not open it."""
-    server = await started(ServerSecurity(token_file=pki.token))
-    try:
+    async with served(GainParticipant(), security=ServerSecurity(token_file=pki.token)) as server:
         assert await one_step(server.address, ClientSecurity(token_file=pki.token)) == 3.0
-    finally:
-        await server.stop(grace=0.1)
 
 
 def test_plaintext_off_loopback_needs_insecure() -> None:
@@ -168,16 +153,14 @@ def test_an_unreadable_secret_names_the_file(tmp_path: Path) -> None:
 
 async def test_a_health_port_answers_plaintext_probes_and_nothing_else(pki: DevPki) -> None:
     """Kubernetes gRPC probes and Docker healthchecks cannot do TLS: the health-only port."""
-    server = await started(
-        ServerSecurity(
-            cert=pki.server_cert,
-            key=pki.server_key,
-            client_ca=pki.ca,
-            token_file=pki.token,
-            health_port=0,
-        )
+    security = ServerSecurity(
+        cert=pki.server_cert,
+        key=pki.server_key,
+        client_ca=pki.ca,
+        token_file=pki.token,
+        health_port=0,
     )
-    try:
+    async with served(GainParticipant(), security=security) as server:
         assert server.health_port
         health = f"grpc://127.0.0.1:{server.health_port}"
         await probe(health)  # SERVING, plaintext, no certificate, no token
@@ -187,5 +170,3 @@ async def test_a_health_port_answers_plaintext_probes_and_nothing_else(pki: DevP
         await server.stop(grace=0.1)
         with pytest.raises(ParticipantUnavailable):
             await probe(health, connect_timeout=0.5)
-    finally:
-        await server.stop(grace=0.1)

@@ -4,6 +4,7 @@ started, whichever way the test leaves the block."""
 
 from __future__ import annotations
 
+import contextlib
 import os
 import socket
 import subprocess
@@ -18,6 +19,7 @@ from coupler.examples.gain import GainParticipant
 from coupler.testing import (
     eventually,
     free_port,
+    free_ports,
     process_group,
     served,
     served_in_thread,
@@ -136,3 +138,11 @@ def test_free_port_is_free() -> None:
     port = free_port()
     with socket.socket() as taken:
         taken.bind(("127.0.0.1", port))
+
+
+def test_free_ports_are_different_and_free() -> None:
+    ports = free_ports(8)
+    assert len(set(ports)) == 8
+    with contextlib.ExitStack() as stack:
+        for port in ports:
+            stack.enter_context(socket.socket()).bind(("127.0.0.1", port))

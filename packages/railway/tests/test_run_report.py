@@ -21,29 +21,21 @@ import pytest
 
 from coupler.channels import Causality, Channel, Description, RunSetup, Value, ValueType
 from coupler.participant import Participant, Values
-from coupler.testing import served_in_thread
+from coupler.testing import SystemStructure, remote, served_in_thread
 from coupler_railway.messages import BALISE_DETECTIONS
 
 from .test_scoring import ROWS, detections
 
-SSD = """<?xml version="1.0" encoding="UTF-8"?>
-<ssd:SystemStructureDescription version="1.0" name="Scored"
-    xmlns:ssd="http://ssp-standard.org/SSP1/SystemStructureDescription">
-  <ssd:System name="Scored">
-    <ssd:Elements>
-      <ssd:Component name="Perception" type="application/x-coupler-grpc"
-                     source="grpc://127.0.0.1:{perception}">
-        <ssd:Connectors><ssd:Connector name="detections" kind="output"/></ssd:Connectors>
-      </ssd:Component>
-      <ssd:Component name="TrackBalises" type="application/x-coupler-grpc"
-                     source="grpc://127.0.0.1:{balises}">
-        <ssd:Connectors><ssd:Connector name="passed_in_step" kind="output"/></ssd:Connectors>
-      </ssd:Component>
-    </ssd:Elements>
-  </ssd:System>
-  <ssd:DefaultExperiment startTime="0" stopTime="60"/>
-</ssd:SystemStructureDescription>
-"""
+LOOPBACK = "grpc://127.0.0.1:{}"
+
+
+def scored(*, perception: int | None, balises: int) -> SystemStructure:
+    """Perception (when served) and TrackBalises, each alone, 0 .. 60 s."""
+    components = [
+        remote("Perception", LOOPBACK.format(perception), outputs=["detections"]),
+        remote("TrackBalises", LOOPBACK.format(balises), outputs=["passed_in_step"]),
+    ]
+    return SystemStructure("Scored", components[perception is None :], stop_time=60)
 
 
 class Table(Participant):
@@ -86,8 +78,7 @@ def test_coupler_run_writes_the_perception_report(tmp_path: Path) -> None:
     )
     out = tmp_path / "run"
     with served_in_thread(perception) as one, served_in_thread(balises) as two:
-        ssd = tmp_path / "scored.ssd"
-        ssd.write_text(SSD.format(perception=one.port, balises=two.port))
+        ssd = scored(perception=one.port, balises=two.port).write(tmp_path / "scored.ssd")
         coupler = Path(sys.executable).with_name("coupler")
         done = subprocess.run(
             [str(coupler), "run", str(ssd), "--step", "1", "--out", str(out)],
@@ -120,10 +111,7 @@ def test_a_run_without_detections_has_no_report(tmp_path: Path) -> None:
     )
     out = tmp_path / "run"
     with served_in_thread(balises) as server:
-        ssd = tmp_path / "plain.ssd"
-        text = SSD.format(perception=0, balises=server.port)
-        start = text.index('      <ssd:Component name="Perception"')
-        ssd.write_text(text[:start] + text[text.index('      <ssd:Component name="Track') :])
+        ssd = scored(perception=None, balises=server.port).write(tmp_path / "plain.ssd")
         coupler = Path(sys.executable).with_name("coupler")
         done = subprocess.run(
             [str(coupler), "run", str(ssd), "--step", "1", "--stop-time", "3", "--out", str(out)],

@@ -20,6 +20,7 @@ import pytest
 from coupler.channels import RunSetup
 from coupler.client import RemoteParticipant
 from coupler.server import ParticipantServer
+from coupler_dev.browser import chromium
 from coupler_railway import Infrastructure, load_infrastructure
 from mapserver.__main__ import build_state
 from mapserver.config import MapServerSettings
@@ -244,33 +245,11 @@ def stalled_socket(port: int, path: str = "/api/events") -> socket.socket:
     return sock
 
 
-CHROMIUM = Path("/usr/bin/chromium")
-"""Debian's Chromium; the browser tests skip without it."""
-BROWSER_ARGS = [
-    "--headless=new",
-    "--no-sandbox",
-    "--disable-gpu",
-    "--disable-background-networking",
-    "--disable-component-update",
-    "--disable-sync",
-    "--no-first-run",
-    "--disable-quic",
-]
-
-
 @pytest.fixture
 async def browser() -> AsyncIterator[Any]:
-    """Headless Chromium driven by Playwright."""
-    from playwright.async_api import async_playwright
-
-    async with async_playwright() as playwright:
-        launched = await playwright.chromium.launch(
-            executable_path=str(CHROMIUM), args=BROWSER_ARGS
-        )
-        try:
-            yield launched
-        finally:
-            await launched.close()
+    """Headless Chromium driven by Playwright (coupler_dev.browser)."""
+    async with chromium() as launched:
+        yield launched
 
 
 def page_errors(page: Any) -> list[str]:

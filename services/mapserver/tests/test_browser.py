@@ -10,7 +10,9 @@ from typing import Any
 
 import pytest
 
-from .conftest import CHROMIUM, EXPECTED_IDS, REPO, MapService, Run, page_errors
+from coupler_dev.browser import CHROMIUM
+
+from .conftest import EXPECTED_IDS, REPO, MapService, Run, page_errors
 
 ARTIFACT = REPO / "test-artifacts" / "mapserver.png"
 

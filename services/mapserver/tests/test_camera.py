@@ -20,8 +20,9 @@ from PIL import Image as PillowImage
 
 from coupler.v1.railway_pb2 import BaliseDetection, BaliseDetections, PixelBox
 from coupler.v1.sensors_pb2 import Image
+from coupler_dev.browser import CHROMIUM, NO_CHROMIUM
 
-from .conftest import CHROMIUM, REPO, EventStream, MapService, Run, page_errors
+from .conftest import REPO, EventStream, MapService, Run, page_errors
 
 ARTIFACT = REPO / "test-artifacts" / "mapserver-camera.png"
 BOX = (380, 400, 420, 410)  # left, top, right, bottom
@@ -114,7 +115,7 @@ async def test_a_bad_camera_input_is_ignored_and_the_run_goes_on(
     assert service.state.steps == 2
 
 
-@pytest.mark.skipif(not CHROMIUM.exists(), reason="Debian's chromium is not installed")
+@pytest.mark.skipif(not CHROMIUM.exists(), reason=NO_CHROMIUM)
 async def test_the_page_shows_the_frame_with_its_boxes_in_chromium(
     service: MapService, run: Run, browser: Any
 ) -> None:

@@ -14,13 +14,14 @@ import pytest
 from aiohttp import web
 from PIL import Image
 
+from coupler_dev.browser import CHROMIUM, NO_CHROMIUM
 from mapserver.config import MapServerSettings
 
-from .conftest import CHROMIUM, REPO, TEST_LINE, MapService, Run, page_errors
+from .conftest import REPO, TEST_LINE, MapService, Run, page_errors
 
 ARTIFACT = REPO / "test-artifacts" / "mapserver-controls.png"
 
-pytestmark = pytest.mark.skipif(not CHROMIUM.exists(), reason="Debian's chromium is not installed")
+pytestmark = pytest.mark.skipif(not CHROMIUM.exists(), reason=NO_CHROMIUM)
 
 
 class TileServer:

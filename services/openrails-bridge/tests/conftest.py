@@ -7,7 +7,6 @@ served by a real ParticipantServer, driven through a RemoteParticipant.
 from __future__ import annotations
 
 import copy
-import socket
 from collections.abc import AsyncIterator, Awaitable, Callable
 from contextlib import AbstractAsyncContextManager, asynccontextmanager
 from typing import Any
@@ -16,7 +15,7 @@ import pytest
 from aiohttp import web
 
 from coupler.client import RemoteParticipant
-from coupler.server import ParticipantServer
+from coupler.testing import free_port, served
 from openrails_bridge.__main__ import build
 from openrails_bridge.config import BridgeSettings
 from openrails_mock.api import create_app
@@ -142,15 +141,14 @@ def bridge() -> Bridge:
     ) -> AsyncIterator[RemoteParticipant]:
         settings.setdefault("request_timeout_s", 2.0)
         settings.setdefault("ready_timeout_s", 5.0)
-        server = ParticipantServer(build(BridgeSettings(openrails_url=url, **settings)))
-        try:
-            await server.start()
-            async with RemoteParticipant(
+        participant = build(BridgeSettings(openrails_url=url, **settings))
+        async with (
+            served(participant) as server,
+            RemoteParticipant(
                 server.address, name="OpenRails", connect_timeout=connect_timeout
-            ) as remote:
-                yield remote
-        finally:
-            await server.stop(grace=0.1)
+            ) as remote,
+        ):
+            yield remote
 
     return _bridge
 
@@ -158,7 +156,4 @@ def bridge() -> Bridge:
 @pytest.fixture
 def closed_port() -> int:
     """A port nothing listens on."""
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        port: int = s.getsockname()[1]
-    return port
+    return free_port()

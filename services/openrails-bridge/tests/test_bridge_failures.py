@@ -19,7 +19,7 @@ from aiohttp import web
 from coupler.channels import RunSetup
 from coupler.client import RemoteParticipant
 from coupler.errors import ParticipantError, ParticipantUnavailable
-from coupler.server import ParticipantServer
+from coupler.testing import served
 from openrails_bridge.__main__ import build
 from openrails_bridge.config import BridgeSettings
 
@@ -70,10 +70,8 @@ async def test_openrails_down_at_start_then_up(mock: Mock, closed_port: int) -> 
     UNAVAILABLE naming it; once OpenRails answers, SERVING and runs go."""
     url = f"http://127.0.0.1:{closed_port}"
     settings = BridgeSettings(openrails_url=url, ready_timeout_s=0.5, request_timeout_s=0.5)
-    server = ParticipantServer(build(settings))
     started = time.monotonic()
-    await server.start()  # does not wait for OpenRails
-    try:
+    async with served(build(settings)) as server:  # does not wait for OpenRails
         assert time.monotonic() - started < 2.0
         with pytest.raises(ParticipantUnavailable) as waiting:
             async with RemoteParticipant(server.address, name="OpenRails", connect_timeout=0.5):
@@ -86,8 +84,6 @@ async def test_openrails_down_at_start_then_up(mock: Mock, closed_port: int) -> 
         ):
             await remote.initialize(RunSetup(run_id="t", start_time=0.0, step_size=0.2))
             moving = await remote.do_step(0.0, 0.2, {"throttle": 1.0})
-    finally:
-        await server.stop(grace=0.1)
     health = str(waiting.value)
     assert "health is NOT_SERVING: cannot reach OpenRails at " in health
     assert f"{url}/API/READY: ClientConnectorError" in health

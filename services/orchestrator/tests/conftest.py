@@ -29,7 +29,7 @@ from coupler.logs import configure_logging
 from coupler.participant import Participant, Values
 from coupler.security import ServerSecurity
 from coupler.server import ParticipantServer
-from coupler.testing import served_in_thread
+from coupler.testing import Component, Connector, fmu, served_in_thread
 from coupler_orchestrator import native
 from coupler_orchestrator.cli.main import main
 from coupler_orchestrator.master import native_fmu_step as kernel
@@ -63,6 +63,12 @@ def fmus(built_fmus: dict[str, Path], monkeypatch: pytest.MonkeyPatch) -> dict[s
     """The built FMUs; ``${COUPLER_FMU_DIR}`` in the SSDs of data/ names their folder."""
     monkeypatch.setenv("COUPLER_FMU_DIR", str(next(iter(built_fmus.values())).parent))
     return built_fmus
+
+
+def project_fmu(name: str, model: str, *connectors: Connector, **options: Any) -> Component:
+    """Component ``name`` of an SSD: the project's FMU ``model`` ("Source2") in the folder
+    ``${COUPLER_FMU_DIR}`` names (the ``fmus`` fixture sets it); ``options``: ``fmu``'s."""
+    return fmu(name, f"${{COUPLER_FMU_DIR}}/{model}.fmu", *connectors, **options)
 
 
 @dataclass(frozen=True)

@@ -16,8 +16,9 @@ from pathlib import Path
 import pytest
 
 from coupler.server import ParticipantServer
+from coupler.testing import Annotation, SystemStructure
 
-from .conftest import DATA, Coupler
+from .conftest import DATA, Coupler, project_fmu
 
 COUPLER = str(Path(sys.executable).with_name("coupler"))
 SECONDS = "must be a number of seconds > 0 and <= 86400 (24 h)"
@@ -135,33 +136,18 @@ def test_pacing_slower_than_any_lease_is_refused(
     )
 
 
-ANNOTATED = """<?xml version="1.0" encoding="UTF-8"?>
-<ssd:SystemStructureDescription version="1.0" name="Slow"
-    xmlns:ssd="http://ssp-standard.org/SSP1/SystemStructureDescription"
-    xmlns:ssc="http://ssp-standard.org/SSP1/SystemStructureCommon">
-  <ssd:System name="Slow">
-    <ssd:Elements>
-      <ssd:Component name="Source" source="${COUPLER_FMU_DIR}/Source2.fmu">
-        <ssd:Connectors><ssd:Connector name="ramp" kind="output"/></ssd:Connectors>
-        <ssd:Annotations>
-          <ssc:Annotation type="org.coupler.component">
-            <c:Component xmlns:c="org.coupler.component" callTimeout="TIMEOUT"/>
-          </ssc:Annotation>
-        </ssd:Annotations>
-      </ssd:Component>
-    </ssd:Elements>
-  </ssd:System>
-  <ssd:DefaultExperiment startTime="0" stopTime="1"/>
-</ssd:SystemStructureDescription>
-"""
+def annotated(timeout: str) -> SystemStructure:
+    """Source (FMI 2) alone, with a call timeout of ``timeout`` in its component annotation."""
+    bound = Annotation("org.coupler.component", "Component", {"callTimeout": timeout})
+    source = project_fmu("Source", "Source2", outputs=["ramp"], annotations=[bound])
+    return SystemStructure("Slow", [source])
 
 
 @pytest.mark.parametrize("timeout", ["INF", "1e9", "0"])
 def test_a_components_call_timeout_is_bounded(
     fmus: dict[str, Path], coupler: Coupler, tmp_path: Path, timeout: str
 ) -> None:
-    ssd = tmp_path / "slow.ssd"
-    ssd.write_text(ANNOTATED.replace("TIMEOUT", timeout))
+    ssd = annotated(timeout).write(tmp_path / "slow.ssd")
     outcome = coupler("validate", ssd, "--step", "0.5")
     assert outcome.code == 1
-    assert "slow.ssd line 11" in outcome.err and f"callTimeout {SECONDS}" in outcome.err
+    assert "slow.ssd line 13" in outcome.err and f"callTimeout {SECONDS}" in outcome.err

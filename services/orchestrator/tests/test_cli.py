@@ -17,6 +17,7 @@ from pathlib import Path
 import pytest
 
 from coupler.server import ParticipantServer
+from coupler.testing import SystemStructure, fmu
 from coupler_orchestrator.observer import RunEnd, RunInfo
 from coupler_orchestrator.outputs.progress import ProgressLines
 
@@ -89,38 +90,29 @@ def test_progress_lines_when_not_on_a_terminal(tmp_path: Path) -> None:
 
 # The first hour's papercuts: what a new user typed, and what the command must say.
 
-SSD = """<?xml version="1.0" encoding="UTF-8"?>
-<ssd:SystemStructureDescription version="1.0" name="T"
-    xmlns:ssd="http://ssp-standard.org/SSP1/SystemStructureDescription"
-    xmlns:ssc="http://ssp-standard.org/SSP1/SystemStructureCommon">
-  <ssd:System name="T">
-    <ssd:Elements>
-      <ssd:Component name="A" source="{fmus}/Source2.fmu"/>
-      <ssd:Component name="B" source="{fmus}/Integrator2.fmu">
-        <ssd:Connectors><ssd:Connector name="u" kind="input"/></ssd:Connectors>
-      </ssd:Component>
-    </ssd:Elements>
-    <ssd:Connections>
-      <ssd:Connection startElement="A" startConnector="ramp" endElement="B" endConnector="u"/>
-    </ssd:Connections>
-  </ssd:System>
-  <ssd:DefaultExperiment startTime="0" stopTime="1"{step}/>
-</ssd:SystemStructureDescription>
-"""
 
-
-RAMP = '<ssd:Connectors><ssd:Connector name="ramp" kind="output"/></ssd:Connectors>'
+def chain(fmus: dict[str, Path], *, ramp: bool = False) -> str:
+    """A (Source2) --ramp--> B (Integrator2); A's ``ramp`` connector declared or not."""
+    return SystemStructure(
+        "T",
+        components=[
+            fmu("A", fmus["Source2"], outputs=["ramp"] if ramp else []),
+            fmu("B", fmus["Integrator2"], inputs=["u"]),
+        ],
+        connections=[("A.ramp", "B.u")],
+        stop_time=1,
+    ).xml()
 
 
 def test_an_undeclared_connector_says_how_to_declare_it(
     coupler: Coupler, fmus: dict[str, Path], tmp_path: Path
 ) -> None:
     ssd = tmp_path / "t.ssd"
-    ssd.write_text(SSD.format(fmus=fmus["Source2"].parent, step=""))
+    ssd.write_text(chain(fmus))
     outcome = coupler("validate", ssd, "--step", "0.1")
     assert outcome.code == 1
     assert (
-        "t.ssd line 13: connection A.ramp -> B.u: component 'A' declares no connector 'ramp' "
+        "t.ssd line 16: connection A.ramp -> B.u: component 'A' declares no connector 'ramp' "
         "(it declares none); a connection joins declared connectors: add "
         '<ssd:Connector name="ramp" kind="output"/> to its <ssd:Connectors> (`coupler '
         "describe` lists the participant's channels)"
@@ -132,7 +124,7 @@ def test_a_step_size_in_the_default_experiment_says_where_a_step_goes(
     coupler: Coupler, fmus: dict[str, Path], tmp_path: Path
 ) -> None:
     ssd = tmp_path / "t.ssd"
-    ssd.write_text(SSD.format(fmus=fmus["Source2"].parent, step=' stepSize="0.1"'))
+    ssd.write_text(chain(fmus).replace('stopTime="1"/>', 'stopTime="1" stepSize="0.1"/>'))
     outcome = coupler("validate", ssd)
     assert outcome.code == 1
     assert (
@@ -146,13 +138,9 @@ def test_a_step_size_in_the_default_experiment_says_where_a_step_goes(
     # the fix it gives works: that annotation carries the step
     annotation = re.search(r"<ssd:Annotations>.*</ssd:Annotations>", outcome.err)
     assert annotation is not None
-    source = f'<ssd:Component name="A" source="{fmus["Source2"]}"/>'
-    assert source in SSD.format(fmus=fmus["Source2"].parent, step="")
-    fixed = (
-        SSD.format(fmus=fmus["Source2"].parent, step="")
-        .replace(source, source.replace("/>", ">" + RAMP + "</ssd:Component>"))
-        .replace('stopTime="1"/>', f'stopTime="1">{annotation[0]}</ssd:DefaultExperiment>')
-    )
+    fixed = chain(fmus, ramp=True)
+    assert 'stopTime="1"/>' in fixed
+    fixed = fixed.replace('stopTime="1"/>', f'stopTime="1">{annotation[0]}</ssd:DefaultExperiment>')
     ssd.write_text(fixed)
     outcome = coupler("run", ssd, "--out", tmp_path / "out")
     assert outcome.code == 0, outcome.err

@@ -29,68 +29,38 @@ from hypothesis import strategies as st
 from coupler.channels import Causality, Channel, Description, RunSetup, Value, ValueType
 from coupler.messages import encode_message
 from coupler.participant import EndRun, Participant, Values
+from coupler.testing import Annotation, Component, SystemStructure, fmu, remote
 from coupler_orchestrator.observer import Column
 from coupler_orchestrator.outputs.csv import csv_field, formatter, row_formatter
 from coupler_railway.messages import TRAIN_STATE
 
-from .conftest import Coupler, serving
+from .conftest import Coupler, project_fmu, serving
 
 pytestmark = pytest.mark.usefixtures("fmus")
 
-HEAD = """<?xml version="1.0" encoding="UTF-8"?>
-<ssd:SystemStructureDescription version="1.0" name="T"
-    xmlns:ssd="http://ssp-standard.org/SSP1/SystemStructureDescription"
-    xmlns:ssc="http://ssp-standard.org/SSP1/SystemStructureCommon">
-  <ssd:System name="T">
-    <ssd:Elements>
-{elements}
-    </ssd:Elements>{connections}
-  </ssd:System>
-  <ssd:DefaultExperiment startTime="{start}" stopTime="{stop}"/>
-</ssd:SystemStructureDescription>
-"""
 
-
-def connectors(*pairs: tuple[str, str]) -> str:
-    """SSD connectors without type or unit: those come from the participant."""
-    if not pairs:
-        return ""
-    items = "".join(f'<ssd:Connector name="{n}" kind="{k}"/>' for n, k in pairs)
-    return f"<ssd:Connectors>{items}</ssd:Connectors>"
-
-
-def remote(name: str, port: int, *pairs: tuple[str, str], extra: str = "") -> str:
-    return (
-        f'      <ssd:Component name="{name}" type="application/x-coupler-grpc" '
-        f'source="grpc://127.0.0.1:{port}">{connectors(*pairs)}{extra}</ssd:Component>'
-    )
-
-
-def fmu(name: str, model: str, *pairs: tuple[str, str]) -> str:
-    return (
-        f'      <ssd:Component name="{name}" source="${{COUPLER_FMU_DIR}}/{model}.fmu">'
-        f"{connectors(*pairs)}</ssd:Component>"
-    )
-
-
-def link(a: str, ca: str, b: str, cb: str) -> str:
-    return (
-        f'      <ssd:Connection startElement="{a}" startConnector="{ca}" '
-        f'endElement="{b}" endConnector="{cb}"/>'
-    )
+def served_at(name: str, port: int, **options: Any) -> Component:
+    """A participant served on 127.0.0.1 at ``port``; its connectors without type or unit:
+    those come from the participant."""
+    return remote(name, f"grpc://127.0.0.1:{port}", **options)
 
 
 def write(
-    tmp_path: Path, elements: list[str], links: list[str], start: float = 0.0, stop: float = 1.0
+    tmp_path: Path,
+    components: list[Component],
+    connections: list[tuple[str, str]],
+    start: float = 0.0,
+    stop: float = 1.0,
 ) -> Path:
-    path = tmp_path / "t.ssd"
-    connections = "\n".join(links)
-    if connections:
-        connections = f"\n    <ssd:Connections>\n{connections}\n    </ssd:Connections>"
-    path.write_text(
-        HEAD.format(elements="\n".join(elements), connections=connections, start=start, stop=stop)
-    )
-    return path
+    system = SystemStructure("T", components, connections, start_time=start, stop_time=stop)
+    return system.write(tmp_path / "t.ssd")
+
+
+def speedo_to_integrator(tmp_path: Path, port: int) -> Path:
+    """Speedo (gRPC at ``port``) --y--> Integ.u (Integrator2 FMU)."""
+    speedo = served_at("Speedo", port, outputs=["y"])
+    integ = project_fmu("Integ", "Integrator2", inputs=["u"])
+    return write(tmp_path, [speedo, integ], [("Speedo.y", "Integ.u")])
 
 
 class Source(Participant):
@@ -133,14 +103,7 @@ def test_kmh_from_a_participant_arrive_as_ms_at_an_fmu(coupler: Coupler, tmp_pat
     initial output).
     """
     with serving(Source("km/h")) as server:
-        path = write(
-            tmp_path,
-            [
-                remote("Speedo", server.port, ("y", "output")),
-                fmu("Integ", "Integrator2", ("u", "input")),
-            ],
-            [link("Speedo", "y", "Integ", "u")],
-        )
+        path = speedo_to_integrator(tmp_path, server.port)
         outcome = coupler("run", path, "--step", "0.25", "--out", tmp_path / "o")
     assert outcome.code == 0, outcome.err
     assert coupler.column(tmp_path / "o", "Integ.x") == [0.0, 2.5, 5.0, 7.5, 10.0]
@@ -148,32 +111,18 @@ def test_kmh_from_a_participant_arrive_as_ms_at_an_fmu(coupler: Coupler, tmp_pat
 
 def test_m_to_s_is_refused_naming_both_ends(coupler: Coupler, tmp_path: Path) -> None:
     with serving(Source("m")) as server:
-        path = write(
-            tmp_path,
-            [
-                remote("Speedo", server.port, ("y", "output")),
-                fmu("Integ", "Integrator2", ("u", "input")),
-            ],
-            [link("Speedo", "y", "Integ", "u")],
-        )
+        path = speedo_to_integrator(tmp_path, server.port)
         outcome = coupler("validate", path, "--step", "0.25")
     assert outcome.code == 1
     assert (
-        "t.ssd line 11: connection Speedo.y -> Integ.u: 'Speedo.y' is in m but 'Integ.u' is in "
+        "t.ssd line 20: connection Speedo.y -> Integ.u: 'Speedo.y' is in m but 'Integ.u' is in "
         "m/s, and m and m s-1 are different dimensions"
     ) in outcome.err
 
 
 def test_a_unit_nobody_understands_is_warned_not_ignored(coupler: Coupler, tmp_path: Path) -> None:
     with serving(Source("parsecs per fortnite")) as server:
-        path = write(
-            tmp_path,
-            [
-                remote("Speedo", server.port, ("y", "output")),
-                fmu("Integ", "Integrator2", ("u", "input")),
-            ],
-            [link("Speedo", "y", "Integ", "u")],
-        )
+        path = speedo_to_integrator(tmp_path, server.port)
         validated = coupler("validate", path, "--step", "0.25")
         ran = coupler("run", path, "--step", "0.25", "--out", tmp_path / "o")
     message = "unit 'parsecs per fortnite' is not understood"
@@ -188,14 +137,14 @@ def test_step_sizes_arrive_exactly_as_configured(coupler: Coupler, tmp_path: Pat
     deltaTime 0.3 gets 0.3 exactly (not 3 * 0.1 = 0.30000000000000004)."""
     every = Source("", name="Every")
     third = Source("", name="Third")
-    slow = (
-        '<ssd:Annotations><ssc:Annotation type="com.avl.model.connect.ssp.component">'
-        '<c:Component xmlns:c="com.avl.model.connect.ssp.component" deltaTime="0.3"/>'
-        "</ssc:Annotation></ssd:Annotations>"
-    )
+    slow = Annotation("com.avl.model.connect.ssp.component", "Component", {"deltaTime": "0.3"})
     with serving(every) as a, serving(third) as b:
         path = write(
-            tmp_path, [remote("Every", a.port), remote("Third", b.port, extra=slow)], [], 0.2, 2.0
+            tmp_path,
+            [served_at("Every", a.port), served_at("Third", b.port, annotations=[slow])],
+            [],
+            0.2,
+            2.0,
         )
         outcome = coupler("run", path, "--step", "0.1", "--out", tmp_path / "o")
     assert outcome.code == 0, outcome.err
@@ -249,10 +198,10 @@ def test_a_grpc_participant_ends_the_run(coupler: Coupler, tmp_path: Path) -> No
         path = write(
             tmp_path,
             [
-                remote("Tank", server.port, ("y", "output")),
-                fmu("Integ", "Integrator2", ("u", "input")),
+                served_at("Tank", server.port, outputs=["y"]),
+                project_fmu("Integ", "Integrator2", inputs=["u"]),
             ],
-            [link("Tank", "y", "Integ", "u")],
+            [("Tank.y", "Integ.u")],
         )
         outcome = coupler("run", path, "--step", "0.25", "--out", tmp_path / "o")
     assert outcome.code == 0, outcome.err
@@ -276,7 +225,7 @@ def test_an_output_missing_from_an_answer_fails_the_run_naming_it(
     coupler: Coupler, tmp_path: Path
 ) -> None:
     with serving(Forgetful("", name="Forgetful")) as server:
-        path = write(tmp_path, [remote("Forgetful", server.port)], [])
+        path = write(tmp_path, [served_at("Forgetful", server.port)], [])
         outcome = coupler("run", path, "--step", "0.25", "--out", tmp_path / "o")
     assert outcome.code == 1
     summary = coupler.summary(tmp_path / "o")
@@ -368,8 +317,8 @@ def test_an_unpacked_ssp_folder_runs_like_its_archive(
 def test_gauss_seidel_refuses_a_component_feeding_itself(coupler: Coupler, tmp_path: Path) -> None:
     path = write(
         tmp_path,
-        [fmu("Feed", "Feedthrough2", ("real_out", "output"), ("real_in", "input"))],
-        [link("Feed", "real_out", "Feed", "real_in")],
+        [project_fmu("Feed", "Feedthrough2", inputs=["real_in"], outputs=["real_out"])],
+        [("Feed.real_out", "Feed.real_in")],
     )
     refused = coupler("validate", path, "--step", "0.5", "--algorithm", "gauss-seidel")
     assert refused.code == 1
@@ -392,7 +341,7 @@ def test_gauss_seidel_refuses_a_component_feeding_itself(coupler: Coupler, tmp_p
 def test_grids_that_cannot_run_are_refused(
     coupler: Coupler, tmp_path: Path, options: list[str], message: str
 ) -> None:
-    path = write(tmp_path, [fmu("Feed", "Feedthrough2")], [])
+    path = write(tmp_path, [project_fmu("Feed", "Feedthrough2")], [])
     opts = options if "--step" in options else [*options, "--step", "0.5"]
     outcome = coupler("run", path, "--out", tmp_path / "o", *opts)
     assert outcome.code == 1
@@ -402,7 +351,7 @@ def test_grids_that_cannot_run_are_refused(
 
 
 def test_an_infinite_openmcx_delta_time_is_refused(coupler: Coupler, tmp_path: Path) -> None:
-    path = write(tmp_path, [fmu("Feed", "Feedthrough2")], [])
+    path = write(tmp_path, [project_fmu("Feed", "Feedthrough2")], [])
     text = path.read_text().replace(
         '<ssd:DefaultExperiment startTime="0.0" stopTime="1.0"/>',
         '<ssd:DefaultExperiment startTime="0" stopTime="1"><ssd:Annotations>'
@@ -470,7 +419,7 @@ def test_a_train_state_column_reads_as_json(coupler: Coupler, tmp_path: Path) ->
     finds coupler.v1.TrainState through the installed package's ``coupler.messages`` entry
     point and writes the column as JSON, not hex."""
     with serving(Train()) as server:
-        path = write(tmp_path, [remote("Train", server.port)], [])
+        path = write(tmp_path, [served_at("Train", server.port)], [])
         outcome = coupler.process("run", path, "--step", "0.5", "--out", tmp_path / "o")
     assert outcome.code == 0, outcome.err
     cells = [row["Train.state"] for row in coupler.results(tmp_path / "o")]
@@ -491,9 +440,7 @@ def test_an_archive_and_its_fmus_share_one_unpack_budget(
         for item in source.infolist():
             copy.writestr(item, source.read(item))
         copy.writestr("resources/padding.bin", bytes(1024 * 1024), zipfile.ZIP_DEFLATED)
-    ssd = write(
-        tmp_path, ['      <ssd:Component name="Source" source="resources/Source2.fmu"/>'], []
-    )
+    ssd = write(tmp_path, [fmu("Source", "resources/Source2.fmu")], [])
     archive = tmp_path / "padded.ssp"
     with zipfile.ZipFile(archive, "w") as zf:
         zf.write(ssd, "SystemStructure.ssd")
@@ -528,10 +475,10 @@ def test_isolated_fmus_share_the_run_s_one_unpack_budget(
     """Three FMUs unpacking 24 MB each against --unpack-limit 64: refused before any of them
     starts, naming the budget, in process and isolated alike (each isolated host used to get
     a 2 GiB budget of its own: the run completed)."""
-    components = []
+    components: list[Component] = []
     for i in (1, 2, 3):
         padded_fmu(fmus["Source2"], tmp_path / f"Big{i}.fmu", 24)
-        components.append(f'      <ssd:Component name="Big{i}" source="Big{i}.fmu"/>')
+        components.append(fmu(f"Big{i}", f"Big{i}.fmu"))
     ssd = write(tmp_path, components, [])
     command = [
         sys.executable, "-m", "coupler_orchestrator", "run", str(ssd), "--out",

@@ -11,6 +11,7 @@ import os
 import subprocess
 import sys
 import zipfile
+from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
 
@@ -19,52 +20,33 @@ import pytest
 from coupler.channels import Capabilities, Description
 from coupler.examples.gain import GainParticipant
 from coupler.server import ParticipantServer
-from coupler.testing import free_port
+from coupler.testing import (
+    Annotation,
+    Component,
+    Connection,
+    Connector,
+    SystemStructure,
+    fmu,
+    free_port,
+    remote,
+)
 
-from .conftest import DATA, Coupler, Stepper, serving
+from .conftest import DATA, Coupler, Stepper, project_fmu, serving
 
 pytestmark = pytest.mark.usefixtures("fmus")
 
-HEAD = """<?xml version="1.0" encoding="UTF-8"?>
-<ssd:SystemStructureDescription version="1.0" name="Bad"
-    xmlns:ssd="http://ssp-standard.org/SSP1/SystemStructureDescription"
-    xmlns:ssc="http://ssp-standard.org/SSP1/SystemStructureCommon">
-  <ssd:System name="Bad">
-    <ssd:Elements>
-{elements}
-    </ssd:Elements>{connections}
-  </ssd:System>
-  <ssd:DefaultExperiment startTime="0" stopTime="1"/>
-</ssd:SystemStructureDescription>
-"""
+
+def ssd(
+    tmp_path: Path,
+    components: Sequence[Component],
+    connections: Sequence[Connection | tuple[str, str]] = (),
+    name: str = "bad.ssd",
+) -> Path:
+    return SystemStructure("Bad", components, connections).write(tmp_path / name)
 
 
-def ssd(tmp_path: Path, elements: str, connections: str = "", name: str = "bad.ssd") -> Path:
-    path = tmp_path / name
-    if connections:
-        connections = f"\n    <ssd:Connections>\n{connections}\n    </ssd:Connections>"
-    path.write_text(HEAD.format(elements=elements, connections=connections))
-    return path
-
-
-def fmu(name: str, model: str, connectors: str = "", annotations: str = "") -> str:
-    if connectors:
-        connectors = f"<ssd:Connectors>{connectors}</ssd:Connectors>"
-    return (
-        f'      <ssd:Component name="{name}" source="${{COUPLER_FMU_DIR}}/{model}.fmu">'
-        f"{connectors}{annotations}</ssd:Component>"
-    )
-
-
-def connector(name: str, kind: str, type_: str = "Real") -> str:
-    return f'<ssd:Connector name="{name}" kind="{kind}"><ssc:{type_}/></ssd:Connector>'
-
-
-def link(a: str, ca: str, b: str, cb: str, inner: str = "") -> str:
-    return (
-        f'      <ssd:Connection startElement="{a}" startConnector="{ca}" '
-        f'endElement="{b}" endConnector="{cb}">{inner}</ssd:Connection>'
-    )
+def connector(name: str, kind: str, type_: str = "Real") -> Connector:
+    return Connector(name, kind, type_)
 
 
 def assert_refused(coupler: Coupler, path: Path, *fragments: str, command: str = "validate") -> str:
@@ -86,18 +68,17 @@ def test_malformed_xml(coupler: Coupler, tmp_path: Path, command: str) -> None:
 
 
 def test_schema_violation(coupler: Coupler, tmp_path: Path) -> None:
-    path = ssd(
-        tmp_path, fmu("Source", "Source2").replace("<ssd:Component ", '<ssd:Component bogus="1" ')
-    )
-    assert_refused(coupler, path, "bad.ssd line 7: schema violation", "bogus")
+    path = ssd(tmp_path, [project_fmu("Source", "Source2")])
+    path.write_text(path.read_text().replace("<ssd:Component ", '<ssd:Component bogus="1" '))
+    assert_refused(coupler, path, "bad.ssd line 8: schema violation", "bogus")
 
 
 def test_unknown_component_type(coupler: Coupler, tmp_path: Path) -> None:
-    path = ssd(tmp_path, '      <ssd:Component name="A" type="application/x-other" source="x"/>')
+    path = ssd(tmp_path, [Component("A", "x", type="application/x-other")])
     assert_refused(
         coupler,
         path,
-        "bad.ssd line 7: component 'A' has type 'application/x-other', which is not supported",
+        "bad.ssd line 8: component 'A' has type 'application/x-other', which is not supported",
         "use application/x-fmu-sharedlibrary or application/x-coupler-grpc",
     )
 
@@ -108,14 +89,15 @@ def test_duplicate_component_names(coupler: Coupler, tmp_path: Path, command: st
     first silently: "valid (1 components)" and a run of the other FMU)."""
     path = ssd(
         tmp_path,
-        fmu("Source", "Source2", connector("ramp", "output"))
-        + "\n"
-        + fmu("Source", "Integrator2", connector("u", "input")),
+        [
+            project_fmu("Source", "Source2", connector("ramp", "output")),
+            project_fmu("Source", "Integrator2", connector("u", "input")),
+        ],
     )
     assert_refused(
         coupler,
         path,
-        "bad.ssd line 8: element 'Source' in system 'Bad' is already defined at line 7",
+        "bad.ssd line 13: element 'Source' in system 'Bad' is already defined at line 8",
         "rename or remove one of the two",
         command=command,
     )
@@ -125,16 +107,16 @@ def test_duplicate_component_names(coupler: Coupler, tmp_path: Path, command: st
 def test_duplicate_connector_names(coupler: Coupler, tmp_path: Path) -> None:
     path = ssd(
         tmp_path,
-        fmu(
-            "Source",
-            "Source2",
-            connector("ramp", "output") + "\n" + connector("ramp", "parameter"),
-        ),
+        [
+            project_fmu(
+                "Source", "Source2", connector("ramp", "output"), connector("ramp", "parameter")
+            )
+        ],
     )
     assert_refused(
         coupler,
         path,
-        "bad.ssd line 8: connector 'ramp' of component 'Source' is already defined at line 7",
+        "bad.ssd line 11: connector 'ramp' of component 'Source' is already defined at line 10",
     )
 
 
@@ -150,28 +132,28 @@ def test_zip_slip_entry(coupler: Coupler, tmp_path: Path) -> None:
 
 
 def test_missing_fmu(coupler: Coupler, tmp_path: Path) -> None:
-    path = ssd(tmp_path, '      <ssd:Component name="A" source="resources/Missing.fmu"/>')
+    path = ssd(tmp_path, [fmu("A", "resources/Missing.fmu")])
     assert_refused(
         coupler,
         path,
-        "bad.ssd line 7: component 'A': FMU file 'resources/Missing.fmu' does not exist",
+        "bad.ssd line 8: component 'A': FMU file 'resources/Missing.fmu' does not exist",
         "add the FMU",
     )
 
 
 def test_connector_missing_on_the_participant(coupler: Coupler, tmp_path: Path) -> None:
-    path = ssd(tmp_path, fmu("Source", "Source2", connector("speed", "output")))
+    path = ssd(tmp_path, [project_fmu("Source", "Source2", connector("speed", "output"))])
     assert_refused(
         coupler,
         path,
-        "bad.ssd line 7: connector 'Source.speed' does not exist on participant 'Source'",
+        "bad.ssd line 10: connector 'Source.speed' does not exist on participant 'Source'",
         "its channels: slope, offset, amplitude, freq, ramp, sine, counter",
         "rename the connector or the channel",
     )
 
 
 def test_type_mismatch_with_the_participant(coupler: Coupler, tmp_path: Path) -> None:
-    path = ssd(tmp_path, fmu("Source", "Source2", connector("ramp", "output", "Integer")))
+    path = ssd(tmp_path, [project_fmu("Source", "Source2", connector("ramp", "output", "Integer"))])
     assert_refused(
         coupler,
         path,
@@ -182,14 +164,16 @@ def test_type_mismatch_with_the_participant(coupler: Coupler, tmp_path: Path) ->
 def test_type_mismatch_between_connectors(coupler: Coupler, tmp_path: Path) -> None:
     path = ssd(
         tmp_path,
-        fmu("Source", "Source2", connector("ramp", "output"))
-        + fmu("Feed", "Feedthrough3", connector("int_in", "input", "Integer")),
-        link("Source", "ramp", "Feed", "int_in"),
+        [
+            project_fmu("Source", "Source2", connector("ramp", "output")),
+            project_fmu("Feed", "Feedthrough3", connector("int_in", "input", "Integer")),
+        ],
+        [("Source.ramp", "Feed.int_in")],
     )
     assert_refused(
         coupler,
         path,
-        "bad.ssd line 10: connection Source.ramp -> Feed.int_in: connector 'Feed.int_in' "
+        "bad.ssd line 20: connection Source.ramp -> Feed.int_in: connector 'Feed.int_in' "
         "expects Integer, but 'Source.ramp' is Real; connect compatible channels or add a "
         "transformation",
     )
@@ -200,25 +184,27 @@ def test_unconnected_input_without_start_value(
 ) -> None:
     with serving(Stepper()) as server:
         monkeypatch.setenv("STEPPER_PORT", str(server.port))
-        path = ssd(
-            tmp_path,
-            '      <ssd:Component name="S" type="application/x-coupler-grpc" '
-            'source="grpc://127.0.0.1:${STEPPER_PORT}"/>',
-        )
+        path = ssd(tmp_path, [remote("S", "grpc://127.0.0.1:${STEPPER_PORT}")])
         assert_refused(
             coupler,
             path,
-            "bad.ssd line 7: input 'S.aspect' is neither connected nor has a start value",
+            "bad.ssd line 8: input 'S.aspect' is neither connected nor has a start value",
             "connect it or bind a value to it",
         )
 
 
-LOOP = [
-    fmu("Feed", "Feedthrough3", connector("real_in", "input") + connector("real_out", "output"))
-    + fmu("Feed2", "Feedthrough2", connector("real_in", "input") + connector("real_out", "output"))
-    + fmu("Analyzer", "Integrator2", connector("u", "input")),
-    [link("Feed", "real_out", "Feed2", "real_in"), link("Feed2", "real_out", "Analyzer", "u")],
-]
+LOOP = (
+    [
+        project_fmu(
+            "Feed", "Feedthrough3", connector("real_in", "input"), connector("real_out", "output")
+        ),
+        project_fmu(
+            "Feed2", "Feedthrough2", connector("real_in", "input"), connector("real_out", "output")
+        ),
+        project_fmu("Analyzer", "Integrator2", connector("u", "input")),
+    ],
+    [("Feed.real_out", "Feed2.real_in"), ("Feed2.real_out", "Analyzer.u")],
+)
 
 
 @pytest.mark.parametrize("command", ["validate", "run"])
@@ -229,9 +215,7 @@ def test_loop_without_decoupling(coupler: Coupler, tmp_path: Path, command: str)
                        Feed2 --real_out--> Analyzer.u
     """
     elements, links = LOOP
-    path = ssd(
-        tmp_path, elements, "\n".join([*links, link("Feed2", "real_out", "Feed", "real_in")])
-    )
+    path = ssd(tmp_path, elements, [*links, ("Feed2.real_out", "Feed.real_in")])
     outcome = (
         coupler(command, path, "--algorithm", "gauss-seidel", "--out", tmp_path / "o")
         if (command == "run")
@@ -242,15 +226,11 @@ def test_loop_without_decoupling(coupler: Coupler, tmp_path: Path, command: str)
     assert "mark one connection of it decoupled" in outcome.err
     # the same loop runs under Jacobi, and under Gauss-Seidel once a connection is decoupled
     assert coupler("validate", path, "--step", "0.5").code == 0
-    decoupled = (
-        '<ssd:Annotations><ssc:Annotation type="org.coupler.connection">'
-        '<c:Connection xmlns:c="org.coupler.connection" decoupled="true"/>'
-        "</ssc:Annotation></ssd:Annotations>"
-    )
+    decoupled = Annotation("org.coupler.connection", "Connection", {"decoupled": "true"})
     path = ssd(
         tmp_path,
         elements,
-        "\n".join([*links, link("Feed2", "real_out", "Feed", "real_in", decoupled)]),
+        [*links, Connection("Feed2.real_out", "Feed.real_in", [decoupled])],
         name="decoupled.ssd",
     )
     assert coupler("validate", path, "--algorithm", "gauss-seidel", "--step", "0.5").code == 0
@@ -258,15 +238,11 @@ def test_loop_without_decoupling(coupler: Coupler, tmp_path: Path, command: str)
 
 def test_unreachable_participant(coupler: Coupler, tmp_path: Path) -> None:
     port = free_port()
-    path = ssd(
-        tmp_path,
-        f'      <ssd:Component name="Gain" type="application/x-coupler-grpc" '
-        f'source="grpc://127.0.0.1:{port}"/>',
-    )
+    path = ssd(tmp_path, [remote("Gain", f"grpc://127.0.0.1:{port}")])
     outcome = coupler("run", path, "--step", "0.5", "--connect-timeout", "0.3", "--out", tmp_path)
     assert outcome.code == 1
     assert (
-        f"bad.ssd line 7: component 'Gain': Gain.connect [UNAVAILABLE]: not SERVING at "
+        f"bad.ssd line 8: component 'Gain': Gain.connect [UNAVAILABLE]: not SERVING at "
         f"grpc://127.0.0.1:{port} within 0.3 s" in outcome.err
     )
     assert "is the participant running and listening on that address?" in outcome.err
@@ -275,15 +251,17 @@ def test_unreachable_participant(coupler: Coupler, tmp_path: Path) -> None:
 def test_validate_lists_every_problem(coupler: Coupler, tmp_path: Path) -> None:
     path = ssd(
         tmp_path,
-        fmu(
-            "Source",
-            "Source2",
-            connector("speed", "output") + connector("ramp", "output", "Boolean"),
-        )
-        + fmu("Feed", "Feedthrough3", connector("int_in", "input", "Integer"))
-        + '      <ssd:Component name="Far" type="application/x-coupler-grpc" '
-        'source="grpc://127.0.0.1:1"/>',
-        link("Source", "ramp", "Feed", "int_in"),
+        [
+            project_fmu(
+                "Source",
+                "Source2",
+                connector("speed", "output"),
+                connector("ramp", "output", "Boolean"),
+            ),
+            project_fmu("Feed", "Feedthrough3", connector("int_in", "input", "Integer")),
+            remote("Far", "grpc://127.0.0.1:1"),
+        ],
+        [("Source.ramp", "Feed.int_in")],
     )
     outcome = coupler("validate", path, "--connect-timeout", "0.2", "--step", "0.5")
     assert outcome.code == 1
@@ -291,11 +269,11 @@ def test_validate_lists_every_problem(coupler: Coupler, tmp_path: Path) -> None:
     assert len(problems) == 4, outcome.err
     assert "bad.ssd: 4 problems" in outcome.err
     for fragment in (
-        "bad.ssd line 7: connector 'Source.speed' does not exist on participant 'Source'",
-        "bad.ssd line 7: connector 'Source.ramp' expects Boolean, but the participant declares "
+        "bad.ssd line 10: connector 'Source.speed' does not exist on participant 'Source'",
+        "bad.ssd line 11: connector 'Source.ramp' expects Boolean, but the participant declares "
         "Real; declare the connector <ssc:Real/>",
         # the connection is checked once, with the types the participants declare
-        "bad.ssd line 10: connection Source.ramp -> Feed.int_in: connector 'Feed.int_in' expects "
+        "bad.ssd line 22: connection Source.ramp -> Feed.int_in: connector 'Feed.int_in' expects "
         "Integer, but 'Source.ramp' is Real; connect compatible channels or add a transformation",
         "component 'Far': Far.connect [UNAVAILABLE]",
     ):
@@ -352,39 +330,25 @@ class FixedStepGain(GainParticipant):
 
 def test_step_not_a_multiple_of_participant_fixed_step(coupler: Coupler, tmp_path: Path) -> None:
     with serving(FixedStepGain()) as server:
-        path = ssd(
-            tmp_path,
-            f'      <ssd:Component name="Gain" type="application/x-coupler-grpc" '
-            f'source="grpc://127.0.0.1:{server.port}"/>',
-        )
+        path = ssd(tmp_path, [remote("Gain", f"grpc://127.0.0.1:{server.port}")])
         outcome = coupler("validate", path, "--step", "0.3", "--stop-time", "0.6")
         assert outcome.code == 1
         assert (
-            "bad.ssd line 7: participant 'Gain' steps in whole multiples of 0.2 s, but its "
+            "bad.ssd line 8: participant 'Gain' steps in whole multiples of 0.2 s, but its "
             "communication step is 0.3 s; choose --step (or its deltaTime) as a multiple of 0.2 s"
         ) in outcome.err
         assert coupler("validate", path, "--step", "0.4", "--stop-time", "0.8").code == 0
 
 
-LEAKY_SSD = """<?xml version="1.0" encoding="UTF-8"?>
-<ssd:SystemStructureDescription version="1.0" name="Leak"
-    xmlns:ssd="http://ssp-standard.org/SSP1/SystemStructureDescription">
-  <ssd:System name="Leak">
-    <ssd:Elements>
-      <ssd:Component name="A" type="application/x-coupler-grpc"
-                     source="grpc://${LEAK_HOST}:${LEAK_PORT}">
-        <ssd:Connectors><ssd:Connector name="y" kind="output"/></ssd:Connectors>
-      </ssd:Component>
-      <ssd:Component name="B" source="${LEAK_DIR}/b.fmu">
-        <ssd:Connectors><ssd:Connector name="u" kind="input"/></ssd:Connectors>
-      </ssd:Component>
-      <ssd:Component name="C" source="${SCHEME_DIR}/c.fmu">
-        <ssd:Connectors><ssd:Connector name="u" kind="input"/></ssd:Connectors>
-      </ssd:Component>
-    </ssd:Elements>
-  </ssd:System>
-</ssd:SystemStructureDescription>
-"""
+LEAKY_SSD = SystemStructure(
+    "Leak",
+    components=[
+        remote("A", "grpc://${LEAK_HOST}:${LEAK_PORT}", outputs=["y"]),
+        fmu("B", "${LEAK_DIR}/b.fmu", inputs=["u"]),
+        fmu("C", "${SCHEME_DIR}/c.fmu", inputs=["u"]),
+    ],
+    stop_time=None,
+)
 
 
 def test_a_source_in_error_names_its_variables_never_their_values(tmp_path: Path) -> None:
@@ -392,8 +356,7 @@ def test_a_source_in_error_names_its_variables_never_their_values(tmp_path: Path
     source that then does not work is quoted as written, naming the variables — their values
     (here made to look like secrets) are never shown (they were: "source
     'grpc://127.0.0.1:s3cr3t-port' is not of the form ...", "FMU file '/s3cr3t-dir/b.fmu'")."""
-    path = tmp_path / "leak.ssd"
-    path.write_text(LEAKY_SSD)
+    path = LEAKY_SSD.write(tmp_path / "leak.ssd")
     values = {
         "LEAK_HOST": "127.0.0.1",
         "LEAK_PORT": "s3cr3t-port",
@@ -420,7 +383,7 @@ def test_a_fleet_health_url_in_error_names_its_variables_never_their_values(
     """A fleet file's health URL that does not work once expanded: one sentence naming the
     variables (it was a traceback ending "Port could not be cast to integer value as
     's3cr3t-port'")."""
-    (tmp_path / "leak.ssd").write_text(LEAKY_SSD)
+    LEAKY_SSD.write(tmp_path / "leak.ssd")
     fleet = tmp_path / "fleet.toml"
     fleet.write_text(
         '[scenario]\nssp = "leak.ssd"\n\n[[service]]\nname = "gain"\n'

@@ -29,7 +29,8 @@ from coupler.examples.gain import GainParticipant
 from coupler.participant import EndRun, Values
 from coupler.security import ServerSecurity
 from coupler.server import ParticipantServer
-from coupler.testing import free_port
+from coupler.testing import Component, Connector, SystemStructure, free_port
+from coupler.testing.ssd import FMU
 from coupler_dev.devcerts import write_pki
 from coupler_orchestrator.tools import export_fmu as export
 from coupler_orchestrator.tools.export_fmu import fingerprint, write_fmu
@@ -44,32 +45,25 @@ Y = 3.0 * 1.1  # the gain participant's y for STARTS
 # from 0.1 in the last bits (Coupler's are exactly 0.1), with h = 1/8 they are the same.
 STEP = 0.125
 
-GAIN_SSD = """<?xml version="1.0" encoding="UTF-8"?>
-<ssd:SystemStructureDescription version="1.0" name="G"
-    xmlns:ssd="http://ssp-standard.org/SSP1/SystemStructureDescription"
-    xmlns:ssc="http://ssp-standard.org/SSP1/SystemStructureCommon">
-  <ssd:System name="G">
-    <ssd:Elements>
-      <ssd:Component name="Gain" type="{type}" source="{source}">
-        <ssd:Connectors>
-          <ssd:Connector name="gain" kind="parameter"><ssc:Real/></ssd:Connector>
-          <ssd:Connector name="offset" kind="parameter"><ssc:Integer/></ssd:Connector>
-          <ssd:Connector name="u" kind="input"><ssc:Real/></ssd:Connector>
-          <ssd:Connector name="n" kind="input"><ssc:Integer/></ssd:Connector>
-          <ssd:Connector name="flag" kind="input"><ssc:Boolean/></ssd:Connector>
-          <ssd:Connector name="label" kind="input"><ssc:String/></ssd:Connector>
-          <ssd:Connector name="y" kind="output"><ssc:Real/></ssd:Connector>
-          <ssd:Connector name="x" kind="output"><ssc:Real/></ssd:Connector>
-          <ssd:Connector name="count" kind="output"><ssc:Integer/></ssd:Connector>
-          <ssd:Connector name="inverted" kind="output"><ssc:Boolean/></ssd:Connector>
-          <ssd:Connector name="echo" kind="output"><ssc:String/></ssd:Connector>
-        </ssd:Connectors>
-      </ssd:Component>
-    </ssd:Elements>
-  </ssd:System>
-  <ssd:DefaultExperiment startTime="0.0" stopTime="1.0"/>
-</ssd:SystemStructureDescription>
-"""
+GAIN_CONNECTORS = [
+    Connector("gain", "parameter", "Real"),
+    Connector("offset", "parameter", "Integer"),
+    Connector("u", "input", "Real"),
+    Connector("n", "input", "Integer"),
+    Connector("flag", "input", "Boolean"),
+    Connector("label", "input", "String"),
+    Connector("y", "output", "Real"),
+    Connector("x", "output", "Real"),
+    Connector("count", "output", "Integer"),
+    Connector("inverted", "output", "Boolean"),
+    Connector("echo", "output", "String"),
+]
+
+
+def gain_ssd(path: Path, kind: str, source: str | Path) -> Path:
+    """The gain participant alone, as component ``kind`` (an FMU or gRPC) at ``source``."""
+    gain = Component("Gain", str(source), type=kind, connectors=GAIN_CONNECTORS)
+    return SystemStructure("G", [gain], start_time=0.0, stop_time=1.0).write(path)
 
 
 BASE_SYSTEM = re.compile(
@@ -177,8 +171,7 @@ def gain_run(fmu: Path, stop: float = 1.0, step: float = STEP) -> dict[str, Any]
 def direct_run(coupler: Coupler, tmp_path: Path, source: str, kind: str) -> list[dict[str, str]]:
     """`coupler run` of the gain participant alone, with STARTS, steps of STEP to 1.0."""
     short = kind.rsplit("-", 1)[-1]
-    ssd = tmp_path / f"{short}.ssd"
-    ssd.write_text(GAIN_SSD.format(type=kind, source=source))
+    ssd = gain_ssd(tmp_path / f"{short}.ssd", kind, source)
     out = tmp_path / f"results-{short}"
     params = [
         f"--param=Gain.{k}={str(v).lower() if isinstance(v, bool) else v}"
@@ -637,10 +630,7 @@ def test_a_participant_ending_the_run_ends_it_through_the_fmu(
     fmi2Terminated: Coupler, running the FMU, ends the run `terminated` at 0.5 s."""
     with serving(EndingGain()) as ending:
         monkeypatch.setenv("COUPLER_PROXY_ADDRESS", address(ending))
-        ssd = tmp_path / "ending.ssd"
-        ssd.write_text(
-            GAIN_SSD.format(type="application/x-fmu-sharedlibrary", source=exported[fmi])
-        )
+        ssd = gain_ssd(tmp_path / "ending.ssd", FMU, exported[fmi])
         outcome = coupler("run", ssd, "--step", str(STEP), "--out", tmp_path / "out")
     assert outcome.code == 0, outcome.err
     summary = coupler.summary(tmp_path / "out")

@@ -33,7 +33,7 @@ from coupler.channels import RunSetup, Value
 from coupler.client import parse_address
 from coupler.examples.gain import GainParticipant
 from coupler.participant import Values
-from coupler.testing import end_group, free_port, wait_until
+from coupler.testing import SystemStructure, end_group, fmu, free_port, remote, wait_until
 from coupler.v1 import component_pb2 as pb
 from coupler.v1 import component_pb2_grpc as pb_grpc
 
@@ -41,35 +41,16 @@ from .conftest import Coupler, serving
 
 pytestmark = pytest.mark.usefixtures("fmus")
 HERE = Path(__file__).parent
-SSD = """<?xml version="1.0" encoding="UTF-8"?>
-<ssd:SystemStructureDescription version="1.0" name="Faults"
-    xmlns:ssd="http://ssp-standard.org/SSP1/SystemStructureDescription"
-    xmlns:ssc="http://ssp-standard.org/SSP1/SystemStructureCommon">
-  <ssd:System name="Faults">
-    <ssd:Elements>
-      <ssd:Component name="Source" source="${COUPLER_FMU_DIR}/Source2.fmu">
-        <ssd:Connectors><ssd:Connector name="ramp" kind="output"/></ssd:Connectors>
-      </ssd:Component>
-      <ssd:Component name="Gain" type="application/x-coupler-grpc"
-                     source="grpc://127.0.0.1:${GAIN_PORT}">
-        <ssd:Connectors>
-          <ssd:Connector name="u" kind="input"/><ssd:Connector name="y" kind="output"/>
-        </ssd:Connectors>
-      </ssd:Component>
-      <ssd:Component name="Integ" source="${COUPLER_FMU_DIR}/Integrator2.fmu">
-        <ssd:Connectors><ssd:Connector name="u" kind="input"/></ssd:Connectors>
-      </ssd:Component>
-    </ssd:Elements>
-    <ssd:Connections>
-      <ssd:Connection startElement="Source" startConnector="ramp"
-                      endElement="Gain" endConnector="u"/>
-      <ssd:Connection startElement="Gain" startConnector="y"
-                      endElement="Integ" endConnector="u"/>
-    </ssd:Connections>
-  </ssd:System>
-  <ssd:DefaultExperiment startTime="0" stopTime="20"/>
-</ssd:SystemStructureDescription>
-"""
+SSD = SystemStructure(
+    "Faults",
+    components=[
+        fmu("Source", "${COUPLER_FMU_DIR}/Source2.fmu", outputs=["ramp"]),
+        remote("Gain", "grpc://127.0.0.1:${GAIN_PORT}", inputs=["u"], outputs=["y"]),
+        fmu("Integ", "${COUPLER_FMU_DIR}/Integrator2.fmu", inputs=["u"]),
+    ],
+    connections=[("Source.ramp", "Gain.u"), ("Gain.y", "Integ.u")],
+    stop_time=20,
+)
 RUN = ("--step", "0.1")
 PACED = ("--realtime-factor", "5")
 """200 steps in 4 s: the first rows reach the disk after 1 s (results.csv is flushed once a
@@ -78,9 +59,7 @@ second), and a fault caused then lands well before the run's end on a slow machi
 
 @pytest.fixture
 def ssd(tmp_path: Path) -> Path:
-    path = tmp_path / "faults.ssd"
-    path.write_text(SSD)
-    return path
+    return SSD.write(tmp_path / "faults.ssd")
 
 
 class Gain:
@@ -561,26 +540,15 @@ def test_a_full_disk_leaves_no_unreadable_parquet_behind(
         subprocess.run(["umount", str(full)], check=False)
 
 
-FAULTY_SSD = """<?xml version="1.0" encoding="UTF-8"?>
-<ssd:SystemStructureDescription version="1.0" name="FaultyFmu"
-    xmlns:ssd="http://ssp-standard.org/SSP1/SystemStructureDescription">
-  <ssd:System name="FaultyFmu">
-    <ssd:Elements>
-      <ssd:Component name="Source" source="${COUPLER_FMU_DIR}/Source2.fmu">
-        <ssd:Connectors><ssd:Connector name="ramp" kind="output"/></ssd:Connectors>
-      </ssd:Component>
-      <ssd:Component name="Faulty" source="${FAULTY_FMU_DIR}/Faulty2.fmu">
-        <ssd:Connectors><ssd:Connector name="u" kind="input"/></ssd:Connectors>
-      </ssd:Component>
-    </ssd:Elements>
-    <ssd:Connections>
-      <ssd:Connection startElement="Source" startConnector="ramp"
-                      endElement="Faulty" endConnector="u"/>
-    </ssd:Connections>
-  </ssd:System>
-  <ssd:DefaultExperiment startTime="0" stopTime="10"/>
-</ssd:SystemStructureDescription>
-"""
+FAULTY_SSD = SystemStructure(
+    "FaultyFmu",
+    components=[
+        fmu("Source", "${COUPLER_FMU_DIR}/Source2.fmu", outputs=["ramp"]),
+        fmu("Faulty", "${FAULTY_FMU_DIR}/Faulty2.fmu", inputs=["u"]),
+    ],
+    connections=[("Source.ramp", "Faulty.u")],
+    stop_time=10,
+)
 
 
 @pytest.fixture
@@ -589,9 +557,7 @@ def faulty_ssd(
 ) -> Path:
     """Source (FMI 2) --ramp--> Faulty (FMI 2: crash_at / hang_at), 0 .. 10 s."""
     monkeypatch.setenv("FAULTY_FMU_DIR", str(faulty_fmus["Faulty2"].parent))
-    path = tmp_path / "faulty.ssd"
-    path.write_text(FAULTY_SSD)
-    return path
+    return FAULTY_SSD.write(tmp_path / "faulty.ssd")
 
 
 @pytest.mark.slow

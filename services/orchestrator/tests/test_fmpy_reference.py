@@ -22,34 +22,9 @@ import pytest
 from coupler.channels import Causality, RunSetup
 from coupler.errors import ParticipantError
 from coupler.fmu import FmuParticipant
+from coupler.testing import Component, SystemStructure
 
 from .conftest import Coupler
-
-SSD = """<?xml version="1.0" encoding="UTF-8"?>
-<ssd:SystemStructureDescription version="1.0" name="Alone"
-    xmlns:ssd="http://ssp-standard.org/SSP1/SystemStructureDescription"
-    xmlns:ssc="http://ssp-standard.org/SSP1/SystemStructureCommon"
-    xmlns:ssv="http://ssp-standard.org/SSP1/SystemStructureParameterValues">
-  <ssd:System name="Alone">
-    <ssd:Elements>
-      <ssd:Component name="{name}" source="{source}">
-        <ssd:ParameterBindings>
-          <ssd:ParameterBinding>
-            <ssd:ParameterValues>
-              <ssv:ParameterSet version="1.0" name="p">
-                <ssv:Parameters>
-{parameters}
-                </ssv:Parameters>
-              </ssv:ParameterSet>
-            </ssd:ParameterValues>
-          </ssd:ParameterBinding>
-        </ssd:ParameterBindings>
-      </ssd:Component>
-    </ssd:Elements>
-  </ssd:System>
-  <ssd:DefaultExperiment startTime="{start}" stopTime="{stop}"/>
-</ssd:SystemStructureDescription>
-"""
 
 CASES = {
     "Source2": {"slope": 0.7, "offset": 0.1, "amplitude": 1.5, "freq": 0.3},
@@ -66,13 +41,9 @@ def test_fmu_alone_equals_fmpy(
 ) -> None:
     start, stop, step = 0.25, 4.0, 0.125
     values = CASES[fmu]
-    parameters = "\n".join(
-        f'<ssv:Parameter name="{n}"><ssv:Real value="{v!r}"/></ssv:Parameter>'
-        for n, v in values.items()
-    )
-    ssd = tmp_path / "alone.ssd"
-    ssd.write_text(
-        SSD.format(name=fmu, source=fmus[fmu], parameters=parameters, start=start, stop=stop)
+    alone = Component(fmu, str(fmus[fmu]), parameters=values)
+    ssd = SystemStructure("Alone", [alone], start_time=start, stop_time=stop).write(
+        tmp_path / "alone.ssd"
     )
     out = tmp_path / "out"
     outcome = coupler("run", ssd, "--out", out, "--step", step)

@@ -18,36 +18,9 @@ from pathlib import Path
 import fmpy
 import pytest
 
+from coupler.testing import Component, Connector, SystemStructure, fmu
+
 from .conftest import Coupler
-
-HEAD = """<?xml version="1.0" encoding="UTF-8"?>
-<ssd:SystemStructureDescription version="1.0" name="Arrays"
-    xmlns:ssd="http://ssp-standard.org/SSP1/SystemStructureDescription"
-    xmlns:ssc="http://ssp-standard.org/SSP1/SystemStructureCommon"
-    xmlns:ssv="http://ssp-standard.org/SSP1/SystemStructureParameterValues">
-  <ssd:System name="Arrays">
-    <ssd:Elements>
-{elements}
-    </ssd:Elements>
-{connections}
-  </ssd:System>
-  <ssd:DefaultExperiment startTime="0" stopTime="{stop}"/>
-</ssd:SystemStructureDescription>
-"""
-
-COMPONENT = """      <ssd:Component name="{name}" source="{source}">
-{connectors}
-        <ssd:ParameterBindings><ssd:ParameterBinding><ssd:ParameterValues>
-          <ssv:ParameterSet version="1.0" name="p"><ssv:Parameters>
-{parameters}
-          </ssv:Parameters></ssv:ParameterSet>
-        </ssd:ParameterValues></ssd:ParameterBinding></ssd:ParameterBindings>
-      </ssd:Component>"""
-
-CONNECTION = (
-    '      <ssd:Connection startElement="{}" startConnector="{}"\n'
-    '                      endElement="{}" endConnector="{}"/>'
-)
 
 #: The model description's start values (row-major), and the elements the tests bind.
 STARTS = {
@@ -66,34 +39,20 @@ def _component(
     source: Path,
     parameters: Mapping[str, float | int],
     connectors: Mapping[str, str] | None = None,
-) -> str:
+) -> Component:
     """A component; ``connectors`` maps connector names to kinds (all Real)."""
-    ports = "".join(
-        f'<ssd:Connector name="{n}" kind="{kind}"><ssc:Real/></ssd:Connector>'
-        for n, kind in (connectors or {}).items()
-    )
-    ports = f"<ssd:Connectors>{ports}</ssd:Connectors>" if ports else ""
-    if not parameters:
-        return f'      <ssd:Component name="{name}" source="{source}">{ports}</ssd:Component>'
-    lines = "\n".join(
-        f'<ssv:Parameter name="{n}"><ssv:{"Integer" if isinstance(v, int) else "Real"} '
-        f'value="{v!r}"/></ssv:Parameter>'
-        for n, v in parameters.items()
-    )
-    return COMPONENT.format(name=name, source=source, parameters=lines, connectors=ports)
+    typed = [Connector(n, kind, "Real") for n, kind in (connectors or {}).items()]
+    return fmu(name, source, *typed, parameters=parameters)
 
 
 def _ssd(
-    tmp_path: Path, elements: Sequence[str], connections: Sequence[str] = (), stop: float = 2.0
+    tmp_path: Path,
+    components: Sequence[Component],
+    connections: Sequence[tuple[str, str]] = (),
+    stop: float = 2.0,
 ) -> Path:
-    ssd = tmp_path / "arrays.ssd"
-    links = f"<ssd:Connections>\n{chr(10).join(connections)}\n</ssd:Connections>"
-    ssd.write_text(
-        HEAD.format(
-            elements="\n".join(elements), connections=links if connections else "", stop=stop
-        )
-    )
-    return ssd
+    system = SystemStructure("Arrays", components, connections, stop_time=stop)
+    return system.write(tmp_path / "arrays.ssd")
 
 
 def _full(bound: Mapping[str, float]) -> dict[str, list[float]]:
@@ -150,8 +109,8 @@ def test_array_elements_are_connectable(
             _component("Integ", fmus["Integrator3"], {}, {"u": "input"}),
         ],
         [
-            CONNECTION.format("Source", "ramp", "SS", "u[2]"),
-            CONNECTION.format("SS", "y[1]", "Integ", "u"),
+            ("Source.ramp", "SS.u[2]"),
+            ("SS.y[1]", "Integ.u"),
         ],
         stop=1.0,
     )

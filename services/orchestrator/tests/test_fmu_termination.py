@@ -21,24 +21,9 @@ import pytest
 from coupler.examples.gain import GainParticipant
 from coupler.fmu import FmuParticipant
 from coupler.participant import Participant
+from coupler.testing import Component, SystemStructure, remote
 
 from .conftest import Coupler, Outcome, serving
-
-ALONE = """<?xml version="1.0" encoding="UTF-8"?>
-<ssd:SystemStructureDescription version="1.0" name="Stair"
-    xmlns:ssd="http://ssp-standard.org/SSP1/SystemStructureDescription">
-  <ssd:System name="Stair">
-    <ssd:Elements>
-{elements}
-    </ssd:Elements>
-  </ssd:System>
-  <ssd:DefaultExperiment startTime="0" stopTime="20"/>
-</ssd:SystemStructureDescription>
-"""
-
-FMU = """      <ssd:Component name="{name}" source="{source}"/>"""
-REMOTE = """      <ssd:Component name="{name}" type="application/x-coupler-grpc"
-                     source="grpc://127.0.0.1:{port}"/>"""
 
 
 class RecordsTerminate(Participant):
@@ -63,17 +48,23 @@ class RecordingFmu(RecordsTerminate, FmuParticipant):
         self.terminated = []
 
 
-def _write(tmp_path: Path, *elements: str) -> Path:
-    ssd = tmp_path / "stair.ssd"
-    ssd.write_text(ALONE.format(elements="\n".join(elements)))
-    return ssd
+def _write(tmp_path: Path, *components: Component) -> Path:
+    return SystemStructure("Stair", components, stop_time=20).write(tmp_path / "stair.ssd")
+
+
+def _fmu(name: str, source: Path) -> Component:
+    return Component(name, str(source))
+
+
+def _remote(name: str, port: int) -> Component:
+    return remote(name, f"grpc://127.0.0.1:{port}")
 
 
 def _run_alone(coupler: Coupler, fmu: Path, out: Path, *, step: float) -> Outcome:
     """``coupler run`` of the Stair FMU alone, 0 .. 20 s."""
     return coupler(
         "run",
-        _write(out.parent, FMU.format(name="Stair", source=fmu)),
+        _write(out.parent, _fmu("Stair", fmu)),
         "--out",
         out,
         "--step",
@@ -137,8 +128,8 @@ def test_every_participant_is_terminated(
     with serving(gain) as server:
         ssd = _write(
             tmp_path,
-            FMU.format(name="Stair", source=fmus[fmu]),
-            REMOTE.format(name="Gain", port=server.port),
+            _fmu("Stair", fmus[fmu]),
+            _remote("Gain", server.port),
         )
         out = tmp_path / "out"
         outcome = coupler("run", ssd, "--out", out, "--step", 0.5)
@@ -159,8 +150,8 @@ def test_termination_request_over_the_wire(
     with serving(stair) as server:
         ssd = _write(
             tmp_path,
-            REMOTE.format(name="Stair", port=server.port),
-            FMU.format(name="Source", source=fmus["Source2"]),
+            _remote("Stair", server.port),
+            _fmu("Source", fmus["Source2"]),
         )
         for run in ("first", "second"):
             out = tmp_path / run

@@ -14,6 +14,7 @@ import asyncio
 import io
 import zlib
 from collections.abc import Mapping
+from dataclasses import replace
 from pathlib import Path
 
 import aiohttp
@@ -22,14 +23,15 @@ from PIL import Image as Pillow
 
 from coupler.channels import Causality, Channel, Description, RunSetup, Value, ValueType
 from coupler.participant import Values
+from coupler.testing import remote
 from coupler.v1.sensors_pb2 import Image
+from coupler_dev.browser import CHROMIUM, NO_CHROMIUM, chromium
 from coupler_orchestrator.options import RunOptions
 from coupler_orchestrator.outputs.monitor import MonitorServer
 from coupler_orchestrator.runner import run_scenario
 
 from .conftest import Coupler
 from .test_message_size import SSD, Camera, Fleet, fleet  # noqa: F401 - the fixture
-from .test_monitor import BROWSER_ARGS, CHROMIUM
 
 WIDTH, HEIGHT = 8, 4
 RED = (
@@ -44,10 +46,8 @@ RED = (
 
 @pytest.fixture
 def ssd(tmp_path: Path) -> Path:
-    path = tmp_path / "frames.ssd"
-    depth = '<ssd:Connector name="frame" kind="output"/><ssd:Connector name="depth" kind="output"/>'
-    path.write_text(SSD.replace('<ssd:Connector name="frame" kind="output"/>', depth))
-    return path
+    camera = remote("Camera", "grpc://127.0.0.1:${CAMERA_PORT}", outputs=["frame", "depth"])
+    return replace(SSD, components=[camera, *SSD.components[1:]]).write(tmp_path / "frames.ssd")
 
 
 def frame(step: int) -> bytes:
@@ -179,36 +179,28 @@ async def test_the_monitor_serves_the_latest_frame_and_keeps_no_frame_history(
 
 
 @pytest.mark.slow
-@pytest.mark.skipif(not CHROMIUM.exists(), reason="Debian's chromium is not installed")
+@pytest.mark.skipif(not CHROMIUM.exists(), reason=NO_CHROMIUM)
 async def test_the_monitor_page_shows_the_latest_frame(
     ssd: Path,
     tmp_path: Path,
     fleet: Fleet,  # noqa: F811
 ) -> None:
-    from playwright.async_api import async_playwright
-
     fleet.serve(camera=ImageCamera(0))
     async with MonitorServer("127.0.0.1:0") as monitor:
         options = RunOptions(stop_time=4.0, step_size=0.1, realtime_factor=1.0)
         running = asyncio.create_task(
             run_scenario(ssd, options, out_dir=tmp_path, observers=[monitor.state])
         )
-        async with async_playwright() as playwright:
-            browser = await playwright.chromium.launch(
-                executable_path=str(CHROMIUM), args=BROWSER_ARGS
-            )
-            try:
-                page = await browser.new_page()
-                errors: list[str] = []
-                page.on("pageerror", lambda exc: errors.append(str(exc)))
-                await page.goto(monitor.url)
-                shown = "document.querySelector(\"#camera-list img[data-channel='Camera.frame']\")"
-                await page.wait_for_function(f"{shown} && {shown}.naturalWidth === {WIDTH}")
-                hidden = await page.evaluate("document.getElementById('cameras').hidden")
-                outcome = await running
-                # the page follows the run to its last frame (step 40: red 40)
-                await page.wait_for_function(f"{RED} === 40", arg=None)
-            finally:
-                await browser.close()
+        async with chromium() as browser:
+            page = await browser.new_page()
+            errors: list[str] = []
+            page.on("pageerror", lambda exc: errors.append(str(exc)))
+            await page.goto(monitor.url)
+            shown = "document.querySelector(\"#camera-list img[data-channel='Camera.frame']\")"
+            await page.wait_for_function(f"{shown} && {shown}.naturalWidth === {WIDTH}")
+            hidden = await page.evaluate("document.getElementById('cameras').hidden")
+            outcome = await running
+            # the page follows the run to its last frame (step 40: red 40)
+            await page.wait_for_function(f"{RED} === 40", arg=None)
     assert outcome.end.status == "completed"
     assert not hidden and errors == []

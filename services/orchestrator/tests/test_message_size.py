@@ -20,35 +20,21 @@ import pytest
 from coupler.channels import Causality, Channel, Description, RunSetup, Value, ValueType
 from coupler.examples.gain import GainParticipant
 from coupler.participant import Participant, Values
+from coupler.testing import SystemStructure, remote
 
 from .conftest import Coupler, serving
 
 FRAME = 800 * 600 * 3
 MIB = 1024 * 1024
-SSD = """<?xml version="1.0" encoding="UTF-8"?>
-<ssd:SystemStructureDescription version="1.0" name="Frames"
-    xmlns:ssd="http://ssp-standard.org/SSP1/SystemStructureDescription">
-  <ssd:System name="Frames">
-    <ssd:Elements>
-      <ssd:Component name="Camera" type="application/x-coupler-grpc"
-                     source="grpc://127.0.0.1:${CAMERA_PORT}">
-        <ssd:Connectors><ssd:Connector name="frame" kind="output"/></ssd:Connectors>
-      </ssd:Component>
-      <ssd:Component name="Gain" type="application/x-coupler-grpc"
-                     source="grpc://127.0.0.1:${GAIN_PORT}">
-        <ssd:Connectors>
-          <ssd:Connector name="blob" kind="input"/><ssd:Connector name="blob_out" kind="output"/>
-        </ssd:Connectors>
-      </ssd:Component>
-    </ssd:Elements>
-    <ssd:Connections>
-      <ssd:Connection startElement="Camera" startConnector="frame"
-                      endElement="Gain" endConnector="blob"/>
-    </ssd:Connections>
-  </ssd:System>
-  <ssd:DefaultExperiment startTime="0" stopTime="0.3"/>
-</ssd:SystemStructureDescription>
-"""
+SSD = SystemStructure(
+    "Frames",
+    components=[
+        remote("Camera", "grpc://127.0.0.1:${CAMERA_PORT}", outputs=["frame"]),
+        remote("Gain", "grpc://127.0.0.1:${GAIN_PORT}", inputs=["blob"], outputs=["blob_out"]),
+    ],
+    connections=[("Camera.frame", "Gain.blob")],
+    stop_time=0.3,
+)
 
 
 class Camera(Participant):
@@ -76,9 +62,7 @@ class Camera(Participant):
 
 @pytest.fixture
 def ssd(tmp_path: Path) -> Path:
-    path = tmp_path / "frames.ssd"
-    path.write_text(SSD)
-    return path
+    return SSD.write(tmp_path / "frames.ssd")
 
 
 @pytest.fixture

@@ -16,6 +16,7 @@ import aiohttp
 import pytest
 
 from coupler.server import ParticipantServer
+from coupler_dev.browser import CHROMIUM, NO_CHROMIUM, chromium
 from coupler_orchestrator.options import RunOptions
 from coupler_orchestrator.outputs.monitor import (
     Decimated,
@@ -28,8 +29,6 @@ from coupler_orchestrator.runner import run_scenario
 
 from .conftest import DATA, REPO, Coupler
 
-CHROMIUM = Path("/usr/bin/chromium")
-BROWSER_ARGS = ["--headless=new", "--no-sandbox", "--disable-gpu", "--no-first-run"]
 ARTIFACT = REPO / "test-artifacts" / "monitor.png"
 MEMBERS = ["Source", "Gain", "Feed", "Feed2"]
 
@@ -52,51 +51,43 @@ def run(stop: float, rtf: float | None, monitor: MonitorServer, out: Path) -> An
 
 
 @pytest.mark.slow
-@pytest.mark.skipif(not CHROMIUM.exists(), reason="Debian's chromium is not installed")
+@pytest.mark.skipif(not CHROMIUM.exists(), reason=NO_CHROMIUM)
 async def test_the_page_charts_a_picked_channel_and_each_participants_latency(
     fmus: dict[str, Path], gain_server: ParticipantServer, tmp_path: Path
 ) -> None:
-    from playwright.async_api import async_playwright
-
     async with MonitorServer("127.0.0.1:0") as monitor:
         # 8 s of wall time: long enough for a browser that starts slowly on a busy machine to
         # see the chart move
         running = asyncio.create_task(run(8.0, 1.0, monitor, tmp_path))
-        async with async_playwright() as playwright:
-            browser = await playwright.chromium.launch(
-                executable_path=str(CHROMIUM), args=BROWSER_ARGS
+        async with chromium() as browser:
+            page = await browser.new_page(viewport={"width": 1200, "height": 900})
+            errors: list[str] = []
+            page.on("pageerror", lambda exc: errors.append(str(exc)))
+            page.on("console", lambda m: errors.append(m.text) if m.type == "error" else None)
+            await page.goto(monitor.url)
+            await page.wait_for_function("window.monitor.channels.length > 0")
+            await page.check("#channels input[value='Gain.y']")
+            gain = "window.monitor.values['Gain.y']"
+            await page.wait_for_function(f"{gain} && {gain}.data[0].length > 3")
+            first = await page.evaluate("window.monitor.values['Gain.y'].data[0].length")
+            await page.wait_for_function(
+                f"window.monitor.values['Gain.y'].data[0].length > {first + 3}"
+            )  # the chart moves
+            status = await page.text_content("#status")
+            latency = await page.evaluate(
+                "Array.from(document.querySelectorAll('#latency-table tbody tr'))"
+                ".map((row) => row.cells[0].textContent)"
             )
-            try:
-                page = await browser.new_page(viewport={"width": 1200, "height": 900})
-                errors: list[str] = []
-                page.on("pageerror", lambda exc: errors.append(str(exc)))
-                page.on("console", lambda m: errors.append(m.text) if m.type == "error" else None)
-                await page.goto(monitor.url)
-                await page.wait_for_function("window.monitor.channels.length > 0")
-                await page.check("#channels input[value='Gain.y']")
-                gain = "window.monitor.values['Gain.y']"
-                await page.wait_for_function(f"{gain} && {gain}.data[0].length > 3")
-                first = await page.evaluate("window.monitor.values['Gain.y'].data[0].length")
-                await page.wait_for_function(
-                    f"window.monitor.values['Gain.y'].data[0].length > {first + 3}"
-                )  # the chart moves
-                status = await page.text_content("#status")
-                latency = await page.evaluate(
-                    "Array.from(document.querySelectorAll('#latency-table tbody tr'))"
-                    ".map((row) => row.cells[0].textContent)"
-                )
-                series = await page.evaluate(
-                    "window.monitor.latency.series.slice(1).map((s) => s.label)"
-                )
-                ARTIFACT.parent.mkdir(exist_ok=True)
-                await page.screenshot(path=str(ARTIFACT), full_page=True)
-                outcome = await running
-                await page.wait_for_function(
-                    "document.getElementById('status').textContent === 'completed'"
-                )
-                drawn = await page.evaluate("window.monitor.values['Gain.y'].data[0].length")
-            finally:
-                await browser.close()
+            series = await page.evaluate(
+                "window.monitor.latency.series.slice(1).map((s) => s.label)"
+            )
+            ARTIFACT.parent.mkdir(exist_ok=True)
+            await page.screenshot(path=str(ARTIFACT), full_page=True)
+            outcome = await running
+            await page.wait_for_function(
+                "document.getElementById('status').textContent === 'completed'"
+            )
+            drawn = await page.evaluate("window.monitor.values['Gain.y'].data[0].length")
     assert status == "running"
     assert latency == MEMBERS and series == MEMBERS
     assert outcome.end.status == "completed"

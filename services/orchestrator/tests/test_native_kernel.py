@@ -18,6 +18,7 @@ from typing import Any
 
 import pytest
 
+from coupler.testing import Annotation, Connection, Connector, SystemStructure, fmu
 from coupler_orchestrator import native
 from coupler_orchestrator.master import native_fmu_step as kernel
 from coupler_orchestrator.model import Plan
@@ -33,10 +34,7 @@ ROUTES = [
     ("Feed2", "real_out", "Feed3", "real_in"),
     ("Feed3", "bool_out", "Feed1", "bool_in"),  # a loop: Jacobi and Gauss-Seidel differ
 ]
-DECOUPLED = (
-    '<ssd:Annotations><ssc:Annotation type="org.coupler.connection">'
-    '<coupler:Connection decoupled="true"/></ssc:Annotation></ssd:Annotations>'
-)
+DECOUPLED = Annotation("org.coupler.connection", "Connection", {"decoupled": "true"})
 """The loop's last connection: Gauss-Seidel reads it from the previous step."""
 STRING = ("Feed1", "string_out", "Feed2", "string_in")
 
@@ -45,14 +43,13 @@ TYPES = {"ramp": "Real", "sine": "Real", "counter": "Integer", "real": "Real", "
          "bool": "Boolean", "string": "String"}  # fmt: skip
 
 
-def connectors(outputs: list[str], inputs: list[str]) -> str:
+def connectors(outputs: list[str], inputs: list[str]) -> list[Connector]:
     """Connectors of every output and of the connected inputs."""
-    return "".join(
-        f'<ssd:Connector name="{name}" kind="{kind}"><ssc:{TYPES[name.split("_")[0]]}/>'
-        "</ssd:Connector>"
+    return [
+        Connector(name, kind, TYPES[name.split("_")[0]])
         for names, kind in ((outputs, "output"), (inputs, "input"))
         for name in names
-    )
+    ]
 
 
 def chain(
@@ -61,37 +58,21 @@ def chain(
     def inputs(element: str) -> list[str]:
         return [d for _, _, c, d in routes if c == element]
 
-    elements = [
-        f'<ssd:Component name="Source" source="{fmus[source]}"><ssd:Connectors>'
-        f"{connectors(['ramp', 'sine', 'counter'], [])}</ssd:Connectors></ssd:Component>"
-    ] + [
-        f'<ssd:Component name="Feed{k}" source="{fmus["Feedthrough2"]}"><ssd:Connectors>'
-        f"{connectors(['real_out', 'int_out', 'bool_out', 'string_out'], inputs(f'Feed{k}'))}"
-        "</ssd:Connectors></ssd:Component>"
+    components = [fmu("Source", fmus[source], *connectors(["ramp", "sine", "counter"], []))] + [
+        fmu(
+            f"Feed{k}",
+            fmus["Feedthrough2"],
+            *connectors(["real_out", "int_out", "bool_out", "string_out"], inputs(f"Feed{k}")),
+        )
         for k in (1, 2, 3)
     ]
     connections = [
-        f'<ssd:Connection startElement="{a}" startConnector="{b}" endElement="{c}" '
-        f'endConnector="{d}">{DECOUPLED if (a, c) == ("Feed3", "Feed1") else ""}</ssd:Connection>'
+        Connection(f"{a}.{b}", f"{c}.{d}", [DECOUPLED] if (a, c) == ("Feed3", "Feed1") else [])
         for a, b, c, d in routes
     ]
-    path = folder / "chain.ssd"
-    path.write_text(
-        f"""<?xml version="1.0" encoding="UTF-8"?>
-<ssd:SystemStructureDescription version="1.0" name="Chain"
-    xmlns:ssd="http://ssp-standard.org/SSP1/SystemStructureDescription"
-    xmlns:ssc="http://ssp-standard.org/SSP1/SystemStructureCommon"
-    xmlns:coupler="org.coupler.connection">
-  <ssd:System name="Chain">
-    <ssd:Elements>{"".join(elements)}</ssd:Elements>
-    <ssd:Connections>{"".join(connections)}</ssd:Connections>
-  </ssd:System>
-  <ssd:DefaultExperiment startTime="0" stopTime="2"/>
-</ssd:SystemStructureDescription>
-""",
-        encoding="utf-8",
+    return SystemStructure("Chain", components, connections, stop_time=2).write(
+        folder / "chain.ssd"
     )
-    return path
 
 
 @pytest.fixture

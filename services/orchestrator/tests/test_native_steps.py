@@ -38,9 +38,7 @@ def native() -> Iterator[None]:
 
 @pytest.fixture
 def ssd(tmp_path: Path) -> Path:
-    path = tmp_path / "faults.ssd"
-    path.write_text(SSD)
-    return path
+    return SSD.write(tmp_path / "faults.ssd")
 
 
 def component(source: str = "grpc://127.0.0.1:1") -> ssp.Component:
@@ -51,11 +49,15 @@ def component(source: str = "grpc://127.0.0.1:1") -> ssp.Component:
 def test_remote_participants_step_natively_unless_told_not_to(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
-    assert type(participants.create(component(), RunOptions())) is steps.NativeRemote
-    plain = participants.create(component(), RunOptions(native_steps=False))
-    assert type(plain) is RemoteParticipant
+    """The runner gives each remote participant its step transport (``steps.transport``):
+    the native step channel, unless --no-native-steps or COUPLER_NATIVE_STEPS=0 say no."""
+    created = participants.create(component(), RunOptions(), steps=steps.transport())
+    assert type(created) is RemoteParticipant and type(created.steps) is steps.NativeSteps
+    assert steps.transport(RunOptions(native_steps=False).native_steps)() is None
+    plain = participants.create(component(), RunOptions())
+    assert type(plain) is RemoteParticipant and plain.steps is None
     monkeypatch.setenv(steps.ENVIRONMENT, "0")
-    assert type(participants.create(component(), RunOptions())) is RemoteParticipant
+    assert steps.transport()() is None
 
 
 @pytest.mark.usefixtures("native")
@@ -150,23 +152,24 @@ def test_an_answer_outside_the_description_fails_the_run(
 def test_without_coupler_native_remote_steps_take_grpc_aio() -> None:
     """Without coupler-native: the run takes the Python path and says why."""
     assert not steps.enabled()
-    created = participants.create(component(), RunOptions())
-    assert type(created) is RemoteParticipant
+    created = participants.create(component(), RunOptions(), steps=steps.transport())
+    assert type(created) is RemoteParticipant and created.steps is None
     assert steps.why_python(created, asked=True) == MISSING
 
 
 @pytest.mark.usefixtures("native")
 async def test_a_step_in_two_halves() -> None:
-    """NativeRemote after Initialize: split() is itself; send, then receive, gives what
-    do_step over grpc.aio gives; after Terminate the stream is gone."""
+    """NativeSteps given to a RemoteParticipant, after Initialize: split() is itself; send,
+    then receive, gives what do_step over grpc.aio gives; after Terminate the stream is gone."""
     with serving(GainParticipant("Gain")) as one, serving(GainParticipant("Gain")) as other:
-        native = steps.NativeRemote(f"grpc://127.0.0.1:{one.port}")
+        transport = steps.NativeSteps()
+        native = RemoteParticipant(f"grpc://127.0.0.1:{one.port}", steps=transport)
         aio = RemoteParticipant(f"grpc://127.0.0.1:{other.port}")
         for p in (native, aio):
             await p.open()
             await p.initialize(RunSetup(run_id=f"halves-{id(p)}", start_time=0.0, step_size=0.1))
-        halves = native.split()
-        assert halves is native
+        halves = transport.split()
+        assert halves is transport
         for k in range(3):
             halves.send(k * 0.1, 0.1, {"u": float(k)})
             assert halves.receive() == await aio.do_step(k * 0.1, 0.1, {"u": float(k)})
@@ -180,4 +183,4 @@ async def test_a_step_in_two_halves() -> None:
         for p in (native, aio):
             await p.terminate("done")
             await p.close()
-        assert native.split() is None
+        assert transport.split() is None

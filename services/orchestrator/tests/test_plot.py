@@ -16,12 +16,11 @@ from typing import Any
 import pytest
 from PIL import Image
 
+from coupler_dev.browser import CHROMIUM, NO_CHROMIUM, chromium
 from coupler_orchestrator.assets import VENDOR
 
 from .conftest import DATA, REPO, Coupler
 
-CHROMIUM = Path("/usr/bin/chromium")
-BROWSER_ARGS = ["--headless=new", "--no-sandbox", "--disable-gpu", "--no-first-run"]
 ARTIFACT = REPO / "test-artifacts" / "plot.png"
 
 
@@ -72,46 +71,40 @@ def test_html_is_self_contained(coupler: Coupler, runs: tuple[Path, Path], tmp_p
     assert '"axis": "[m]"' in page and '"axis": "(no unit)"' in page
 
 
-@pytest.mark.skipif(not CHROMIUM.exists(), reason="Debian's chromium is not installed")
+@pytest.mark.skipif(not CHROMIUM.exists(), reason=NO_CHROMIUM)
 async def test_html_renders_in_chromium(runs: tuple[Path, Path], tmp_path: Path) -> None:
-    from playwright.async_api import async_playwright
-
     from coupler_orchestrator.tools.plot import plot
 
     out = plot(list(runs), ["Integ.x", "Source.*"], tmp_path / "plot.html", title="chain")
-    async with async_playwright() as playwright:
-        browser = await playwright.chromium.launch(executable_path=str(CHROMIUM), args=BROWSER_ARGS)
-        try:
-            page = await browser.new_page(viewport={"width": 1100, "height": 800})
-            errors: list[str] = []
-            requests: list[str] = []
-            page.on("pageerror", lambda exc: errors.append(str(exc)))
-            page.on("console", lambda m: errors.append(m.text) if m.type == "error" else None)
-            page.on("request", lambda r: requests.append(r.url))
-            await page.goto(out.as_uri())
-            await page.wait_for_function("window.couplerPlot && window.couplerPlot.ready")
-            charts: list[dict[str, Any]] = await page.evaluate(
-                """() => window.couplerPlot.charts.map((chart) => {
-                    const canvas = chart.root.querySelector("canvas");
-                    const pixels = canvas.getContext("2d")
-                        .getImageData(0, 0, canvas.width, canvas.height).data;
-                    let drawn = 0;
-                    for (let i = 3; i < pixels.length; i += 4) if (pixels[i] > 0) drawn++;
-                    return {series: chart.series.length, drawn, labels:
-                        chart.series.map((s) => s.label)};
-                })"""
-            )
-            # by unit, in the order of the CSV's columns: Source.* (no unit), then Integ.x [m];
-            # each with the time series and one series per run and channel
-            assert [c["series"] for c in charts] == [7, 3]
-            assert charts[1]["labels"][1:] == ["long: Integ.x", "short: Integ.x"]
-            assert all(c["drawn"] > 1000 for c in charts), charts
-            assert errors == []
-            assert all(u.startswith(("file://", "data:")) for u in requests), requests
-            ARTIFACT.parent.mkdir(parents=True, exist_ok=True)
-            await page.screenshot(path=str(ARTIFACT), full_page=True)
-        finally:
-            await browser.close()
+    async with chromium() as browser:
+        page = await browser.new_page(viewport={"width": 1100, "height": 800})
+        errors: list[str] = []
+        requests: list[str] = []
+        page.on("pageerror", lambda exc: errors.append(str(exc)))
+        page.on("console", lambda m: errors.append(m.text) if m.type == "error" else None)
+        page.on("request", lambda r: requests.append(r.url))
+        await page.goto(out.as_uri())
+        await page.wait_for_function("window.couplerPlot && window.couplerPlot.ready")
+        charts: list[dict[str, Any]] = await page.evaluate(
+            """() => window.couplerPlot.charts.map((chart) => {
+                const canvas = chart.root.querySelector("canvas");
+                const pixels = canvas.getContext("2d")
+                    .getImageData(0, 0, canvas.width, canvas.height).data;
+                let drawn = 0;
+                for (let i = 3; i < pixels.length; i += 4) if (pixels[i] > 0) drawn++;
+                return {series: chart.series.length, drawn, labels:
+                    chart.series.map((s) => s.label)};
+            })"""
+        )
+        # by unit, in the order of the CSV's columns: Source.* (no unit), then Integ.x [m];
+        # each with the time series and one series per run and channel
+        assert [c["series"] for c in charts] == [7, 3]
+        assert charts[1]["labels"][1:] == ["long: Integ.x", "short: Integ.x"]
+        assert all(c["drawn"] > 1000 for c in charts), charts
+        assert errors == []
+        assert all(u.startswith(("file://", "data:")) for u in requests), requests
+        ARTIFACT.parent.mkdir(parents=True, exist_ok=True)
+        await page.screenshot(path=str(ARTIFACT), full_page=True)
 
 
 @pytest.mark.parametrize(

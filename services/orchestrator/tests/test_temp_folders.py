@@ -43,17 +43,17 @@ def faulty_ssd(
     tmp_path: Path, faulty_fmus: dict[str, Path], monkeypatch: pytest.MonkeyPatch
 ) -> Path:
     monkeypatch.setenv("FAULTY_FMU_DIR", str(faulty_fmus["Faulty2"].parent))
-    path = tmp_path / "faulty.ssd"
-    path.write_text(FAULTY_SSD)
-    return path
+    return FAULTY_SSD.write(tmp_path / "faulty.ssd")
 
 
 @pytest.fixture
 def archive(tmp_path: Path, fmus: dict[str, Path], faulty_fmus: dict[str, Path]) -> Path:
     """The faulty scenario as an .ssp holding both FMUs."""
     path = tmp_path / "faulty.ssp"
-    ssd = FAULTY_SSD.replace("${COUPLER_FMU_DIR}", "resources").replace(
-        "${FAULTY_FMU_DIR}", "resources"
+    ssd = (
+        FAULTY_SSD.xml()
+        .replace("${COUPLER_FMU_DIR}", "resources")
+        .replace("${FAULTY_FMU_DIR}", "resources")
     )
     with zipfile.ZipFile(path, "w") as zf:
         zf.writestr("SystemStructure.ssd", ssd)

@@ -1,6 +1,10 @@
 """``RemoteParticipant``: a participant behind ``grpc://HOST:PORT`` (or ``grpcs://`` with TLS),
 seen as a local one.
 
+Its steps travel over ``grpc.aio`` (a StepStream where the participant offers one, else DoStep
+calls) unless it is given a ``StepTransport`` (``RemoteParticipant(address, steps=...)``), as
+an httpx client is given a transport: the orchestrator gives its native step channel that way.
+
 gRPC errors are translated to Coupler's exception tree here, in ``translate``, and nowhere else (the
 orchestrator's native step channel calls it too).
 """
@@ -11,7 +15,8 @@ import asyncio
 import contextlib
 import secrets
 import time
-from collections.abc import Callable, Mapping
+from abc import ABC, abstractmethod
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import replace
 from types import TracebackType
 from typing import Any, TypeVar
@@ -69,12 +74,33 @@ def uses_tls(address: str) -> bool:
     return address.startswith("grpcs://")
 
 
+class StepTransport(ABC):
+    """How a ``RemoteParticipant``'s steps travel once its run is initialized, when not over
+    its own ``grpc.aio`` channel. One transport serves one participant."""
+
+    @abstractmethod
+    def start(self, participant: RemoteParticipant) -> bool:
+        """After Initialize: take this run's steps (True), or leave them to the participant's
+        ``grpc.aio`` calls (False, e.g. when the participant offers no StepStream). Raises
+        ``ParticipantError`` when it should take them and cannot."""
+
+    @abstractmethod
+    async def step(self, request: wire.DoStepRequest) -> wire.DoStepResponse:
+        """The participant's answer to one step's request; Coupler's errors (``translate``)."""
+
+    @abstractmethod
+    def close(self, *, timeout: float) -> None:
+        """End this run's steps: after Terminate, waiting up to ``timeout`` seconds for the
+        end's status; at once (``timeout`` 0) when the participant is closed."""
+
+
 class RemoteParticipant(Participant):
     """A participant reached over gRPC.
 
     ``open()`` waits until the participant's health is SERVING (within ``connect_timeout``) and
     describes it; every call then has a deadline of ``call_timeout`` seconds. With
-    ``streaming`` (and a participant that supports it) steps travel over one StepStream.
+    ``streaming`` (and a participant that supports it) steps travel over one StepStream;
+    given ``steps`` (a ``StepTransport``), over that transport when it takes them.
     The values of one message (Binary and String together) may have ``max_message_bytes``; one
     over it, either way, fails naming its channel (``MessageTooLarge``).
     """
@@ -90,8 +116,13 @@ class RemoteParticipant(Participant):
         security: ClientSecurity | None = None,
         on_waiting: Callable[[str], None] | None = None,
         max_message_bytes: int = MAX_MESSAGE_BYTES,
+        steps: StepTransport | None = None,
     ) -> None:
         self.address = address
+        self.steps = steps
+        """The transport given for the steps (None: ``grpc.aio``)."""
+        self._transported = False
+        """Whether ``steps`` carries this run's steps."""
         self.max_message_bytes = max_message_bytes
         self.target = parse_address(address)
         self.security = security or ClientSecurity()
@@ -107,6 +138,11 @@ class RemoteParticipant(Participant):
         self._stream: grpc.aio.StreamStreamCall | None = None
         self._run = wire.RunKey()
         """The run's id and secret, carried by every call after Initialize."""
+
+    @property
+    def metadata(self) -> tuple[tuple[str, str], ...]:
+        """What every call carries (the bearer token, when there is one)."""
+        return self._metadata
 
     async def __aenter__(self) -> RemoteParticipant:
         await self.open()
@@ -236,9 +272,12 @@ class RemoteParticipant(Participant):
             "Initialize",
             self._stubbed().Initialize(request, timeout=self.call_timeout, metadata=self._metadata),
         )
-        if self.streaming and self.codec.description.capabilities.streaming:
+        outputs = self._response("Initialize", lambda: wire.outputs_from_pb(response, self.codec))
+        if self.steps is not None and self.steps.start(self):
+            self._transported = True
+        elif self.streaming and self.codec.description.capabilities.streaming:
             self._stream = self._stubbed().StepStream(metadata=self._metadata)
-        return self._response("Initialize", lambda: wire.outputs_from_pb(response, self.codec))
+        return outputs
 
     def step_request(
         self, time: float, step: float, inputs: Mapping[str, Value]
@@ -258,20 +297,33 @@ class RemoteParticipant(Participant):
             "DoStep", lambda: wire.step_pieces(self._run, time, step, inputs, self.codec)
         )
 
+    def step_outputs(
+        self, response: wire.DoStepResponse, large: Iterable[tuple[str, bytes]] = ()
+    ) -> Values:
+        """A DoStep answer's outputs, checked against the description, with the long Binary
+        outputs ``wire.step_answer`` cut out of it (``large``); ``EndRun`` (with them) when the
+        participant asks to end the run."""
+        outputs = self._response(
+            "DoStep", lambda: wire.outputs_from_pb(response, self.codec, large)
+        )
+        reason = wire.termination_requested(response)
+        if reason is not None:
+            raise EndRun(reason, outputs)
+        return outputs
+
     async def do_step(self, time: float, step: float, inputs: Mapping[str, Value]) -> Values:
         request = self.step_request(time, step, inputs)
-        if self._stream is not None:
+        if self._transported:
+            assert self.steps is not None
+            response = await self.steps.step(request)
+        elif self._stream is not None:
             response = await self._call("DoStep", self._stream_step(self._stream, request))
         else:
             response = await self._call(
                 "DoStep",
                 self._stubbed().DoStep(request, timeout=self.call_timeout, metadata=self._metadata),
             )
-        outputs = self._response("DoStep", lambda: wire.outputs_from_pb(response, self.codec))
-        reason = wire.termination_requested(response)
-        if reason is not None:
-            raise EndRun(reason, outputs)
-        return outputs
+        return self.step_outputs(response)
 
     async def _stream_step(
         self, stream: grpc.aio.StreamStreamCall, request: wire.DoStepRequest
@@ -293,6 +345,7 @@ class RemoteParticipant(Participant):
     async def terminate(self, reason: str = "") -> None:
         """Terminate the run (named by its id), then close its step stream."""
         stream, self._stream = self._stream, None
+        transported, self._transported = self._transported, False
         try:
             await self._call(
                 "Terminate",
@@ -303,6 +356,8 @@ class RemoteParticipant(Participant):
                 ),
             )
         finally:
+            if transported and self.steps is not None:
+                self.steps.close(timeout=1.0)
             if stream is not None:
                 # the run has ended either way; the stream's end only confirms it
                 with contextlib.suppress(
@@ -312,6 +367,9 @@ class RemoteParticipant(Participant):
                     await asyncio.wait_for(stream.code(), self.call_timeout)
 
     async def close(self) -> None:
+        if self._transported and self.steps is not None:
+            self._transported = False
+            self.steps.close(timeout=0.0)
         if self._stream is not None:
             self._stream.cancel()
             self._stream = None

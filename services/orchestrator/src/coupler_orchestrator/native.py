@@ -10,12 +10,23 @@ platform it has no wheel for) every run steps through Python with the same resul
 from __future__ import annotations
 
 import importlib
+import os
 import sys
 from typing import Any
 
 import structlog
 
 log = structlog.get_logger("coupler.native")
+
+ENVIRONMENT = "COUPLER_NATIVE_STEPS"
+"""``0`` turns native stepping (the native step channel, the native FMU step) off for every run
+of the process."""
+
+
+def wanted(asked: bool = True) -> bool:
+    """Whether native stepping is asked for and not turned off by ``COUPLER_NATIVE_STEPS``."""
+    return asked and os.environ.get(ENVIRONMENT, "1").strip().lower() not in ("0", "no", "false")
+
 
 MISSING = (
     "coupler-native is not installed (its wheel is built for Linux x86_64; in the repository: "

@@ -21,6 +21,7 @@ from coupler.archives import Budget, remove_scratch, scratch_folder
 from coupler.channels import Description
 from coupler.errors import ScenarioError
 from coupler_orchestrator import ssp
+from coupler_orchestrator.master import native_step_channel
 from coupler_orchestrator.master.loop import Master
 from coupler_orchestrator.master.openmcx import OpenMcxMaster
 from coupler_orchestrator.model import Checked, Plan
@@ -131,7 +132,8 @@ async def run_scenario(
                 "--parquet needs the pyarrow package: install it (pip install pyarrow, or "
                 "uv sync in a checkout) or leave --parquet out (results.csv is always written)"
             )
-        async with opened(scenario, options, budget) as roster:
+        steps = native_step_channel.transport(options.native_steps)
+        async with opened(scenario, options, budget, steps=steps) as roster:
             checked = check(scenario, roster, options)
             plan = build_plan(checked, wire(checked), options)
             if out_dir is None:  # made once the run is sure to start: no empty folders

@@ -10,59 +10,52 @@ from __future__ import annotations
 
 import shutil
 import zipfile
+from collections.abc import Sequence
 from pathlib import Path
 
 import pytest
 
 from coupler.channels import Causality, ValueType
 from coupler.errors import ScenarioError, ValidationError
+from coupler.testing import (
+    Annotation,
+    Binding,
+    Component,
+    Connection,
+    Connector,
+    SystemStructure,
+    fmu,
+    remote,
+)
 from coupler_orchestrator.ssp import BooleanMappingTransformation, LinearTransformation, load_ssp
 
 DATA = Path(__file__).parent / "data"
 ENV = {"SCALE_HOST": "scale"}
 
-HEAD = """<?xml version="1.0" encoding="UTF-8"?>
-<ssd:SystemStructureDescription version="{version}" name="T"
-    xmlns:ssd="http://ssp-standard.org/SSP1/SystemStructureDescription"
-    xmlns:ssc="http://ssp-standard.org/SSP1/SystemStructureCommon">
-  <ssd:System name="Root">
-    <ssd:Elements>
-{elements}
-    </ssd:Elements>{connections}
-  </ssd:System>
-  <ssd:Units>
-    <ssc:Unit name="m"><ssc:BaseUnit m="1"/></ssc:Unit>
-    <ssc:Unit name="s"><ssc:BaseUnit s="1"/></ssc:Unit>
-  </ssd:Units>
-</ssd:SystemStructureDescription>
-"""
+
+def grpc(name: str, *connectors: Connector, source: str = "grpc://localhost:1") -> Component:
+    return remote(name, source, *connectors)
 
 
-def grpc(name: str, connectors: str, source: str = "grpc://localhost:1") -> str:
-    return (
-        f'      <ssd:Component name="{name}" type="application/x-coupler-grpc" source="{source}">'
-        f"<ssd:Connectors>{connectors}</ssd:Connectors></ssd:Component>"
+def real(name: str, kind: str, unit: str = "") -> Connector:
+    return Connector(name, kind, "Real", unit)
+
+
+def write(
+    tmp_path: Path,
+    components: Sequence[Component],
+    connections: Sequence[tuple[str, str]] = (),
+    version: str = "1.0",
+) -> Path:
+    system = SystemStructure(
+        "Root",
+        components,
+        connections,
+        stop_time=None,
+        units={"m": {"m": 1}, "s": {"s": 1}},
+        version=version,
     )
-
-
-def real(name: str, kind: str, unit: str = "") -> str:
-    u = f' unit="{unit}"' if unit else ""
-    return f'<ssd:Connector name="{name}" kind="{kind}"><ssc:Real{u}/></ssd:Connector>'
-
-
-def link(a: str, ca: str, b: str, cb: str) -> str:
-    return (
-        f'      <ssd:Connection startElement="{a}" startConnector="{ca}" '
-        f'endElement="{b}" endConnector="{cb}"/>'
-    )
-
-
-def write(tmp_path: Path, elements: str, connections: str = "", version: str = "1.0") -> Path:
-    path = tmp_path / "scenario.ssd"
-    if connections:
-        connections = f"\n    <ssd:Connections>\n{connections}\n    </ssd:Connections>"
-    path.write_text(HEAD.format(version=version, elements=elements, connections=connections))
-    return path
+    return system.write(tmp_path / "scenario.ssd")
 
 
 @pytest.fixture
@@ -145,11 +138,56 @@ def test_ssp_archive(tmp_path: Path) -> None:
     assert scenario.source == archive.resolve()
 
 
+def test_the_ssd_builder_of_coupler_testing_writes_what_it_is_given(tmp_path: Path) -> None:
+    """coupler.testing.SystemStructure: a schema-valid SSD that loads as it was built."""
+    bound = {"gain": 2.5, "count": 3, "on": True, "label": "x"}
+    timeout = Annotation("org.coupler.component", "Component", {"callTimeout": "4"})
+    decoupled = Annotation("org.coupler.connection", "Connection", {"decoupled": "true"})
+    system = SystemStructure(
+        "Built",
+        components=[
+            fmu(
+                "Plant",
+                "x.fmu",
+                real("y", "output", "m"),
+                inputs=["u"],
+                parameters=bound,
+                annotations=[timeout],
+            ),
+            remote("Control", "grpc://${C_HOST}:9", inputs=["y"], outputs=["u"]),
+        ],
+        connections=[
+            ("Plant.y", "Control.y"),
+            Connection("Control.u", "Plant.u", annotations=[decoupled]),
+        ],
+        start_time=0.5,
+        stop_time=3,
+        units={"m": {"m": 1}, "km": {"m": 1, "factor": 1000}},
+    )
+    (tmp_path / "x.fmu").touch()
+    scenario = load_ssp(system.write(tmp_path / "b.ssd"), env={"C_HOST": "h"})
+    assert (scenario.name, scenario.start_time, scenario.stop_time) == ("Built", 0.5, 3.0)
+    assert scenario.units["km"].base_unit.factor == 1000.0
+    plant, control = scenario.components
+    assert plant.type == "application/x-fmu-sharedlibrary"
+    assert [(c.name, c.kind, c.type, c.unit) for c in plant.connectors] == [
+        ("y", "output", ValueType.REAL, "m"),
+        ("u", "input", None, None),
+    ]
+    assert {n: p.value for n, p in plant.parameters.items()} == bound
+    assert (plant.settings.call_timeout, control.settings.call_timeout) == (4.0, None)
+    assert (control.type, control.source) == ("application/x-coupler-grpc", "grpc://h:9")
+    assert [(c.start, c.end, c.decoupled) for c in scenario.connections] == [
+        ("Plant.y", "Control.y", False),
+        ("Control.u", "Plant.u", True),
+    ]
+
+
 def test_ssp2_loads_with_structural_checks(tmp_path: Path) -> None:
     path = write(
         tmp_path,
-        grpc("A", real("y", "output")) + grpc("B", real("u", "input")),
-        link("A", "y", "B", "u"),
+        [grpc("A", real("y", "output")), grpc("B", real("u", "input"))],
+        [("A.y", "B.u")],
         version="2.0",
     )
     scenario = load_ssp(path)
@@ -158,11 +196,11 @@ def test_ssp2_loads_with_structural_checks(tmp_path: Path) -> None:
 
 
 def test_env_expansion_and_undefined_variable(tmp_path: Path) -> None:
-    path = write(tmp_path, grpc("A", real("y", "output"), "grpc://${A_HOST}:${A_PORT:-9}"))
+    path = write(tmp_path, [grpc("A", real("y", "output"), source="grpc://${A_HOST}:${A_PORT:-9}")])
     assert load_ssp(path, env={"A_HOST": "h"}).component("A").source == "grpc://h:9"
     with pytest.raises(ValidationError) as info:
         load_ssp(path, env={})
-    assert "scenario.ssd line 7: component 'A': environment variable 'A_HOST'" in str(info.value)
+    assert "scenario.ssd line 8: component 'A': environment variable 'A_HOST'" in str(info.value)
 
 
 @pytest.mark.parametrize(
@@ -173,7 +211,7 @@ def test_only_address_variables_expand_and_values_are_never_shown(
     tmp_path: Path, source: str
 ) -> None:
     """An SSD cannot read an arbitrary environment variable into an address (and print it)."""
-    path = write(tmp_path, grpc("A", real("y", "output"), source))
+    path = write(tmp_path, [grpc("A", real("y", "output"), source=source)])
     secrets = {"SECRET": "s3cr3t-value", "HOME": "/root", "PASSWORD": "hunter2"}
     with pytest.raises(ValidationError) as info:
         load_ssp(path, env=secrets)
@@ -183,7 +221,7 @@ def test_only_address_variables_expand_and_values_are_never_shown(
 
 
 def test_user_information_in_a_source_is_refused(tmp_path: Path) -> None:
-    path = write(tmp_path, grpc("A", real("y", "output"), "grpc://user:pw@${A_HOST}:9"))
+    path = write(tmp_path, [grpc("A", real("y", "output"), source="grpc://user:pw@${A_HOST}:9")])
     with pytest.raises(ValidationError, match="carries user information"):
         load_ssp(path, env={"A_HOST": "h"})
 
@@ -216,14 +254,9 @@ def test_an_unknown_mapping_source_is_an_error(tmp_path: Path) -> None:
         ' xmlns:ssm="http://ssp-standard.org/SSP1/SystemStructureParameterMapping">\n'
         '  <ssm:MappingEntry source="gian" target="k"/>\n</ssm:ParameterMapping>\n'
     )
-    component = (
-        '      <ssd:Component name="A" type="application/x-coupler-grpc" source="grpc://h:1">'
-        '<ssd:ParameterBindings><ssd:ParameterBinding source="p.ssv">'
-        '<ssd:ParameterMapping source="p.ssm"/></ssd:ParameterBinding></ssd:ParameterBindings>'
-        "</ssd:Component>"
-    )
+    component = remote("A", "grpc://h:1", bindings=[Binding("p.ssv", mapping="p.ssm")])
     with pytest.raises(ValidationError) as info:
-        load_ssp(write(tmp_path, component))
+        load_ssp(write(tmp_path, [component]))
     assert "p.ssm line 3: parameter mapping source 'gian' names no parameter" in str(info.value)
     assert "gain" in str(info.value)
 
@@ -243,15 +276,16 @@ def test_doctype_refused(tmp_path: Path) -> None:
 
 
 def test_schema_violation(tmp_path: Path) -> None:
-    path = write(tmp_path, '      <ssd:Component name="A" source="x.fmu" bogus="1"/>')
+    path = write(tmp_path, [fmu("A", "x.fmu")])
+    path.write_text(path.read_text().replace('source="x.fmu"', 'source="x.fmu" bogus="1"'))
     with pytest.raises(ValidationError) as info:
         load_ssp(path)
-    assert "scenario.ssd line 7: schema violation" in str(info.value)
+    assert "scenario.ssd line 8: schema violation" in str(info.value)
     assert "bogus" in str(info.value)
 
 
 def test_unknown_component_type(tmp_path: Path) -> None:
-    path = write(tmp_path, '      <ssd:Component name="A" type="application/x-other" source="x"/>')
+    path = write(tmp_path, [Component("A", "x", type="application/x-other")])
     with pytest.raises(ValidationError) as info:
         load_ssp(path)
     message = str(info.value)
@@ -260,7 +294,7 @@ def test_unknown_component_type(tmp_path: Path) -> None:
 
 
 def test_missing_fmu(tmp_path: Path) -> None:
-    path = write(tmp_path, '      <ssd:Component name="A" source="resources/missing.fmu"/>')
+    path = write(tmp_path, [fmu("A", "resources/missing.fmu")])
     with pytest.raises(ValidationError, match=r"FMU file 'resources/missing\.fmu' does not exist"):
         load_ssp(path)
 
@@ -268,13 +302,13 @@ def test_missing_fmu(tmp_path: Path) -> None:
 def test_unknown_connector(tmp_path: Path) -> None:
     path = write(
         tmp_path,
-        grpc("Integrator", real("y", "output")) + grpc("Gain", real("real_in2", "input")),
-        link("Integrator", "y", "Gain", "real_in"),
+        [grpc("Integrator", real("y", "output")), grpc("Gain", real("real_in2", "input"))],
+        [("Integrator.y", "Gain.real_in")],
     )
     with pytest.raises(ValidationError) as info:
         load_ssp(path)
     assert (
-        "scenario.ssd line 10: connection Integrator.y -> Gain.real_in: component 'Gain' "
+        "scenario.ssd line 20: connection Integrator.y -> Gain.real_in: component 'Gain' "
         "declares no connector 'real_in' (its connectors: real_in2); did you mean 'real_in2'?"
     ) in str(info.value)
 

@@ -17,29 +17,22 @@ steps go through ``grpc.aio`` with the same meaning, the same errors and the sam
 
 from __future__ import annotations
 
-import os
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from typing import Any
 
 import grpc
 
 from coupler import wire
-from coupler.channels import RunSetup, Value
-from coupler.client import RemoteParticipant, translate, uses_tls
+from coupler.channels import Value
+from coupler.client import RemoteParticipant, StepTransport, translate, uses_tls
 from coupler.errors import ParticipantError, ParticipantTimeout
-from coupler.participant import EndRun, Values
+from coupler.participant import Values
 from coupler.security import read_secret
-from coupler_orchestrator.native import NativeModule
+from coupler.v1 import component_pb2 as pb
+from coupler_orchestrator.native import ENVIRONMENT as ENVIRONMENT
+from coupler_orchestrator.native import NativeModule, wanted
 
-ENVIRONMENT = "COUPLER_NATIVE_STEPS"
-"""``0`` turns the native step channel off for every run of the process."""
 _CODES = {code.value[0]: code for code in grpc.StatusCode}
-
-
-def wanted(asked: bool = True) -> bool:
-    """Whether native stepping is asked for and not turned off by ``COUPLER_NATIVE_STEPS``."""
-    return asked and os.environ.get(ENVIRONMENT, "1").strip().lower() not in ("0", "no", "false")
-
 
 library = NativeModule("_step_streams", "the native step channel")
 """``library()``: the native step channel (``ffi``, ``lib``), or None (why is said once)."""
@@ -57,40 +50,38 @@ def why_python(participant: object, asked: bool) -> str:
         return "native steps are off (--no-native-steps or COUPLER_NATIVE_STEPS=0)"
     if library() is None:
         return str(library.problem)
-    if isinstance(participant, NativeRemote):
+    if isinstance(participant, RemoteParticipant) and isinstance(participant.steps, NativeSteps):
         return "the participant offers no StepStream"
     return "not a gRPC participant (its steps are Python calls)"
 
 
-class NativeRemote(RemoteParticipant):
-    """A remote participant whose steps travel over the native step channel (``split``);
-    every other call, and the steps of a participant without StepStream, as
-    ``RemoteParticipant``'s."""
+class NativeSteps(StepTransport):
+    """A remote participant's steps over the native step channel, given to it as its
+    ``StepTransport`` (``transport``); ``split`` gives the master the two halves of a step.
+    Taken when the participant offers a StepStream; without one its steps stay DoStep calls."""
 
-    def __init__(self, address: str, **options: Any) -> None:
-        super().__init__(address, streaming=False, **options)
+    def __init__(self) -> None:
         native = library()
-        self._ffi: Any = None
-        self._lib: Any = None
+        assert native is not None, "NativeSteps without the native step channel"
+        self._ffi, self._lib = native.ffi, native.lib
+        self._data = native.ffi.new("const char **")
+        self._size = native.ffi.new("size_t *")
+        self._code = native.ffi.new("int *")
+        self._remote: RemoteParticipant | None = None
         self._native: Any = None
         """The open stream (a ``cs_stream *``)."""
-        if native is not None:
-            self._ffi, self._lib = native.ffi, native.lib
-            self._data = native.ffi.new("const char **")
-            self._size = native.ffi.new("size_t *")
-            self._code = native.ffi.new("int *")
         self._sent: list[Any] = []
-        """The pieces of the request under way (``send``)."""
+        """The pieces of the request under way (``_send``)."""
 
-    async def initialize(self, setup: RunSetup) -> Values:
-        outputs = await super().initialize(setup)
-        if self._lib is not None and self.codec.description.capabilities.streaming:
-            self._native = self._open()
-        return outputs
+    def start(self, participant: RemoteParticipant) -> bool:
+        if not participant.codec.description.capabilities.streaming:
+            return False
+        self._remote = participant
+        self._native = self._open(participant)
+        return True
 
-    def _open(self) -> Any:
-        assert self._lib is not None and self._ffi is not None
-        security, tls = self.security, uses_tls(self.address)
+    def _open(self, remote: RemoteParticipant) -> Any:
+        security, tls = remote.security, uses_tls(remote.address)
         pems = [
             read_secret(path, what) if tls and path else b""
             for path, what in (
@@ -99,52 +90,70 @@ class NativeRemote(RemoteParticipant):
                 (security.cert, "TLS certificate"),
             )
         ]
-        pairs = [self._ffi.new("char[]", text.encode()) for pair in self._metadata for text in pair]
+        pairs = [
+            self._ffi.new("char[]", text.encode()) for pair in remote.metadata for text in pair
+        ]
         metadata = self._ffi.new("char *[]", pairs or 1)
         stream = self._lib.cs_open(
-            self.target.encode(),
+            remote.target.encode(),
             int(tls),
             *pems,
             metadata,
-            len(self._metadata),
-            self.call_timeout,
-            self.transport_limit + wire.FRAMING_BYTES,
+            len(remote.metadata),
+            remote.call_timeout,
+            remote.transport_limit + wire.FRAMING_BYTES,
         )
         error = self._ffi.string(self._lib.cs_error(stream)).decode(errors="replace")
         if error:
             self._lib.cs_close(stream, 0.0)
             raise ParticipantError(
-                f"{error} ({self.address})", participant=self.name, call="StepStream"
+                f"{error} ({remote.address})", participant=remote.name, call="StepStream"
             )
         return stream
 
-    def split(self) -> NativeRemote | None:
+    def split(self) -> NativeSteps | None:
+        """The two halves of a step (``steppers.Split``) while this transport carries a run."""
         return self if self._native is not None else None
 
     def send(self, time: float, step: float, inputs: Mapping[str, Value]) -> None:
         """Put a step's request on its way; ``receive()`` takes the answer."""
-        assert self._lib is not None and self._native is not None
-        pieces = self.step_request_pieces(time, step, inputs)
+        assert self._remote is not None and self._native is not None
+        self._send(self._remote.step_request_pieces(time, step, inputs))
+
+    def _send(self, pieces: list[bytes]) -> None:
+        """Send a request given as pieces whose concatenation is the message."""
+        assert self._remote is not None
         # sent from these objects, not copied: kept until the next step or the stream's end
         self._sent = [self._ffi.from_buffer(piece) for piece in pieces]
         sizes = [len(piece) for piece in pieces]
         if self._lib.cs_send(self._native, self._sent, sizes, len(pieces)) != self._lib.CS_OK:
-            self.receive()  # the stream has ended: its status says why
+            self._answer()  # the stream has ended: its status says why
             raise ParticipantError(
                 "a step was sent before the previous answer was received",
-                participant=self.name,
+                participant=self._remote.name,
                 call="DoStep",
             )
 
     def receive(self) -> Values:
         """The answer to the request sent; blocks up to the call deadline."""
-        assert self._lib is not None and self._ffi is not None and self._native is not None
-        lib = self._lib
-        result = lib.cs_receive(self._native, self.call_timeout, self._data, self._size, self._code)
+        assert self._remote is not None
+        response, large = wire.step_answer(self._answered())
+        return self._remote.step_outputs(response, large)
+
+    def _answer(self) -> pb.DoStepResponse:
+        return pb.DoStepResponse.FromString(self._answered())
+
+    def _answered(self) -> memoryview:
+        """The serialized answer to the request sent (valid until the next receive)."""
+        assert self._remote is not None and self._native is not None
+        lib, remote = self._lib, self._remote
+        result = lib.cs_receive(
+            self._native, remote.call_timeout, self._data, self._size, self._code
+        )
         if result == lib.CS_TIMEOUT:
             raise ParticipantTimeout(
-                f"no answer within {self.call_timeout:g} s",
-                participant=self.name,
+                f"no answer within {remote.call_timeout:g} s",
+                participant=remote.name,
                 call="DoStep",
                 status="DEADLINE_EXCEEDED",
             )
@@ -153,39 +162,26 @@ class NativeRemote(RemoteParticipant):
             raise translate(
                 _CODES.get(self._code[0], grpc.StatusCode.UNKNOWN),
                 details,
-                participant=self.name,
+                participant=remote.name,
                 call="DoStep",
-                address=self.address,
+                address=remote.address,
             )
-        response, large = wire.step_answer(self._ffi.buffer(self._data[0], self._size[0]))
-        outputs = self._response(
-            "DoStep", lambda: wire.outputs_from_pb(response, self.codec, large)
-        )
-        reason = wire.termination_requested(response)
-        if reason is not None:
-            raise EndRun(reason, outputs)
-        return outputs
+        return memoryview(self._ffi.buffer(self._data[0], self._size[0]))
 
-    async def do_step(self, time: float, step: float, inputs: Mapping[str, Value]) -> Values:
-        if self._native is None:
-            return await super().do_step(time, step, inputs)
-        self.send(time, step, inputs)
-        return self.receive()
+    async def step(self, request: pb.DoStepRequest) -> pb.DoStepResponse:
+        self._send([request.SerializeToString()])
+        return self._answer()
 
-    async def terminate(self, reason: str = "") -> None:
-        try:
-            await super().terminate(reason)
-        finally:
-            self._close_native(timeout=1.0)
-
-    async def close(self) -> None:
-        self._close_native(timeout=0.0)
-        await super().close()
-
-    def _close_native(self, *, timeout: float) -> None:
+    def close(self, *, timeout: float) -> None:
         """Half-close the stream and wait briefly for its status: the run has ended either
         way, the stream's end only confirms it."""
         stream, self._native = self._native, None
-        if stream is not None and self._lib is not None:
+        if stream is not None:
             self._lib.cs_close(stream, timeout)
         self._sent = []
+
+
+def transport(asked: bool = True) -> Callable[[], StepTransport | None]:
+    """What gives each remote participant of a run its step transport: the native step
+    channel where it is wanted and at hand, else nothing (``grpc.aio``)."""
+    return NativeSteps if enabled(asked) else lambda: None

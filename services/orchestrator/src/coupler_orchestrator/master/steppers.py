@@ -20,9 +20,10 @@ from dataclasses import dataclass
 from typing import Protocol
 
 from coupler.channels import Value
+from coupler.client import RemoteParticipant
 from coupler.fmu import FmuParticipant
 from coupler.participant import Participant, Values
-from coupler_orchestrator.master.native_step_channel import NativeRemote
+from coupler_orchestrator.master.native_step_channel import NativeSteps
 
 StepNow = Callable[[float, float, Mapping[str, Value]], Values]
 """A step taken on the caller's thread: (time, step, inputs) -> outputs."""
@@ -49,6 +50,10 @@ def stepper_of(participant: Participant) -> Stepper:
     """The way ``participant`` steps in this run (after its Initialize)."""
     if isinstance(participant, FmuParticipant):
         return Stepper(now=participant.step_now)
-    if isinstance(participant, NativeRemote) and (halves := participant.split()) is not None:
+    if (
+        isinstance(participant, RemoteParticipant)
+        and isinstance(participant.steps, NativeSteps)
+        and (halves := participant.steps.split()) is not None
+    ):
         return Stepper(split=halves)
     return Stepper()

@@ -9,21 +9,20 @@ together with everything else.
 from __future__ import annotations
 
 import asyncio
-from collections.abc import AsyncIterator
+from collections.abc import AsyncIterator, Callable
 from contextlib import asynccontextmanager, suppress
 from functools import partial
 from pathlib import Path
 
 from coupler.archives import Budget, declared_size
 from coupler.channels import Description
-from coupler.client import RemoteParticipant, parse_address, uses_tls
+from coupler.client import RemoteParticipant, StepTransport, parse_address, uses_tls
 from coupler.errors import CouplerError, ScenarioError
 from coupler.fmu import FmuParticipant
 from coupler.fmuhost import IsolatedFmu
 from coupler.participant import Participant
 from coupler.security import ClientSecurity
 from coupler_orchestrator import ssp
-from coupler_orchestrator.master.native_step_channel import NativeRemote, enabled
 from coupler_orchestrator.model import Candidate, Roster
 from coupler_orchestrator.options import RunOptions
 from coupler_orchestrator.pipeline.builtins import builtin_of
@@ -36,11 +35,21 @@ def where(item: ssp.Component | ssp.Connection | ssp.Connector, file: str = "") 
     return f"{name} line {item.line}"
 
 
+StepTransports = Callable[[], StepTransport | None]
+"""What gives each remote participant of a run its step transport (None: ``grpc.aio``); the
+runner chooses it (the master's native step channel, ``native_step_channel.transport``)."""
+
+
 def create(
-    component: ssp.Component, options: RunOptions, budget: Budget | None = None
+    component: ssp.Component,
+    options: RunOptions,
+    budget: Budget | None = None,
+    *,
+    steps: StepTransports | None = None,
 ) -> Participant:
     """The participant behind a component: an FMU in-process or isolated in a child process,
-    or a remote one; the component's own settings (SSD annotation) over the options."""
+    or a remote one (its steps over ``steps()``'s transport, when it gives one); the component's
+    own settings (SSD annotation) over the options."""
     replay = replay_of(component, options)
     if replay is not None:
         return replay
@@ -63,10 +72,12 @@ def create(
             key=settings.tls_key,
             token_file=settings.token_file,
         )
-        remote = NativeRemote if enabled(options.native_steps) else RemoteParticipant
+        transport = steps() if steps is not None else None
         address = address_of(component, options)
-        return remote(
+        return RemoteParticipant(
             address,
+            steps=transport,
+            streaming=transport is None,  # a transport given takes the stream where there is one
             name=component.name,
             connect_timeout=options.connect_timeout,
             call_timeout=call_timeout,
@@ -139,11 +150,16 @@ def units_of(participant: Participant) -> dict[str, ssp.BaseUnit]:
 
 @asynccontextmanager
 async def opened(
-    scenario: ssp.Scenario, options: RunOptions, budget: Budget | None = None
+    scenario: ssp.Scenario,
+    options: RunOptions,
+    budget: Budget | None = None,
+    *,
+    steps: StepTransports | None = None,
 ) -> AsyncIterator[Roster]:
     """Create, open and describe every component's participant concurrently; close them all on
     the way out, whatever happened. FMUs, in-process and isolated, unpack within ``budget``
-    (shared with the scenario's archive) before any of them starts."""
+    (shared with the scenario's archive) before any of them starts; remote participants step
+    over ``steps()``'s transports."""
     created: dict[str, Participant] = {}
     problems: list[str] = []
     known = [c.name for c in scenario.components]
@@ -160,7 +176,7 @@ async def opened(
             )
     for component in scenario.components:
         try:
-            created[component.name] = create(component, options, budget)
+            created[component.name] = create(component, options, budget, steps=steps)
         except CouplerError as exc:
             problems.append(str(exc))
     try:

@@ -5,8 +5,8 @@ from __future__ import annotations
 
 from coupler.durations import MAX_LEASE
 from coupler.errors import ScenarioError
-from coupler_orchestrator.master.native_step_channel import wanted
 from coupler_orchestrator.model import Checked, Link, Plan
+from coupler_orchestrator.native import wanted
 from coupler_orchestrator.options import RunOptions
 from coupler_orchestrator.pipeline.openmcx import openmcx_of
 from coupler_orchestrator.pipeline.ordering import execution_order

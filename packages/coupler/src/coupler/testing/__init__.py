@@ -7,9 +7,12 @@
   answers SERVING on its health service.
 - ``wait_until(condition)`` / ``eventually(attempt)``: poll until something holds, then give
   what it gave; past the deadline, an error saying what was waited for.
-- ``free_port()``: a port nothing listens on now (for programs that must be given one).
+- ``free_port()``: a port nothing listens on now (for programs that must be given one);
+  ``free_ports(n)``: n different ones.
 - ``process_group(command)``: a process in a process group of its own, ended on every path out
   (passed, failed, timed out, interrupted) with everything it started, and waited for.
+- ``SystemStructure`` with ``fmu(...)`` and ``remote(...)`` components: a small SSD written for
+  ``coupler run`` (``coupler.testing.ssd``).
 
 No pytest needed: these are context managers and functions a test of any framework can use.
 """
@@ -30,6 +33,16 @@ from typing import TYPE_CHECKING, Any, TypeVar
 from coupler.errors import CouplerError
 from coupler.participant import Participant
 from coupler.server import ParticipantServer
+from coupler.testing.ssd import (
+    Annotation,
+    Binding,
+    Component,
+    Connection,
+    Connector,
+    SystemStructure,
+    fmu,
+    remote,
+)
 
 if TYPE_CHECKING:
     from coupler.security import ClientSecurity
@@ -37,10 +50,19 @@ if TYPE_CHECKING:
 T = TypeVar("T")
 
 __all__ = [
+    "Annotation",
+    "Binding",
+    "Component",
+    "Connection",
+    "Connector",
+    "SystemStructure",
     "end_group",
     "eventually",
+    "fmu",
     "free_port",
+    "free_ports",
     "process_group",
+    "remote",
     "served",
     "served_in_thread",
     "wait_until",
@@ -54,6 +76,19 @@ def free_port(host: str = "127.0.0.1") -> int:
     with socket.socket(socket.AF_INET6 if ":" in host else socket.AF_INET) as probe:
         probe.bind((host, 0))
         return int(probe.getsockname()[1])
+
+
+def free_ports(count: int, host: str = "127.0.0.1") -> list[int]:
+    """``count`` different ports nothing listens on at this moment (held together while they
+    are chosen, so no two are the same; the caveat of ``free_port`` holds)."""
+    with contextlib.ExitStack() as stack:
+        probes = [
+            stack.enter_context(socket.socket(socket.AF_INET6 if ":" in host else socket.AF_INET))
+            for _ in range(count)
+        ]
+        for probe in probes:
+            probe.bind((host, 0))
+        return [int(probe.getsockname()[1]) for probe in probes]
 
 
 @contextlib.asynccontextmanager
