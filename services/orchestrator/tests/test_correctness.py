@@ -534,16 +534,19 @@ CELLS = {
 }
 
 
-@given(
-    st.lists(st.sampled_from(sorted(CELLS)), min_size=1, max_size=8).flatmap(
-        lambda types: st.tuples(
-            st.just(types),
-            st.tuples(*(CELLS[t] for t in types)),
-            st.sets(st.integers(0, len(types) - 1)),
-            st.floats(allow_nan=False),
-        )
+RESULT_ROWS = st.lists(st.sampled_from(sorted(CELLS)), min_size=1, max_size=8).flatmap(
+    lambda types: st.tuples(
+        st.just(types),
+        st.tuples(*(CELLS[t] for t in types)),
+        st.sets(st.integers(0, len(types) - 1)),
+        st.floats(allow_nan=False),
     )
 )
+"""(column types, a row of values of them, the picked columns, the time): any row results.csv
+may be asked to write."""
+
+
+@given(RESULT_ROWS)
 def test_a_results_row_is_its_cells_as_each_columns_formatter_writes_them(case: Any) -> None:
     """results.csv's rows come from one %-format made per run; every byte as the columns'
     formatters write the cells one by one, for any selection of columns."""

@@ -11,7 +11,6 @@ from typing import Any
 
 import pytest
 from hypothesis import given
-from hypothesis import strategies as st
 
 from coupler_orchestrator import native
 from coupler_orchestrator.observer import Column
@@ -19,6 +18,7 @@ from coupler_orchestrator.outputs import csv as csv_output
 from coupler_orchestrator.outputs.csv import native_row_formatter, row_formatter
 
 from .conftest import Coupler, require_native
+from .test_correctness import RESULT_ROWS
 from .test_native_kernel import PARAMS, ROUTES, chain
 
 AWKWARD = {
@@ -33,16 +33,6 @@ AWKWARD = {
     "Binary": [b"", b"\x00\xff", b"a,b"],
 }  # fmt: skip
 """Per column type, values whose text is easy to get wrong."""
-
-CELLS = {
-    "Real": st.floats(allow_nan=True) | st.integers(),
-    "Integer": st.integers(),
-    "Enumeration": st.integers(),
-    "UInt64": st.integers(min_value=0, max_value=2**64 - 1),
-    "Boolean": st.booleans() | st.integers(),
-    "String": st.text(),
-    "Binary": st.binary(),
-}
 
 
 @pytest.fixture(autouse=True)
@@ -78,16 +68,7 @@ def test_reals_are_their_repr() -> None:
     assert line == "0.5,-0.0,inf,nan,1e-300,5e-324,1e+16,0.30000000000000004,2.5\n"
 
 
-@given(
-    st.lists(st.sampled_from(sorted(CELLS)), min_size=1, max_size=8).flatmap(
-        lambda types: st.tuples(
-            st.just(types),
-            st.tuples(*(CELLS[t] for t in types)),
-            st.sets(st.integers(0, len(types) - 1)),
-            st.floats(allow_nan=False),
-        )
-    )
-)
+@given(RESULT_ROWS)
 def test_any_row_is_the_same_text(case: Any) -> None:
     """Any mix of column types, any selection (none too)."""
     types, row, chosen, time = case
