@@ -1006,7 +1006,7 @@ async def watched_run(
     log(f"coupler run, watched (as a user runs it) and not watched: Source2, {steps:.0e} steps")
     arguments = [
         "run", str(FMUS / "Source2.fmu"), "--stop-time", str(steps * STEP), "--step", str(STEP),
-        "--no-progress", "--out", str(work / "watched"),
+        "--no-progress", "--out", str(work / "watched"), "--force",
     ]  # fmt: skip
     watched = [str(Path(sys.executable).with_name("coupler")), *arguments]
     direct = "import sys; from coupler_orchestrator.cli.main import main; sys.exit(main())"
@@ -1015,7 +1015,9 @@ async def watched_run(
     def timed(command: list[str]) -> Callable[[], Awaitable[float]]:
         async def run() -> float:
             started = time.perf_counter()
-            await asyncio.to_thread(subprocess.run, command, capture_output=True, check=True)
+            done = await asyncio.to_thread(subprocess.run, command, capture_output=True, text=True)
+            if done.returncode != 0:
+                raise RuntimeError(f"{' '.join(command)} failed ({done.returncode}): {done.stderr}")
             return steps / (time.perf_counter() - started)
 
         return run
