@@ -2,6 +2,7 @@
 
     make bench                  # quick (under 5 min on two cores)
     make bench ARGS=--full      # more steps, 100 participants longer
+    suite.py --smoke            # every section with the fewest steps: runs, measures nothing
     suite.py --sections sockets # some sections only
 
 Cases (steps/s, median of the repetitions; Coupler and its reference interleaved):
@@ -551,9 +552,11 @@ def gains(ports: Sequence[int]) -> list[list[str]]:
     return [[sys.executable, "-m", "coupler.examples", "gain", "--port", str(p)] for p in ports]
 
 
-def rss_mb(pid: int) -> float:
+def rss_mb(pid: int, field: str = "VmRSS") -> float:
+    """A process's resident memory [MB] (``VmHWM``: its peak since it started its program;
+    getrusage's ``ru_maxrss`` would count the parent's too, as Linux keeps it across exec)."""
     for line in Path(f"/proc/{pid}/status").read_text().splitlines():
-        if line.startswith("VmRSS:"):
+        if line.startswith(f"{field}:"):
             return int(line.split()[1]) / 1024
     return 0.0
 
@@ -880,8 +883,6 @@ async def rss_probe(port: int, steps: int, sample_at: int) -> dict[str, float]:
 def replay_probe(recording: Path, steps: int) -> dict[str, float]:
     """In this process: RSS after the imports, then the peak RSS once ``steps`` steps of the
     recording were replayed (the way a run's replay reads it)."""
-    import resource
-
     from coupler.channels import RunSetup
     from coupler_orchestrator.pipeline.replay import ReplayParticipant
 
@@ -902,7 +903,7 @@ def replay_probe(recording: Path, steps: int) -> dict[str, float]:
             await participant.close()
 
     asyncio.run(replay())
-    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    peak = rss_mb(os.getpid(), "VmHWM")
     return {"before_mb": before, "peak_mb": peak}
 
 
@@ -956,6 +957,10 @@ QUICK = Sizes(
 )
 FULL = Sizes(chain_steps=60000, remote_steps=10000, repeats=5, scale_steps=1000,
              rss_steps=100_000, render_positions=100, frame_steps=500)  # fmt: skip
+SMOKE = Sizes(chain_steps=200, remote_steps=50, repeats=1, scale_steps=5, rss_steps=11_000,
+              render_positions=2, frame_steps=10)  # fmt: skip
+"""Every section once with the fewest steps it needs (the RSS probe samples at 1e4): a check
+that `make bench` runs (tests/bench), never a figure."""
 
 
 async def interleaved(
@@ -1574,6 +1579,11 @@ def table(rows: Sequence[Row]) -> str:
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--full", action="store_true", help="more steps and repetitions")
+    parser.add_argument(
+        "--smoke",
+        action="store_true",
+        help="every section with the fewest steps: checks that the suite runs, measures nothing",
+    )
     parser.add_argument("--out", type=Path, default=OUT, help=f"JSON (default {OUT})")
     parser.add_argument(
         "--only",
@@ -1626,7 +1636,8 @@ def main() -> int:
     if not (FMUS / "Feedthrough2.fmu").exists():
         print("error: build/fmus is empty: run make setup (make bench does)", file=sys.stderr)
         return 1
-    sizes = FULL if args.full else QUICK
+    sizes = SMOKE if args.smoke else FULL if args.full else QUICK
+    kind = "smoke: not a measurement" if args.smoke else "full" if args.full else "quick"
     started = time.perf_counter()
 
     def log(text: str) -> None:
@@ -1642,7 +1653,7 @@ def main() -> int:
     extra["fmu_steps"] = fmu_steps
     print()
     print(
-        f"Coupler benchmark ({'full' if args.full else 'quick'}; steps/s, median of "
+        f"Coupler benchmark ({kind}; steps/s, median of "
         f"{sizes.repeats}, Coupler and reference interleaved in this run; {os.cpu_count()} cores, "
         f"Python {platform.python_version()}; remote steps over the {channel}, in-process FMUs "
         f"stepped {fmu_steps})"

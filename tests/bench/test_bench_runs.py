@@ -44,3 +44,29 @@ def test_the_openmcx_rows_say_why_they_are_skipped(tmp_path: Path) -> None:
         assert done.returncode == 0, done.stderr[-2000:]
         assert said in done.stdout, done.stdout
         assert "OpenMCx (C)" not in done.stdout
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(1200)
+def test_every_section_runs_with_the_fewest_steps(tmp_path: Path) -> None:
+    """`make bench` as a whole, each section once with ``--smoke``: a refused results folder, a
+    changed CLI or API breaks this test, not the next person's benchmark run."""
+    done = subprocess.run(
+        [sys.executable, str(ROOT / "benchmarks" / "suite.py"), "--smoke",
+         "--out", str(tmp_path / "bench.json")],
+        capture_output=True, text=True, timeout=1100, cwd=ROOT,
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr[-3000:]
+    assert "Coupler benchmark (smoke: not a measurement;" in done.stdout, done.stdout
+    for row in [
+        "coupler --help",
+        "coupler run, watched",
+        "in-process FMU chain x2",
+        "remote x1 over UDS",
+        "bare grpc.aio stream, empty",
+        "proxy FMU in Coupler (x1)",
+        "camera frames x1 (1.44 MB, 5 Hz)",
+        "orchestrator RSS 1e4 -> 1e5 steps",
+        "replay RSS, 160 MB recording",
+    ]:
+        assert row in done.stdout, f"no row {row!r}:\n{done.stdout}"
