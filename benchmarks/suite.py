@@ -389,6 +389,15 @@ def fmpy_slave(path: Path, name: str) -> tuple[Any, Any]:
     return slave, description
 
 
+def free_slave(slave: Any) -> None:
+    """End an FMPy slave and remove the folder ``fmpy.extract`` unpacked its FMU into."""
+    try:
+        slave.terminate()
+        slave.freeInstance()
+    finally:
+        shutil.rmtree(slave.unzipDirectory, ignore_errors=True)
+
+
 def fmpy_loop(n: int, steps: int) -> float:
     """Steps/s of a hand-written FMPy loop: Source2 -> Feedthrough2 x n, every output read."""
     slaves = []
@@ -420,8 +429,7 @@ def fmpy_loop(n: int, steps: int) -> float:
             slave.doStep(currentCommunicationPoint=t, communicationStepSize=STEP)
     rate = steps / (time.perf_counter() - started)
     for slave, _, _ in slaves:
-        slave.terminate()
-        slave.freeInstance()
+        free_slave(slave)
     return rate
 
 
@@ -498,8 +506,7 @@ def fmpy_proxy_loop(fmu: Path, steps: int) -> float:
         slave.getBoolean([refs["inverted"]])
         slave.getString([refs["echo"]])
     rate = steps / (time.perf_counter() - started)
-    slave.terminate()
-    slave.freeInstance()
+    free_slave(slave)
     return rate
 
 
