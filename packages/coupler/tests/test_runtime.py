@@ -8,7 +8,7 @@ from __future__ import annotations
 import asyncio
 import re
 import secrets
-from collections.abc import Awaitable, Callable, Mapping
+from collections.abc import Mapping
 from typing import TypeVar
 
 import grpc
@@ -21,7 +21,7 @@ from coupler.errors import ParticipantError, ParticipantUnavailable, ScenarioErr
 from coupler.examples.gain import GainParticipant
 from coupler.participant import EndRun, HealthReport, Values
 from coupler.server import ParticipantServer
-from coupler.testing import served
+from coupler.testing import eventually, served
 from coupler.v1 import component_pb2 as pb
 from coupler.v1 import component_pb2_grpc as pb_grpc
 
@@ -157,7 +157,7 @@ async def test_participant_exception_is_internal_and_server_keeps_serving() -> N
             assert info.value.status == "INTERNAL"
         # the failed stream ended its run: the participant serves the next one
         async with RemoteParticipant(server.address) as remote:
-            await eventually(lambda: remote.initialize(setup("next")))
+            await eventually(lambda: remote.initialize(setup("next")), retry=ParticipantError)
             assert (await remote.do_step(0.0, 0.5, {"u": 1.0}))["x"] == 0.5
             await remote.terminate()
 
@@ -287,19 +287,6 @@ async def test_describe_over_the_wire_equals_local(gain_server: ParticipantServe
     assert remote_description == await GainParticipant().describe()
 
 
-async def eventually(attempt: Callable[[], Awaitable[T]], within: float = 5.0) -> T:
-    """``attempt()``'s result once it stops raising ParticipantError, or its last error."""
-    loop = asyncio.get_running_loop()
-    deadline = loop.time() + within
-    while True:
-        try:
-            return await attempt()
-        except ParticipantError:
-            if loop.time() > deadline:
-                raise
-            await asyncio.sleep(0.05)
-
-
 async def raw_stub(address: str) -> tuple[grpc.aio.Channel, pb_grpc.GRPCComponentServiceStub]:
     channel = grpc.aio.insecure_channel(parse_address(address))
     return channel, pb_grpc.GRPCComponentServiceStub(channel)
@@ -335,7 +322,7 @@ async def test_a_silent_run_ends_when_its_lease_expires(gain_server: Participant
     async with RemoteParticipant(gain_server.address, streaming=False) as dead:
         await dead.initialize(setup("dead", lease=0.3))
         async with RemoteParticipant(gain_server.address) as next_one:
-            await eventually(lambda: next_one.initialize(setup("next")))
+            await eventually(lambda: next_one.initialize(setup("next")), retry=ParticipantError)
             assert (await next_one.do_step(0.0, 0.5, {"u": 2.0}))["y"] == 4.0
             await next_one.terminate()
         with pytest.raises(ParticipantError, match="DoStep before Initialize") as info:
@@ -352,7 +339,9 @@ async def test_a_run_ends_with_its_broken_step_stream(gain_server: ParticipantSe
     await lost.do_step(0.0, 0.5, {"u": 1.0})
     await lost.close()  # cancels the stream, no Terminate
     async with RemoteParticipant(gain_server.address) as next_one:
-        await eventually(lambda: next_one.initialize(setup("next")), within=3.0)
+        await eventually(
+            lambda: next_one.initialize(setup("next")), within=3.0, retry=ParticipantError
+        )
         await next_one.terminate()
 
 
@@ -488,5 +477,5 @@ async def test_calls_of_the_run_without_its_secret_are_refused_and_fail_the_run(
         else:
             await owner.terminate()
     async with RemoteParticipant(gain_server.address) as next_one:  # the participant is free
-        await eventually(lambda: next_one.initialize(setup("next")))
+        await eventually(lambda: next_one.initialize(setup("next")), retry=ParticipantError)
         await next_one.terminate()

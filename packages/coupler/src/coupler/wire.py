@@ -69,7 +69,6 @@ _TYPE_TO_PB = {
     ValueType.ENUMERATION: pb.VALUE_TYPE_ENUMERATION,
 }
 _TYPE_FROM_PB = {v: k for k, v in _TYPE_TO_PB.items()}
-_SIZED = (ValueType.BINARY, ValueType.STRING)
 _PYTHON_TYPE: dict[ValueType, type] = {
     ValueType.REAL: float,
     ValueType.INTEGER: int,
@@ -153,8 +152,6 @@ class Codec:
         self.description = description
         self.policy = policy
         self._channels = {c.name: c for c in description.channels}
-        self._sized = any(c.type in _SIZED for c in description.channels)
-        """Whether a message can grow: only Binary and String values count to its limit."""
         self._tables: dict[_Allowed, dict[str, _Slot]] = {}
         self._finite = not policy.allow_nonfinite
 
@@ -191,12 +188,11 @@ class Codec:
     def encode(
         self, values: Mapping[str, object], allowed: Iterable[Causality] | None = None
     ) -> list[pb.VariableBinding]:
-        """Bindings for ``values``, each checked against its channel."""
-        allowed = tuple(allowed) if allowed is not None else None
-        bindings = [self.binding(self.channel(n, allowed), v) for n, v in values.items()]
-        if self._sized:
-            self._fits(values)
-        return bindings
+        """Bindings for ``values``, each checked against its channel (``encode_into`` a
+        message of one's own)."""
+        message = pb.DoStepRequest()
+        self.encode_into(message.inputs, values, tuple(allowed) if allowed is not None else None)
+        return list(message.inputs)
 
     def encode_into(
         self,
@@ -234,13 +230,6 @@ class Codec:
             elif INT32_MIN <= value <= INT32_MAX:
                 return value
         return check(slot.channel, value, self.policy)
-
-    def binding(self, channel: Channel, value: object) -> pb.VariableBinding:
-        """One checked binding."""
-        checked = check(channel, value, self.policy)
-        binding = pb.VariableBinding(channel=channel.name)
-        setattr(binding, _FIELD_OF_TYPE[channel.type], checked)
-        return binding
 
     def encode_apart(
         self,
@@ -426,16 +415,17 @@ def description_from_pb(response: pb.DescribeResponse) -> Description:
 
 def initialize_to_pb(setup: RunSetup, codec: Codec) -> pb.InitializeRequest:
     """The Initialize request for ``setup``, values checked against the participant's channels."""
-    return pb.InitializeRequest(
+    request = pb.InitializeRequest(
         run_id=setup.run_id,
         run_secret=setup.run_secret,
         start_time=setup.start_time,
         step_size=setup.step_size,
         stop_time=setup.stop_time,
-        parameters=codec.encode(setup.parameters, (Causality.PARAMETER,)),
-        inputs=codec.encode(setup.inputs, (Causality.INPUT,)),
         lease_seconds=setup.lease,
     )
+    codec.encode_into(request.parameters, setup.parameters, _PARAMETERS)
+    codec.encode_into(request.inputs, setup.inputs, _INPUTS)
+    return request
 
 
 def initialize_from_pb(request: pb.InitializeRequest, codec: Codec) -> RunSetup:
