@@ -60,3 +60,8 @@ class NativeModule:
                 self.problem = f"{self.name} does not load: {exc}"
                 print(f"warning: {self.what} unavailable: {self.problem}", file=sys.stderr)
         return self._loaded
+
+
+rows = NativeModule("_rows", "the native CSV row")
+"""``rows()``: ``coupler_native._rows`` (``RowFormat`` makes results.csv's lines, ``RowRead``
+reads the native FMU step's row from its arrays), or None (why is said once)."""

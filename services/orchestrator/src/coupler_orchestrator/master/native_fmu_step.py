@@ -34,7 +34,7 @@ from coupler.fmicalls import CONVERT, Group
 from coupler.fmu import FmuParticipant
 from coupler_orchestrator.master.watchdog import IN_PROCESS, Armed
 from coupler_orchestrator.model import Algorithm, Member, Plan
-from coupler_orchestrator.native import NativeModule
+from coupler_orchestrator.native import NativeModule, rows
 
 log = structlog.get_logger("coupler.kernel")
 
@@ -43,8 +43,6 @@ OFF = "native steps are off (--no-native-steps or COUPLER_NATIVE_STEPS=0)"
 
 library = NativeModule("_fmu_steps", "the native FMU step")
 """``library()``: the native FMU step (``ffi``, ``lib``), or None (why is said once)."""
-rows = NativeModule("_rows", "the native row reader")
-"""``rows()``: the module whose ``RowRead`` reads a row from the arrays, or None."""
 
 
 def _address(pointer: Any) -> int:

@@ -29,7 +29,7 @@ from typing import IO, Any
 
 from coupler import messages
 from coupler.channels import Value
-from coupler_orchestrator.native import NativeModule
+from coupler_orchestrator.native import rows as native_rows
 from coupler_orchestrator.observer import Column, Observer, RunEnd, RunInfo
 from coupler_orchestrator.outputs.files import write_failed
 from coupler_orchestrator.outputs.frames import FrameStore, is_frame
@@ -37,8 +37,6 @@ from coupler_orchestrator.outputs.frames import FrameStore, is_frame
 FLUSH_EVERY_S = 1.0
 """Longest time a written row may stay in the buffer [s]."""
 
-native_rows = NativeModule("_rows", "the native CSV row")
-"""``native_rows()``: the native CSV row (its ``RowFormat``), or None (why is said once)."""
 IN_C = "in C (the native CSV row)"
 
 
