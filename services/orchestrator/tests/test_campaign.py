@@ -116,7 +116,9 @@ def test_a_3x3_campaign_runs_in_parallel_and_a_second_run_skips_it(
         }
         assert json.loads((run / "summary.json").read_text())["status"] == "completed"
         assert (run / "results.csv").read_text().startswith("time,")
-        assert "--param Gain.gain=" in (run / "run.log").read_text()
+        command = (run / "run.log").read_text().splitlines()[0]
+        assert "--param Gain.gain=" in command
+        assert " --address grpc://" in command and "=unix:///" in command  # as coupler fleet
     stamps = {p: p.stat().st_mtime_ns for p in out.glob("runs/*/results.csv")}
 
     assert main(["campaign", str(path)]) == 0  # again: nothing runs

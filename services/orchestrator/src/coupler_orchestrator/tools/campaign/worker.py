@@ -153,7 +153,10 @@ async def _run_with_services(job: RunJob, scratch: Path) -> None:
         env = {**os.environ, **{name: str(free_port()) for name in port_variables(scenario.fleet)}}
         spec = replace(FleetSpec.load(scenario.fleet, root=scenario.root, env=env), out=scratch)
         fleet = Fleet(  # its services' logs stay with the run (kept when it fails)
-            spec, health_timeout=scenario.health_timeout, logs=scratch / SERVICE_LOGS
+            spec,
+            health_timeout=scenario.health_timeout,
+            logs=scratch / SERVICE_LOGS,
+            sockets=True,  # on unix sockets, as `coupler fleet` (unless unix_sockets = false)
         )
         try:
             fleet.check_ports()
@@ -162,17 +165,23 @@ async def _run_with_services(job: RunJob, scratch: Path) -> None:
                 raise
             continue
         async with fleet:
-            await _coupler_run(job, scratch, env)
+            await _coupler_run(job, scratch, env, fleet.addresses)
         return
 
 
-async def _coupler_run(job: RunJob, scratch: Path, env: Mapping[str, str]) -> None:
+async def _coupler_run(
+    job: RunJob, scratch: Path, env: Mapping[str, str], addresses: Mapping[str, str] | None = None
+) -> None:
+    """``coupler run`` of ``job`` in ``scratch``; ``addresses`` move participants (the SSD's
+    address of each -> where its fleet serves it, e.g. a unix socket)."""
     scenario = job.scenario
     command = [
         sys.executable, "-m", "coupler_orchestrator", "--log-format", "json",
         "run", str(scenario.ssp), "--out", str(scratch), "--no-progress",
         "--run-id", f"campaign-{job.index}-{job.key}",
     ]  # fmt: skip
+    for source, address in sorted((addresses or {}).items()):
+        command += ["--address", f"{source}={address}"]
     if scenario.stop_time is not None:
         command += ["--stop-time", repr(scenario.stop_time)]
     command += scenario.args
