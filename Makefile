@@ -53,11 +53,11 @@ proto-check: proto
 
 # Example FMUs and the railway driver from the project's own C sources (FMPy's headers, gcc).
 fmus: sync
-	$(UV) run --frozen python -m coupler.fmubuild fmus $(FMU_DIR)
+	$(UV) run --frozen python -m coupler_tools.fmubuild fmus $(FMU_DIR)
 
 # FMUs that crash, hang or must be refused (fmus/README.md), for fault tests; not examples.
 faulty-fmus: sync
-	$(UV) run --frozen python -m coupler.fmubuild fmus/faulty build/faulty-fmus
+	$(UV) run --frozen python -m coupler_tools.fmubuild fmus/faulty build/faulty-fmus
 
 # The TrackBalises FMU: C source + track samples and balise table from the railML file;
 # rebuilt only when the railML file, the model or the FMI wrappers change.
@@ -103,8 +103,8 @@ lint: sync
 	$(UV) run --frozen ruff check .
 	$(UV) run --frozen ruff format --check .
 	$(UV) run --frozen lint-imports
-	$(UV) run --frozen mypy packages/coupler/src packages/coupler-dev/src packages/coupler-native/src \
-	  packages/railway/src services/*/src
+	$(UV) run --frozen mypy packages/coupler/src packages/coupler-dev/src packages/coupler-tools/src \
+	  packages/coupler-native/src packages/railway/src services/*/src
 
 # The suite without the tests marked slow (whole scenarios, campaigns, clusters, several hosts):
 # the developer's default. `make test-slow` runs those; CI runs both (`make test-all` too).

@@ -3,8 +3,9 @@
 #
 #   1. the wheels (`make wheels`: coupler-native compiled and repaired by auditwheel, coupler)
 #   2. a participant written against the coupler wheel alone (scripts/lib/
-#      standalone_participant.py in a fresh venv holding only that wheel and its dependencies)
-#      serves, and the workspace's `coupler run` drives it: the values it answered are right
+#      standalone_participant.py in a fresh venv holding only that wheel and its dependencies;
+#      the wheel holds no build helper: those are coupler-tools') serves, and the workspace's
+#      `coupler run` drives it: the values it answered are right
 #   3. engine (scripts/lib), the local base image (scripts/base-image.sh) and the orchestrator
 #      image built from it (services/orchestrator/Dockerfile: installs coupler-native's wheel)
 #   4. in a container of that image, where no compiler and no system gRPC may be found:
@@ -50,6 +51,10 @@ stage standalone-participant
 installed=$("$UV" pip list --python "$OUT/sdk-venv/bin/python" --format freeze 2>/dev/null |
   grep -ci '^coupler' || true)
 [[ $installed -eq 1 ]] || { say "the fresh venv holds more than the coupler wheel"; exit 1; }
+# the SDK carries no tooling: the FMU builder and the browser files are coupler-tools'
+"$OUT/sdk-venv/bin/python" -c 'import importlib.util as u, sys
+sys.exit(any(u.find_spec(m) for m in ("coupler.fmubuild", "coupler.vendor", "coupler_tools")))' ||
+  { say "the coupler wheel carries the build helpers (coupler.fmubuild, coupler.vendor)"; exit 1; }
 "$OUT/sdk-venv/bin/python" scripts/lib/standalone_participant.py "$OUT/sum.port" \
   >"$OUT/participant.log" 2>&1 &
 PARTICIPANT_PID=$!

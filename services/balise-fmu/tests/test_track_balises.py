@@ -19,8 +19,8 @@ import pytest
 from fmpy.validation import validate_fmu
 
 from balise_fmu.build import FMU_SOURCES, main
-from coupler.fmubuild import build_fmu
 from coupler_railway import Balise, Infrastructure
+from coupler_tools.fmubuild import build_fmu
 
 VERSIONS = [2, 3]
 TEST_LINE = Path(__file__).resolve().parents[3] / "packages/railway/tests/data/test-line.railml"

@@ -24,7 +24,6 @@ import pytest
 
 from coupler.channels import Causality, Channel, Description, RunSetup, Value, ValueType
 from coupler.examples.gain import GainParticipant
-from coupler.fmubuild import build_all
 from coupler.logs import configure_logging
 from coupler.participant import Participant, Values
 from coupler.security import ServerSecurity
@@ -35,6 +34,7 @@ from coupler_orchestrator.cli.main import main
 from coupler_orchestrator.master import native_fmu_step as kernel
 from coupler_orchestrator.master import native_step_channel as steps
 from coupler_orchestrator.outputs import csv as csv_output
+from coupler_tools.fmubuild import build_all
 
 REPO = Path(__file__).resolve().parents[3]
 DATA = Path(__file__).parent / "data"

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 
-from coupler.fmubuild import build_all
+from coupler_tools.fmubuild import build_all
 
 from .conftest import DATA, REPO, Coupler
 from .openmcx_files import differences, table

@@ -12,6 +12,9 @@ promptly).
 ``scratch_folder`` makes the folders archives are unpacked into; each is removed by its owner
 (``remove_scratch``) and, when the process must end without unwinding (``os._exit`` past an FMU
 stuck in C), all at once by ``remove_all_scratch``.
+
+Only reading is here: a participant unpacks archives it is given, and never makes one. Writing
+an FMU is the build helpers' (``coupler_tools.fmubuild.write_archive``).
 """
 
 from __future__ import annotations

@@ -14,11 +14,11 @@ from pathlib import Path
 import structlog
 
 from coupler.fmu import FmuParticipant
-from coupler.fmubuild import FmuBuildError
 from coupler.logs import configure_logging
 from coupler.server import ParticipantServer
 from coupler.settings import add_security_arguments, add_socket_argument
 from coupler_railway import RailMLError
+from coupler_tools.fmubuild import FmuBuildError
 
 from .build import DEFAULT_FMU, DEFAULT_RAILML, build_track_balises
 from .config import BaliseFmuSettings

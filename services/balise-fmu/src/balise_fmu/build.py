@@ -1,7 +1,7 @@
 """Build the TrackBalises FMU: railML -> track and balise tables -> C FMU with them as resources.
 
 ``coupler_railway`` reads the railML file and writes ``track.csv`` and ``balises.csv`` (the
-FMU's ``resources/``); ``coupler.fmubuild`` compiles the C model in ``fmu/TrackBalises`` (FMI
+FMU's ``resources/``); ``coupler_tools.fmubuild`` compiles the C model in ``fmu/TrackBalises`` (FMI
 2.0) or ``fmu/TrackBalises3`` (FMI 3.0, same model source) with gcc and zips the FMU.
 
 Command line::
@@ -17,8 +17,8 @@ import tempfile
 from collections.abc import Sequence
 from pathlib import Path
 
-from coupler.fmubuild import FmuBuildError, build_fmu
 from coupler_railway import RailMLError, load_infrastructure, write_fmu_resources
+from coupler_tools.fmubuild import FmuBuildError, build_fmu
 
 __all__ = [
     "DEFAULT_FMU",

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from coupler import vendor as vendor_files
+from coupler_tools import vendor as vendor_files
 
 STATIC = Path(__file__).parent / "static"
 VENDOR = STATIC / "vendor" / "leaflet"

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from coupler import vendor as vendor_files
+from coupler_tools import vendor as vendor_files
 
 VENDOR = Path(__file__).parent / "static" / "vendor" / "uplot"
 NODE_MODULES = Path(__file__).resolve().parents[2] / "node_modules"

@@ -31,9 +31,9 @@ from coupler import durations, wire
 from coupler.channels import Causality, Channel, Description, ValueType
 from coupler.client import RemoteParticipant, parse_address
 from coupler.errors import CouplerError
-from coupler.fmubuild import write_archive
 from coupler.security import ClientSecurity
 from coupler.values import MAX_MESSAGE_BYTES
+from coupler_tools.fmubuild import write_archive
 
 __all__ = [
     "MODEL_IDENTIFIER",

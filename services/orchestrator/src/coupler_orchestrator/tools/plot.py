@@ -25,9 +25,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from coupler import vendor as vendor_files
 from coupler.errors import CouplerError
 from coupler_orchestrator.assets import SETUP_HINT, UPLOT_FILES, VENDOR
+from coupler_tools import vendor as vendor_files
 
 NUMERIC_TYPES = {"Real", "Integer", "Boolean", "Enumeration", "Float64", "Float32", "Int32"}
 PALETTE = (

@@ -3,7 +3,8 @@
 Pages and reports load their JavaScript from the project's own files, never from a CDN at run
 time (they must work offline). ``npm ci`` in a service folder installs the pinned versions
 (package.json, package-lock.json); ``copy`` takes the files a page needs out of
-``node_modules`` (``make assets`` does both).
+``node_modules`` (``make assets`` does both); ``missing`` tells a server at run time whether
+its page can work.
 """
 
 from __future__ import annotations
@@ -13,6 +14,8 @@ import shutil
 import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
+
+__all__ = ["command", "copy", "missing"]
 
 
 def missing(vendor: Path, names: Sequence[str]) -> list[str]:

@@ -13,7 +13,10 @@ instantiationToken as a C string literal) so the C code can check what it is ins
 An FMU newer than all its inputs (the model folder, the headers it includes by relative path,
 its resources) is not rebuilt.
 
-Command line: ``python -m coupler.fmubuild SRC_ROOT OUT_DIR`` builds every model folder of
+Compiling needs FMPy (for its headers: the ``fmu`` extra, ``coupler-tools[fmu]``); packing an
+archive (``write_archive``, which ``coupler export-fmu`` uses too) does not.
+
+Command line: ``python -m coupler_tools.fmubuild SRC_ROOT OUT_DIR`` builds every model folder of
 SRC_ROOT (SRC_ROOT itself or its direct subfolders) into ``OUT_DIR/<folder name>.fmu`` and
 prints their paths. Deeper folders are sets of their own: ``fmus`` holds the examples,
 ``fmus/faulty`` the FMUs that crash, hang or must be refused (built on their own).
@@ -34,8 +37,6 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 from xml.etree import ElementTree
-
-import fmpy
 
 from coupler.errors import ScenarioError
 
@@ -69,6 +70,12 @@ class _Description:
 
 def fmi_headers() -> Path:
     """The folder of FMI headers FMPy ships (fmi1Functions.h, fmi2Functions.h, fmi3...)."""
+    try:
+        import fmpy
+    except ImportError as exc:
+        raise FmuBuildError(
+            "building FMUs needs FMPy's FMI headers: install coupler-tools[fmu]"
+        ) from exc
     return Path(fmpy.__file__).parent / "c-code"
 
 
@@ -249,9 +256,9 @@ def build_all(src_root: Path, out_dir: Path) -> list[Path]:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """``python -m coupler.fmubuild SRC_ROOT OUT_DIR``: build all FMUs, print their paths."""
+    """``python -m coupler_tools.fmubuild SRC_ROOT OUT_DIR``: build all FMUs, print their paths."""
     parser = argparse.ArgumentParser(
-        prog="python -m coupler.fmubuild", description=main.__doc__ and __doc__.split("\n")[0]
+        prog="python -m coupler_tools.fmubuild", description=main.__doc__ and __doc__.split("\n")[0]
     )
     parser.add_argument("src_root", type=Path, help="folder searched for model folders")
     parser.add_argument("out_dir", type=Path, help="where <folder name>.fmu files are written")

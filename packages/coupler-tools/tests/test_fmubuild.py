@@ -19,7 +19,7 @@ from fmpy.fmi2 import FMU2Slave, fmi2Discard, fmi2LastSuccessfulTime, fmi2Termin
 from fmpy.fmi3 import FMU3Slave
 from fmpy.validation import validate_fmu
 
-from coupler.fmubuild import FmuBuildError, build_all, build_fmu, find_model_folders, main
+from coupler_tools.fmubuild import FmuBuildError, build_all, build_fmu, find_model_folders, main
 
 FMUS = Path(__file__).resolve().parents[3] / "fmus"
 EXAMPLES = [folder.name for folder in find_model_folders(FMUS)]
