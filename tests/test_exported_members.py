@@ -74,7 +74,6 @@ DECLARED = {
         "FmuBuildError",
         "build_all",
         "build_fmu",
-        "compile_library",
         "find_model_folders",
         "main",
         "write_archive",

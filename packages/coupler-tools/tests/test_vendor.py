@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import pytest
@@ -52,9 +53,11 @@ def test_command_says_what_was_copied_or_why_not(
         return vendor.copy(node_modules / "leaflet" / "dist", NAMES, target)
 
     _dist(tmp_path)
-    vendor.command("python -m x.assets", "Leaflet", copy_from, tmp_path / "node_modules", [])
+    node_modules = tmp_path / "node_modules"
+    assert vendor.command("python -m x.assets", "Leaflet", copy_from, node_modules, []) == 0
     assert capsys.readouterr().out == f"Leaflet copied to {target}\n"
-    with pytest.raises(SystemExit, match=r"^python -m x\.assets: .* run `npm ci` first$"):
-        vendor.command(
-            "python -m x.assets", "Leaflet", copy_from, tmp_path, ["--node-modules", "/nowhere"]
-        )
+    elsewhere = ["--node-modules", "/nowhere"]
+    assert vendor.command("python -m x.assets", "Leaflet", copy_from, tmp_path, elsewhere) == 1
+    said = capsys.readouterr()
+    assert not said.out
+    assert re.fullmatch(r"python -m x\.assets: .* run `npm ci` first\n", said.err)

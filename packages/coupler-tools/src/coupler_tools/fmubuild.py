@@ -44,7 +44,6 @@ __all__ = [
     "FmuBuildError",
     "build_all",
     "build_fmu",
-    "compile_library",
     "find_model_folders",
     "main",
     "write_archive",
@@ -169,7 +168,7 @@ def build_fmu(source_dir: Path, out_path: Path, *, resources: Path | None = None
     binary = f"binaries/{_PLATFORM[desc.fmi_version]}/{desc.model_identifier}.so"
     with tempfile.TemporaryDirectory(prefix="fmubuild-") as tmp:
         library = Path(tmp) / f"{desc.model_identifier}.so"
-        compile_library(
+        _compile_library(
             "gcc",
             [
                 *CFLAGS,
@@ -192,7 +191,7 @@ def build_fmu(source_dir: Path, out_path: Path, *, resources: Path | None = None
     return out_path
 
 
-def compile_library(compiler: str, arguments: Sequence[str], *, what: str) -> None:
+def _compile_library(compiler: str, arguments: Sequence[str], *, what: str) -> None:
     """Run ``compiler`` (gcc, g++) with ``arguments``; FmuBuildError with its output naming
     ``what`` was built when it is missing or fails."""
     found = shutil.which(compiler)

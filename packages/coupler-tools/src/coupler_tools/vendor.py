@@ -41,14 +41,16 @@ def copy(dist: Path, names: Sequence[str], vendor: Path) -> Path:
 
 def command(
     prog: str, what: str, copy_from: Callable[[Path], Path], default: Path, argv: list[str] | None
-) -> None:
-    """The body of a service's ``python -m <package>.assets``: ``copy_from(node_modules)``,
-    exit with the reason when ``npm ci`` has not run."""
+) -> int:
+    """The body of a service's ``python -m <package>.assets``: ``copy_from(node_modules)``;
+    the exit status, 1 with the reason on stderr when ``npm ci`` has not run."""
     parser = argparse.ArgumentParser(prog=prog, description=f"copy {what} out of node_modules")
     parser.add_argument("--node-modules", type=Path, default=default)
     args = parser.parse_args(argv)
     try:
         target = copy_from(args.node_modules)
     except FileNotFoundError as exc:
-        sys.exit(f"{prog}: {exc}")
+        print(f"{prog}: {exc}", file=sys.stderr)
+        return 1
     print(f"{what} copied to {target}")
+    return 0

@@ -6,6 +6,7 @@ The page loads Leaflet from the server's own static files, never from a CDN. ``n
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
 from coupler_tools import vendor as vendor_files
@@ -31,9 +32,11 @@ def copy_leaflet(node_modules: Path = NODE_MODULES, vendor: Path = VENDOR) -> Pa
     return vendor_files.copy(node_modules / "leaflet" / "dist", REQUIRED, vendor)
 
 
-def main(argv: list[str] | None = None) -> None:
-    vendor_files.command("python -m mapserver.assets", "Leaflet", copy_leaflet, NODE_MODULES, argv)
+def main(argv: list[str] | None = None) -> int:
+    return vendor_files.command(
+        "python -m mapserver.assets", "Leaflet", copy_leaflet, NODE_MODULES, argv
+    )
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(main())

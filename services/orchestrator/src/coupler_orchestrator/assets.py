@@ -6,6 +6,7 @@
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
 from coupler_tools import vendor as vendor_files
@@ -25,11 +26,11 @@ def copy_uplot(node_modules: Path = NODE_MODULES, vendor: Path = VENDOR) -> Path
     return vendor_files.copy(node_modules / "uplot" / "dist", UPLOT_FILES, vendor)
 
 
-def main(argv: list[str] | None = None) -> None:
-    vendor_files.command(
+def main(argv: list[str] | None = None) -> int:
+    return vendor_files.command(
         "python -m coupler_orchestrator.assets", "uPlot", copy_uplot, NODE_MODULES, argv
     )
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(main())
