@@ -14,6 +14,7 @@ from types import ModuleType
 import pytest
 
 import coupler
+import coupler.fmu
 import coupler_orchestrator
 import coupler_tools
 import coupler_tools.fmubuild
@@ -69,6 +70,7 @@ DECLARED = {
         "validate_scenario",
     ],
     # the build helpers' API is their two modules, each declaring its own names
+    "coupler.fmu": ["FmuParticipant"],
     "coupler_tools": ["fmubuild", "vendor"],
     "coupler_tools.fmubuild": [
         "FmuBuildError",
@@ -86,7 +88,9 @@ MODULES = [coupler_tools.fmubuild, coupler_tools.vendor]
 """Modules that define every name they declare."""
 
 
-@pytest.mark.parametrize("package", [*PACKAGES, coupler_tools, *MODULES], ids=lambda p: p.__name__)
+@pytest.mark.parametrize(
+    "package", [*PACKAGES, coupler.fmu, coupler_tools, *MODULES], ids=lambda p: p.__name__
+)
 def test_the_declared_names_are_the_public_api(package: ModuleType) -> None:
     assert sorted(package.__all__) == sorted(DECLARED[package.__name__])
     assert len(set(package.__all__)) == len(package.__all__)

@@ -9,7 +9,7 @@ is then read from those arrays in one call into C too (``coupler_native._rows.Ro
 with one slice per array where that module is missing.
 
 It is used when it means exactly what the step in Python means: every member an in-process FMU
-with prepared calls (``coupler.fmicalls``: FMI 2.0/3.0 scalars), stepping every base step
+with prepared calls (``coupler.fmu.calls``: FMI 2.0/3.0 scalars), stepping every base step
 (no multiples), every connection a plain copy of a numeric value (no unit or type conversion,
 no strings: a string lives in its FMU's memory only until that FMU's next call). Otherwise, and
 with ``--no-native-steps`` / ``COUPLER_NATIVE_STEPS=0``, the members step through Python with
@@ -30,8 +30,8 @@ from typing import Any
 import structlog
 
 from coupler.channels import Value
-from coupler.fmicalls import CONVERT, Group
 from coupler.fmu import FmuParticipant
+from coupler.fmu.calls import CONVERT, Group
 from coupler_orchestrator.master.watchdog import IN_PROCESS, Armed
 from coupler_orchestrator.model import Algorithm, Member, Plan
 from coupler_orchestrator.native import NativeModule, rows

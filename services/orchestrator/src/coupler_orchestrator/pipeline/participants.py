@@ -19,7 +19,7 @@ from coupler.channels import Description
 from coupler.client import RemoteParticipant, StepTransport, parse_address, uses_tls
 from coupler.errors import CouplerError, ScenarioError
 from coupler.fmu import FmuParticipant
-from coupler.fmuhost import IsolatedFmu
+from coupler.fmu.host import IsolatedFmu
 from coupler.participant import Participant
 from coupler.security import ClientSecurity
 from coupler_orchestrator import ssp

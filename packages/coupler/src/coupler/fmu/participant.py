@@ -1,7 +1,7 @@
 """``FmuParticipant``: an FMU (FMI 1.0, 2.0 or 3.0 co-simulation) run in-process through FMPy.
 
 Steps run on the caller's thread, through FMI calls prepared once per instance
-(``coupler.fmicalls``): no thread hop, no per-call allocation. What is slow and rare — reading
+(``coupler.fmu.calls``): no thread hop, no per-call allocation. What is slow and rare — reading
 and unpacking the FMU, instantiating and initializing it, terminating and freeing it — runs in
 a daemon thread off the event loop, so a caller's deadline can give up on an FMU that hangs
 there (the FMU is then left alone: "wedged"), and a hung FMU never keeps the process from
@@ -9,7 +9,7 @@ exiting. A step that hangs blocks its thread; the orchestrator's watchdog deals 
 A failing FMI call becomes a ``ParticipantError`` carrying the FMU, the call and the FMI status
 (``_fmi`` and ``_failed``, the places FMPy's and the prepared calls' errors are translated).
 Which variables are channels (FMI 3.0 arrays as one channel per element) and which FMUs are
-refused is ``coupler.fmuchannels``' concern.
+refused is ``coupler.fmu.channels``' concern.
 """
 
 from __future__ import annotations
@@ -31,8 +31,8 @@ from fmpy.model_description import ModelDescription, ScalarVariable
 from coupler.archives import Budget, extract, remove_scratch, scratch_folder
 from coupler.channels import Capabilities, Description, RunSetup, Value
 from coupler.errors import ParticipantError, ScenarioError
-from coupler.fmicalls import CallFailed, Calls, Group, prepare, status_name
-from coupler.fmuchannels import (
+from coupler.fmu.calls import CallFailed, Calls, Group, prepare, status_name
+from coupler.fmu.channels import (
     VALUE_TYPES,
     ArrayInputs,
     Layout,
@@ -304,7 +304,7 @@ class FmuParticipant(Participant):
         self._calls = None
         self._checked_inputs: set[tuple[str, ...]] = set()
         if self._elements or self._arrays is not None:
-            return  # arrays keep FMPy's calls (coupler.fmuchannels completes them)
+            return  # arrays keep FMPy's calls (coupler.fmu.channels completes them)
         variables = self._variables
         outputs = [
             (n, v.type, v.valueReference) for n, v in variables.items() if v.causality == "output"

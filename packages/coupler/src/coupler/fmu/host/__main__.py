@@ -1,5 +1,5 @@
 """The generic FMU host as a child process of the orchestrator:
-``python -m coupler.fmuhost FMU --socket PATH --token-file FILE [--name NAME] [--unpacked DIR]``.
+``python -m coupler.fmu.host FMU --socket PATH --token-file FILE [--name NAME] [--unpacked DIR]``.
 
 Serves one FMU (``coupler.fmu.FmuParticipant``) on a unix socket, requiring the token; exits
 on SIGTERM/SIGINT and when its parent process is gone. The orchestrator unpacks the FMU itself
@@ -17,7 +17,7 @@ from pathlib import Path
 
 from coupler.errors import CouplerError
 from coupler.fmu import FmuParticipant
-from coupler.fmuhost import parent_alive
+from coupler.fmu.host import parent_alive
 from coupler.lifetimes import die_with_parent
 from coupler.logs import configure_logging
 from coupler.security import ServerSecurity
@@ -49,7 +49,7 @@ async def host(
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(prog="python -m coupler.fmuhost", description=__doc__)
+    parser = argparse.ArgumentParser(prog="python -m coupler.fmu.host", description=__doc__)
     parser.add_argument("fmu", type=Path, help="the FMU to serve")
     parser.add_argument("--name", help="participant name (default: the FMU's model name)")
     parser.add_argument(
@@ -63,7 +63,7 @@ def main() -> None:
     try:
         asyncio.run(host(args.fmu, args.name, args.socket, args.token_file, args.unpacked))
     except CouplerError as exc:
-        raise SystemExit(f"coupler.fmuhost: {exc}") from exc
+        raise SystemExit(f"coupler.fmu.host: {exc}") from exc
 
 
 if __name__ == "__main__":

@@ -1,5 +1,5 @@
 """An FMU in a child process: ``IsolatedFmu`` runs the generic FMU host
-(``python -m coupler.fmuhost FMU``) and talks to it over the protocol.
+(``python -m coupler.fmu.host FMU``) and talks to it over the protocol.
 
 A segfault or a hang inside the FMU then is a participant fault — the run ends ``failed``
 naming the FMU, the call and how the host died, every completed row kept — never a crash of
@@ -83,7 +83,7 @@ class IsolatedFmu(Participant):
         self._process = await asyncio.create_subprocess_exec(
             sys.executable,
             "-m",
-            "coupler.fmuhost",
+            "coupler.fmu.host",
             str(self.path),
             "--name",
             self.name,
@@ -129,7 +129,7 @@ class IsolatedFmu(Participant):
         said = self._last_words[-1] if self._last_words else "nothing on stderr"
         raise ParticipantUnavailable(
             f"the FMU host process {await self._death()} before serving {self.path.name}: "
-            f"{said.removeprefix('coupler.fmuhost: ')}",
+            f"{said.removeprefix('coupler.fmu.host: ')}",
             participant=self.name,
             call="open",
             status="UNAVAILABLE",
