@@ -559,6 +559,12 @@ def gains(ports: Sequence[int]) -> list[list[str]]:
     return [[sys.executable, "-m", "coupler.examples", "gain", "--port", str(p)] for p in ports]
 
 
+def cpu_s(pid: int) -> float:
+    """A process's CPU time so far, user and system [s] (/proc/<pid>/stat)."""
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
 def rss_mb(pid: int, field: str = "VmRSS") -> float:
     """A process's resident memory [MB] (``VmHWM``: its peak since it started its program;
     getrusage's ``ru_maxrss`` would count the parent's too, as Linux keeps it across exec)."""
@@ -1264,12 +1270,21 @@ async def frames(
     mock, bridge, sink, raw_out, raw_in = free_ports(5)
     raw = [[sys.executable, __file__, "--raw-server", str(raw_out), "--frames", "out"],
            [sys.executable, __file__, "--raw-server", str(raw_in), "--frames", "in"]]  # fmt: skip
-    with processes(frame_services(work, mock, bridge, sink) + raw):
+    names = ("OpenRails mock", "bridge", "map server", "orchestrator")
+    cpu = dict.fromkeys(names, 0.0)  # CPU seconds of each process during the Coupler runs
+    with processes(frame_services(work, mock, bridge, sink) + raw) as started:
         await serving([bridge, sink])
         ssd = frames_ssd(work, bridge, sink)
 
+        def spent() -> list[float]:
+            return [*(cpu_s(p.pid) for p in started[:3]), time.process_time()]
+
         async def through_bridge() -> float:
-            return await coupler_frames(ssd, sizes.frame_steps, work / "out")
+            before = spent()
+            rate = await coupler_frames(ssd, sizes.frame_steps, work / "out")
+            for name, was, now in zip(names, before, spent(), strict=True):
+                cpu[name] += now - was
+            return rate
 
         async def frames_floor() -> float:
             return await raw_frames(raw_out, raw_in, sizes.frame_steps)
@@ -1281,6 +1296,9 @@ async def frames(
         "coupler": round(coupler_fps * megabytes, 1),
         "raw_grpc": round(floor_fps * megabytes, 1),
     }
+    per_step = {n: round(1000 * s / (sizes.repeats * sizes.frame_steps), 2) for n, s in cpu.items()}
+    extra["frames_cpu_ms_per_step"] = per_step
+    log("  CPU per step [ms]: " + ", ".join(f"{n} {ms:.2f}" for n, ms in per_step.items()))
     rows.append(
         Row("camera frames x1 (1.44 MB, 5 Hz)", coupler_fps, "raw grpc.aio streams, same bytes",
             floor_fps, 0.8,

@@ -1,14 +1,19 @@
 from __future__ import annotations
 
+import itertools
 import math
+import os
 
 import pytest
 from google.protobuf import source_context_pb2
 from google.protobuf.message import DecodeError
+from hypothesis import HealthCheck, example, given, settings
+from hypothesis import strategies as st
 
 from coupler import messages, values, wire
 from coupler.channels import Causality, Channel, Description, ValueType, fits_fixed_step
 from coupler.errors import ChannelValueError, MessageTooLarge
+from coupler.v1.sensors_pb2 import CameraIntrinsics, Image
 
 REAL = Channel(name="speed", causality=Causality.OUTPUT, type=ValueType.REAL, unit="m/s")
 INT = Channel(name="count", causality=Causality.OUTPUT, type=ValueType.INTEGER)
@@ -115,6 +120,68 @@ def test_unknown_message_type_is_named() -> None:
         ChannelValueError, match=r"unknown protobuf message type 'coupler\.v1\.Nope'"
     ):
         messages.encode_message("coupler.v1.Nope", {})
+
+
+FUZZ = settings(
+    max_examples=int(os.environ.get("COUPLER_FUZZ_EXAMPLES", "150")),
+    deadline=None,
+    suppress_health_check=[HealthCheck.too_slow],
+)
+DOUBLES = st.floats(allow_nan=True, allow_infinity=True)
+HEADERS = st.builds(
+    Image,
+    sensor=st.text(max_size=20),
+    time_s=DOUBLES,
+    width=st.integers(0, 2**32 - 1),
+    height=st.integers(0, 2**32 - 1),
+    encoding=st.text(max_size=20),
+    intrinsics=st.none() | st.builds(CameraIntrinsics, fx=DOUBLES, fy=DOUBLES, cx=DOUBLES),
+    max_distance_m=DOUBLES,
+)
+"""``coupler.v1.Image`` headers: every field but ``data`` (field 8, its highest)."""
+
+
+@FUZZ
+@given(HEADERS, st.binary(max_size=300), st.lists(st.integers(0, 300), max_size=4))
+def test_a_message_with_its_bytes_apart_is_protobufs_message(
+    header: Image, data: bytes, cuts: list[int]
+) -> None:
+    """``with_bytes`` (a header serialized, the pixels after it, in pieces) writes the bytes
+    protobuf writes for the whole Image; ``without_bytes`` reads them back into the header and
+    a view of the pixels."""
+    whole = Image()
+    whole.CopyFrom(header)
+    whole.data = data
+    bounds = [0, *sorted(min(c, len(data)) for c in cuts), len(data)]
+    pieces = [data[a:b] for a, b in itertools.pairwise(bounds)]
+    written = messages.with_bytes(header, "data", *pieces)
+    assert written == whole.SerializeToString(deterministic=True) == whole.SerializeToString()
+    read, pixels = messages.without_bytes(Image, written, "data")
+    assert read.SerializeToString() == header.SerializeToString() and bytes(pixels) == data
+
+
+@FUZZ
+@given(st.binary(max_size=200) | st.builds(lambda h, d, tail: messages.with_bytes(h, "data", d)
+                                         + tail, HEADERS, st.binary(max_size=50),
+                                         st.binary(max_size=12)))  # fmt: skip
+@example(b"\x42\x02ab\x0a\x01s\x42\x01c")  # data twice (the last wins), around a sensor
+@example(b"\x40\x01\x0a\x01s")  # field 8 as a varint: not the bytes field protobuf knows
+@example(b"\x98\x06\x07\x42\x01c")  # an unknown field, kept
+@example(b"\x42\x05ab")  # truncated
+@example(b"\x0a\x01\xff\x42\x01c")  # a sensor name that is not UTF-8
+def test_reading_a_message_without_its_bytes_is_protobufs_reading(data: bytes) -> None:
+    """Whatever the bytes, ``without_bytes`` gives what protobuf's parsing gives (the bytes
+    field last written wins, unknown fields kept), or protobuf's DecodeError."""
+    try:
+        parsed = Image.FromString(data)
+    except DecodeError:
+        with pytest.raises(DecodeError):
+            messages.without_bytes(Image, data, "data")
+        return
+    read, pixels = messages.without_bytes(Image, data, "data")
+    assert bytes(pixels) == parsed.data
+    parsed.ClearField("data")
+    assert read.SerializeToString() == parsed.SerializeToString()
 
 
 @pytest.mark.parametrize(
@@ -295,7 +362,7 @@ def test_an_answer_with_long_values_decodes_as_protobuf_decodes_it() -> None:
     protobuf's own parsing gives, also for bindings it leaves to protobuf."""
     codec = wire.Codec(FRAMES)
     outputs = {"speed": 3.0, "frame": FRAME, "depth": FRAME[:100], "label": "ä"}
-    response = wire.step_response(outputs, codec)
+    response = wire.DoStepResponse(outputs=codec.encode(outputs))  # protobuf's own writing
     response.terminate, response.terminate_reason = True, "done"
     odd = response.outputs.add(channel="frame", binary=FRAME[::-1])  # the same channel again
     odd.real = 1.0  # oneof: now a Real, a binding step_answer leaves to protobuf
@@ -333,3 +400,85 @@ def test_a_long_value_cut_out_of_an_answer_is_checked() -> None:
     truncated = response.SerializeToString()[:-1]
     with pytest.raises(DecodeError):
         wire.step_answer(truncated)
+
+
+def test_an_answer_writes_long_values_apart_and_protobuf_reads_it() -> None:
+    """``step_response`` and ``StepAnswers`` write long Binary outputs after the message
+    (bytes, not a message); protobuf parses those bytes into the same outputs as protobuf's
+    own writing, ``step_answer`` cuts the long ones out again, and the end of a run survives."""
+    codec = wire.Codec(FRAMES)
+    outputs = {"speed": 3.0, "frame": FRAME, "depth": FRAME[::-1], "label": "ä"}
+    answer = wire.step_response(outputs, codec, terminate_reason="done")
+    assert type(answer) is bytes
+    parsed = wire.DoStepResponse.FromString(answer)
+    assert codec.decode(parsed.outputs) == outputs
+    assert wire.termination_requested(parsed) == "done"
+    cut, large = wire.step_answer(answer)
+    assert sorted(name for name, _ in large) == ["depth", "frame"]
+    assert wire.outputs_from_pb(cut, codec, large) == outputs
+    short = {"speed": 1.0, "frame": b"short"}
+    assert wire.serialized(wire.step_response(short, codec)) == (
+        wire.DoStepResponse(outputs=codec.encode(short)).SerializeToString()
+    )
+
+
+def test_step_answers_with_long_values_carry_each_steps_outputs() -> None:
+    """A stream's answers while a frame comes and goes, gets short and long again, or changes
+    channel: each answer decodes to that step's outputs."""
+    codec = wire.Codec(FRAMES)
+    answers = wire.StepAnswers(codec)
+    steps = [
+        {"speed": 1.0, "frame": b"", "label": "a"},
+        {"speed": 2.0, "frame": FRAME, "label": "b"},
+        {"speed": 3.0, "frame": FRAME[::-1], "label": "c"},
+        {"speed": 4.0, "frame": b"short", "label": "d"},
+        {"speed": 5.0, "frame": FRAME, "label": "e"},
+        {"speed": 6.0, "depth": FRAME, "label": "f"},
+        {"speed": 7.0, "frame": bytearray(FRAME), "label": "g"},
+        {"speed": 8.0, "frame": FRAME, "depth": FRAME[:10], "label": "h"},
+        {"speed": 9.0, "frame": FRAME, "depth": FRAME, "label": "i"},
+    ]
+    for outputs in steps:
+        answer = wire.serialized(answers.answer(outputs))
+        parsed = wire.DoStepResponse.FromString(answer)
+        assert codec.decode(parsed.outputs) == {k: bytes(v) if isinstance(v, bytearray) else v
+                                                for k, v in outputs.items()}  # fmt: skip
+    small = wire.StepAnswers(wire.Codec(FRAMES, values.ValuePolicy(max_message_bytes=100)))
+    small.answer({"frame": FRAME[:50]})
+    with pytest.raises(MessageTooLarge, match=f"'frame' carries {len(FRAME)} bytes"):
+        small.answer({"frame": FRAME})
+
+
+def test_step_answers_make_a_new_message_before_it_holds_too_much() -> None:
+    """Text and bytes set into a reused message stay in its memory (protobuf's arena) until
+    the message goes: after ``HELD_BYTES`` of them, the next answer is a message of its own."""
+    codec = wire.Codec(FRAMES)
+    answers = wire.StepAnswers(codec)
+    first = answers.answer({"speed": 0.0, "label": ""})
+    assert answers.answer({"speed": 1.0, "label": ""}) is first  # numbers only: in place
+    text = "x" * 1000
+    same = 0
+    while answers.answer({"speed": 2.0, "label": text}) is first:
+        same += 1
+    assert 1 < same <= wire.HELD_BYTES // len(text)  # at most HELD_BYTES of text held
+    again = answers.answer({"speed": 3.0, "label": "y"})
+    assert codec.decode(again.outputs) == {"speed": 3.0, "label": "y"}  # type: ignore[union-attr]
+
+
+def test_a_request_with_long_values_is_parsed_apart() -> None:
+    """``step_request`` (the participant runtime's request parser) gives the inputs protobuf's
+    parsing gives, its long Binary inputs cut out, from ``step_pieces``' bytes and from
+    protobuf's own; a request that is not a message is protobuf's error."""
+    codec = wire.Codec(FRAMES)
+    run = wire.RunKey("run-1", bytes(range(32)))
+    for inputs in ({"blob": FRAME, "gain": 2.0}, {"blob": b"short", "gain": 2.0}, {"gain": 1.0}):
+        for data in (
+            b"".join(wire.step_pieces(run, 1.5, 0.2, inputs, codec)),
+            wire.step_to_pb(run, 1.5, 0.2, inputs, codec).SerializeToString(),
+        ):
+            request, large = wire.step_request(data)
+            assert [name for name, _ in large] == (["blob"] if inputs.get("blob") is FRAME else [])
+            step = wire.step_from_pb(request, codec, large)
+            assert (step.run_id, step.time, step.step, step.inputs) == ("run-1", 1.5, 0.2, inputs)
+    with pytest.raises(DecodeError):
+        wire.step_request(b"".join(wire.step_pieces(run, 0.0, 0.2, {"blob": FRAME}, codec))[:-1])

@@ -21,6 +21,7 @@ from PIL import Image as PillowImage
 from coupler.v1.railway_pb2 import BaliseDetection, BaliseDetections, PixelBox
 from coupler.v1.sensors_pb2 import Image
 from coupler_dev.browser import CHROMIUM, NO_CHROMIUM
+from mapserver.camera import CameraView
 
 from .conftest import REPO, EventStream, MapService, Run, page_errors
 
@@ -101,6 +102,36 @@ async def test_frames_and_boxes_in_events_and_jpeg(service: MapService, run: Run
     assert picture.shape == (600, 800, 3)
     block = picture[402:409, 385:416].reshape(-1, 3).mean(axis=0)
     assert block[0] > 200 and block[1] > 160 and block[2] < 80  # still yellow after JPEG
+
+
+def test_a_frame_is_kept_as_it_came_and_pictured_when_asked() -> None:
+    """A step reads only a frame's header: the pixels stay a view of the bytes the step
+    brought; the JPEG is made when asked, once, and shows those pixels (also when the Image's
+    ``data`` is not its last field, or is written twice: protobuf's reading)."""
+    view = CameraView()
+    data = frame(0.5)
+    assert view.update({"camera": data})
+    shown = view.shown()
+    assert shown is not None and shown.pixels.obj is data  # not a copy
+    assert view.jpeg() is view.jpeg()  # encoded once
+    picture = np.asarray(PillowImage.open(io.BytesIO(view.jpeg() or b"")))
+    left, top, right, bottom = BOX
+    assert picture[top + 2 : bottom - 1, left + 5 : right - 4].mean(axis=(0, 1))[2] < 80  # yellow
+    pixels = (255 - np.frombuffer(Image.FromString(data).data, dtype=np.uint8)).tobytes()
+    reordered = (
+        Image(data=b"\0" * 12).SerializeToString()  # a first data, replaced by the last
+        + Image(data=pixels).SerializeToString()
+        + Image(
+            sensor="front", time_s=1.0, width=800, height=600, encoding="rgb8"
+        ).SerializeToString()
+    )
+    assert view.update({"camera": reordered})
+    later = view.shown()
+    assert later is not None and (later.number, later.time_s, later.sensor) == (2, 1.0, "front")
+    assert bytes(later.pixels) == pixels
+    inverted = np.asarray(PillowImage.open(io.BytesIO(view.jpeg(2) or b"")))
+    assert inverted[top + 2 : bottom - 1, left + 5 : right - 4].mean(axis=(0, 1))[2] > 180  # blue
+    assert view.jpeg(1) is not None  # frame 1, still kept, pictured on its own
 
 
 async def test_a_bad_camera_input_is_ignored_and_the_run_goes_on(

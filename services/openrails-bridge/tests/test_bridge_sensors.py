@@ -11,6 +11,7 @@ frame of the wrong size, a sensor OpenRails does not have) comes from a tiny Ope
 
 from __future__ import annotations
 
+import asyncio
 import json
 import subprocess
 import sys
@@ -115,10 +116,11 @@ async def test_a_sensor_openrails_does_not_have_fails_initialize_naming_it(
 
 
 def tiny_with_sensor(
-    frame: bytes, declared: dict[str, Any] | None, status: int = 200
+    frame: bytes, declared: dict[str, Any] | None, status: int = 200, pieces: int = 0
 ) -> web.Application:
     """OpenRails whose step reply declares one 4 x 3 RGB sensor ``cam`` (or ``declared``)
-    and whose GET of its frame answers ``frame``."""
+    and whose GET of its frame answers ``frame`` (in ``pieces`` HTTP chunks of unannounced
+    length, when given)."""
 
     async def ready(request: web.Request) -> web.Response:
         return web.Response(status=200)
@@ -139,8 +141,18 @@ def tiny_with_sensor(
     async def display(request: web.Request) -> web.Response:
         return web.json_response([{"FirstCol": "Speed", "LastCol": "0.0 km/h"}])
 
-    async def camera(request: web.Request) -> web.Response:
-        return web.Response(body=frame, status=status, content_type="application/octet-stream")
+    async def camera(request: web.Request) -> web.StreamResponse:
+        if not pieces:
+            return web.Response(body=frame, status=status, content_type="application/octet-stream")
+        response = web.StreamResponse(status=status)
+        response.enable_chunked_encoding()
+        await response.prepare(request)
+        size = -(-len(frame) // pieces)
+        for at in range(0, len(frame), size):
+            await response.write(frame[at : at + size])
+            await asyncio.sleep(0.01)  # apart: the bridge reads them as they come
+        await response.write_eof()
+        return response
 
     app = web.Application()
     app.router.add_get("/API/READY", ready)
@@ -153,15 +165,19 @@ def tiny_with_sensor(
 
 
 @pytest.mark.parametrize(
-    ("frame", "declared", "status", "message"),
+    ("frame", "declared", "status", "message", "pieces"),
     [
         (b"\x01" * 35, None, 200, "answered a frame of 35 bytes, but CameraSensors declares "
-                                  "sensor 'cam' 4 x 3 rgb: 36 bytes"),
+                                  "sensor 'cam' 4 x 3 rgb: 36 bytes", 0),
         (b"\x01" * 5000, None, 200, "with 5000 bytes, more than the 36 bytes CameraSensors "
-                                    "declares for sensor 'cam' (4 x 3 rgb); refused unread"),
-        (b"{}", None, 404, "/API/CAMERASENSOR/cam answered 404 to GET"),
+                                    "declares for sensor 'cam' (4 x 3 rgb); refused unread", 0),
+        (b"{}", None, 404, "/API/CAMERASENSOR/cam answered 404 to GET", 0),
         (b"", {"width": 8, "height": 3, "h_scale": 1.0, "v_scale": 1.3}, 200,
-         "describes camera sensor 'cam' as 8 x 3, but"),
+         "describes camera sensor 'cam' as 8 x 3, but", 0),
+        (b"\x01" * 35, None, 200, "answered a frame of 35 bytes, but CameraSensors declares "
+                                  "sensor 'cam' 4 x 3 rgb: 36 bytes", 3),
+        (b"\x01" * 60, None, 200, "with more than the 36 bytes CameraSensors declares for "
+                                  "sensor 'cam' (4 x 3 rgb); refused after", 3),
     ],
 )  # fmt: skip
 async def test_a_frame_that_does_not_match_its_declared_size_is_an_error_naming_it(
@@ -171,18 +187,41 @@ async def test_a_frame_that_does_not_match_its_declared_size_is_an_error_naming_
     declared: dict[str, Any] | None,
     status: int,
     message: str,
+    pieces: int,
 ) -> None:
+    """Announced (Content-Length) or not (chunked, ``pieces``)."""
     path = tmp_path / "cam.json"
     path.write_text(
         json.dumps([{"sensorName": "cam", "sensorType": "rgb", "width": 4, "height": 3}])
     )
-    tiny = tiny_with_sensor(frame, declared, status)
+    tiny = tiny_with_sensor(frame, declared, status, pieces)
     async with serve_app(tiny) as url, bridge(url, sensors=path) as remote:
         await remote.initialize(RunSetup(run_id="x", start_time=0.0, step_size=0.2))
         with pytest.raises(ParticipantError) as caught:
             await remote.do_step(0.0, 0.2, {})
     assert caught.value.status == "UNAVAILABLE"
     assert message in str(caught.value)
+
+
+async def test_a_frame_in_pieces_arrives_whole_in_its_image(bridge: Bridge, tmp_path: Path) -> None:
+    """A frame whose HTTP answer comes in pieces (chunked, its length unannounced) is the
+    Image's data byte for byte, the pieces joined once behind the Image's other fields."""
+    path = tmp_path / "cam.json"
+    path.write_text(
+        json.dumps([{"sensorName": "cam", "sensorType": "rgb", "width": 4, "height": 3}])
+    )
+    frame = bytes(range(36))
+    async with (
+        serve_app(tiny_with_sensor(frame, None, pieces=4)) as url,
+        bridge(url, sensors=path) as remote,
+    ):
+        await remote.initialize(RunSetup(run_id="x", start_time=0.0, step_size=0.2))
+        out = await remote.do_step(0.0, 0.2, {})
+    cam = image(out["cam"])
+    assert cam.data == frame and (cam.width, cam.height, cam.time_s) == (4, 3, 0.2)
+    whole = Image()
+    whole.CopyFrom(cam)
+    assert out["cam"] == whole.SerializeToString(deterministic=True)  # as protobuf writes it
 
 
 def test_bad_sensor_files_are_refused_naming_the_entry(tmp_path: Path) -> None:

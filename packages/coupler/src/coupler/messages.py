@@ -14,22 +14,31 @@ module in the entry point group ``coupler.messages`` (``pyproject.toml``)::
 
 and the first time a message type is not known, every such entry point is loaded (once per
 process). A module, a message class or a sequence of message classes may be named.
+
+A message with one long bytes field (a camera frame's pixels) can be written and read without
+that field passing through protobuf, which copies such a value into the message and out again
+and was slow at it (``with_bytes``, ``without_bytes``): its encoding lets a message be its other
+fields followed by the field's key, length and bytes.
 """
 
 from __future__ import annotations
 
 import json
 from collections.abc import Mapping
-from typing import Any
+from typing import Any, TypeVar
 
 from google.protobuf import json_format
 from google.protobuf.message import DecodeError, Message
 
 from coupler.errors import ChannelValueError
+from coupler.wire import _read_varint, _varint
 
 ENTRY_POINTS = "coupler.messages"
 """The entry point group installed packages name their message types in."""
 
+M = TypeVar("M", bound=Message)
+_LEN = 2
+"""The wire type of a length-delimited field."""
 _REGISTRY: dict[str, type[Message]] = {}
 _installed: list[str] | None = None
 """The entry points loaded so far (None: not looked for yet)."""
@@ -127,3 +136,66 @@ def decode_message(message_type: str, data: bytes) -> dict[str, Any]:
 def message_json(message_type: str, data: bytes) -> str:
     """A serialized message as compact JSON text (keys in field order), for results files."""
     return json.dumps(decode_message(message_type, data), separators=(",", ":"), ensure_ascii=False)
+
+
+def with_bytes(message: Message, field: str, *data: bytes) -> bytes:
+    """``message`` serialized with its bytes field ``field`` set to ``data`` (the value, in one
+    or more pieces), without ``data`` passing through protobuf: the message as it is (``field``
+    unset) serialized, then the field's key, length and the pieces, joined once. The same bytes
+    as protobuf's deterministic serialization when ``field`` has the highest number of the
+    fields set (as ``data`` in ``coupler.v1.Image``); a valid encoding of the same message
+    otherwise."""
+    head = message.SerializeToString(deterministic=True)
+    size = sum(map(len, data))
+    if not size:  # proto3 writes no empty bytes field
+        return head
+    number = message.DESCRIPTOR.fields_by_name[field].number
+    return b"".join([head, _varint(number << 3 | _LEN), _varint(size), *data])
+
+
+def without_bytes(cls: type[M], data: bytes, field: str) -> tuple[M, memoryview]:
+    """The message ``cls`` serialized in ``data``, parsed without its bytes field ``field``,
+    and that field's value as a view of ``data`` (not copied; empty when unset). Bytes that
+    are not as expected are left whole to protobuf, which parses them or raises its
+    ``DecodeError``."""
+    view = memoryview(data)
+    key = cls.DESCRIPTOR.fields_by_name[field].number << 3 | _LEN
+    try:
+        rest, value = _split(view, key)
+    except (IndexError, ValueError):
+        message = cls.FromString(bytes(view))
+        value = memoryview(getattr(message, field))
+        message.ClearField(field)
+        return message, value
+    return cls.FromString(rest), value
+
+
+def _split(data: memoryview, field: int) -> tuple[bytes, memoryview]:
+    """``data`` without the top-level field of key ``field`` (a length-delimited one), and
+    the last value of that field (protobuf's rule for a field written twice)."""
+    kept: list[memoryview] = []
+    value = data[0:0]
+    start = at = 0
+    while at < len(data):
+        key, body = _read_varint(data, at)
+        kind = key & 7
+        if kind == _LEN:
+            size, body = _read_varint(data, body)
+            after = body + size
+        elif kind == 0:
+            after = _read_varint(data, body)[1]
+        elif kind in (1, 5):
+            after = body + (8 if kind == 1 else 4)
+        else:
+            raise ValueError("a group")
+        if after > len(data):
+            raise ValueError("truncated")
+        if key >> 3 == field >> 3:
+            if key != field:
+                raise ValueError("the field with another wire type")
+            kept.append(data[start:at])
+            value = data[body:after]
+            start = after
+        at = after
+    kept.append(data[start:])
+    return b"".join(kept), value

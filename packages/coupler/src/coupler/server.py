@@ -166,22 +166,23 @@ class _Servicer(pb_grpc.GRPCComponentServiceServicer):
             return await _guard(context, lambda: wire.initialize_response(outputs, self.codec))
 
     async def DoStep(
-        self, request: wire.DoStepRequest, context: grpc.aio.ServicerContext
-    ) -> wire.DoStepResponse:
+        self, request: wire.StepRequest, context: grpc.aio.ServicerContext
+    ) -> wire.Answer:
         async with self._lock:
             return await self._step(request, context)
 
     async def StepStream(
         self,
-        request_iterator: AsyncIterator[wire.DoStepRequest],
+        request_iterator: AsyncIterator[wire.StepRequest],
         context: grpc.aio.ServicerContext,
-    ) -> AsyncIterator[wire.DoStepResponse]:
+    ) -> AsyncIterator[wire.Answer]:
         carried: _Run | None = None
         answers: wire.StepAnswers | None = None  # this stream's prepared answer
         try:
-            async for request in request_iterator:
+            async for received in request_iterator:
                 async with self._lock:
                     run = self.run
+                    request = received[0]
                     if (
                         carried is not run
                         and run is not None
@@ -191,7 +192,7 @@ class _Servicer(pb_grpc.GRPCComponentServiceServicer):
                         carried = run  # this stream belongs to the run's owner
                     if answers is None and self._codec is not None:
                         answers = wire.StepAnswers(self._codec)
-                    response = await self._step(request, context, answers)
+                    response = await self._step(received, context, answers)
                 yield response
         finally:
             if carried is not None and carried is self.run:
@@ -200,14 +201,17 @@ class _Servicer(pb_grpc.GRPCComponentServiceServicer):
 
     async def _step(
         self,
-        request: wire.DoStepRequest,
+        received: wire.StepRequest,
         context: grpc.aio.ServicerContext,
         answers: wire.StepAnswers | None = None,
-    ) -> wire.DoStepResponse:
+    ) -> wire.Answer:
         """One step: the protocol's checks, the inputs decoded, the participant's step, its
         outputs encoded (into ``answers``' prepared message on a stream). No lambdas, no
         ``_guard`` per stage: one ``try`` around each stage that can fail, ``_refuse`` maps
-        what it raises (the per-step cost is docs/performance.md's profile)."""
+        what it raises (the per-step cost is docs/performance.md's profile). ``received`` is
+        the request and its long Binary inputs, cut out of its bytes (``wire.step_request``);
+        the answer may be bytes already (``wire.step_response``)."""
+        request, large = received
         codec = self._codec
         if codec is None:
             await _refuse(context, _NotReady())
@@ -235,7 +239,7 @@ class _Servicer(pb_grpc.GRPCComponentServiceServicer):
         if run.intrusion is not None or not hmac.compare_digest(request.run_secret, run.secret):
             await self._untrusted(run, request.run_secret, "DoStep", context)
         try:
-            step = wire.step_from_pb(request, codec)
+            step = wire.step_from_pb(request, codec, large)
         except Exception as exc:
             await _refuse(context, exc)
         if not (0 < step.step < math.inf and math.isfinite(step.time)):
@@ -359,6 +363,43 @@ class _Servicer(pb_grpc.GRPCComponentServiceServicer):
 _BACKGROUND: set[asyncio.Task[None]] = set()
 
 
+def _add_service(servicer: _Servicer, server: grpc.aio.Server) -> None:
+    """The component service as protobuf's generated code adds it, but a step's request is
+    parsed by ``wire.step_request`` (its long Binary inputs cut out of its bytes with one copy
+    each) and its answer sent by ``wire.serialized`` (a message, or bytes with long Binary
+    outputs joined after it): protobuf would copy such values twice each way."""
+    unary, stream = grpc.unary_unary_rpc_method_handler, grpc.stream_stream_rpc_method_handler
+    handlers = {
+        "Describe": unary(
+            servicer.Describe,
+            request_deserializer=wire.DescribeRequest.FromString,
+            response_serializer=wire.DescribeResponse.SerializeToString,
+        ),
+        "Initialize": unary(
+            servicer.Initialize,
+            request_deserializer=wire.InitializeRequest.FromString,
+            response_serializer=wire.InitializeResponse.SerializeToString,
+        ),
+        "DoStep": unary(
+            servicer.DoStep,
+            request_deserializer=wire.step_request,
+            response_serializer=wire.serialized,
+        ),
+        "StepStream": stream(
+            servicer.StepStream,
+            request_deserializer=wire.step_request,
+            response_serializer=wire.serialized,
+        ),
+        "Terminate": unary(
+            servicer.Terminate,
+            request_deserializer=wire.TerminateRequest.FromString,
+            response_serializer=wire.TerminateResponse.SerializeToString,
+        ),
+    }
+    server.add_generic_rpc_handlers((grpc.method_handlers_generic_handler(SERVICE_NAME, handlers),))
+    server.add_registered_method_handlers(SERVICE_NAME, handlers)
+
+
 class _NotReady(Exception):
     """A call arrived before the participant was open and described."""
 
@@ -472,7 +513,7 @@ class ParticipantServer:
         self._server = server
         await self._set_health(health_pb2.HealthCheckResponse.NOT_SERVING)
         self._servicer = _Servicer(self.participant, self.max_message_bytes)
-        pb_grpc.add_GRPCComponentServiceServicer_to_server(self._servicer, server)
+        _add_service(self._servicer, server)
         health_pb2_grpc.add_HealthServicer_to_server(self.health, server)
         if self.reflection:
             reflection.enable_server_reflection(

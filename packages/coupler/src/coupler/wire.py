@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, NoReturn
+from typing import TYPE_CHECKING, NoReturn, TypeAlias, TypeVar
 
 from coupler.channels import (
     Capabilities,
@@ -485,61 +485,115 @@ def step_to_pb(
     return request
 
 
-def step_from_pb(request: pb.DoStepRequest, codec: Codec) -> Step:
-    """The step a DoStep request asks for, inputs checked."""
-    inputs = codec.decode(request.inputs, _INPUTS)
+def step_from_pb(
+    request: pb.DoStepRequest, codec: Codec, large: Iterable[tuple[str, bytes]] = ()
+) -> Step:
+    """The step a DoStep request asks for, inputs checked, with the long Binary inputs
+    ``step_request`` cut out of it (``large``)."""
+    inputs = codec.decode(request.inputs, _INPUTS, large)
     return Step(request.run_id, request.current_time, request.step_size, inputs)
+
+
+Answer: TypeAlias = pb.DoStepResponse | bytes
+"""An answer to a step as the participant runtime hands it to gRPC: a message, or one already
+serialized when it carries long Binary outputs (``serialized`` sends either)."""
+
+
+def serialized(answer: Answer) -> bytes:
+    """The bytes gRPC sends for ``answer`` (the participant runtime's response serializer)."""
+    return answer if type(answer) is bytes else answer.SerializeToString()  # type: ignore[union-attr]
 
 
 def step_response(
     outputs: Mapping[str, object], codec: Codec, *, terminate_reason: str | None = None
-) -> pb.DoStepResponse:
-    """The answer to a step; with ``terminate_reason`` it asks to end the run."""
-    response = pb.DoStepResponse()
-    codec.encode_into(response.outputs, outputs, _OUTPUTS)
+) -> Answer:
+    """The answer to a step; with ``terminate_reason`` it asks to end the run. Long Binary
+    outputs (``LARGE_BYTES`` or more) are written apart: the answer is then the message without
+    them, serialized, followed by each one's binding (``step_answer`` reads either)."""
+    response, large = _response_apart(outputs, codec)
     if terminate_reason is not None:
         response.terminate = True
         response.terminate_reason = terminate_reason
-    return response
+    return _joined(response, large) if large else response
+
+
+def _response_apart(
+    outputs: Mapping[str, object], codec: Codec
+) -> tuple[pb.DoStepResponse, list[tuple[str, bytes]]]:
+    """A DoStepResponse with the bindings of ``outputs`` but the long Binary ones, and those."""
+    response = pb.DoStepResponse()
+    large = codec.encode_apart(response.outputs, outputs, _OUTPUTS)
+    return response, large
+
+
+HELD_BYTES = 1024 * 1024
+"""What String and Binary values ``StepAnswers`` sets into its prepared message in place may
+add up to before the message is made anew: protobuf keeps a field's earlier values in the
+message's memory until the message goes, so a message reused for ever would grow by every
+value set into it [bytes]."""
 
 
 class StepAnswers:
     """The answers to the steps of one step stream, written into one prepared message.
 
     The first answer is built as ``step_response`` builds it; while a step's outputs name the
-    same channels as the last one's, the next answer is the same message with the new values
-    set into its bindings in place, checked as ``Codec`` checks them. Safe because a stream
-    sends (serializes) each answer before the next is made; one object per stream.
+    same channels as the last one's (the long Binary ones among them the same), the next answer
+    is the same message with the new values set into its bindings in place, checked as
+    ``Codec`` checks them, and the long Binary values written after it (``step_response``).
+    Safe because a stream sends (serializes) each answer before the next is made; one object
+    per stream. Once the String and Binary values set in place add up to ``HELD_BYTES``, the
+    next answer is a message of its own (the old one's memory goes with it).
     """
 
     def __init__(self, codec: Codec) -> None:
         self._codec = codec
         self._response: pb.DoStepResponse | None = None
-        self._bindings: dict[str, tuple[pb.VariableBinding, _Slot]] = {}
+        self._bindings: dict[str, tuple[pb.VariableBinding | None, _Slot]] = {}
+        """Each channel's binding in the message (None: a long Binary value, written apart)."""
+        self._held = 0
+        """Bytes of String and Binary values set into the message in place."""
 
-    def answer(self, outputs: Mapping[str, object]) -> pb.DoStepResponse:
+    def answer(self, outputs: Mapping[str, object]) -> Answer:
         """The answer carrying ``outputs`` (each checked against its channel)."""
         response, bindings = self._response, self._bindings
-        if response is None or outputs.keys() != bindings.keys():
+        if response is None or outputs.keys() != bindings.keys() or self._held > HELD_BYTES:
             return self._prepare(outputs)
         codec = self._codec
-        size = 0
+        size = held = 0
+        large: list[tuple[str, bytes]] = []
         for name, value in outputs.items():
             binding, slot = bindings[name]
-            setattr(binding, slot.field, codec._checked(slot, value))
+            if binding is None:  # written apart, unless it is no longer a long Binary value
+                if type(value) is not bytes or len(value) < LARGE_BYTES:
+                    return self._prepare(outputs)
+                large.append((name, value))
+                size += len(value)
+                continue
+            checked = codec._checked(slot, value)
             if slot.weight:
-                size += len(value) * slot.weight  # type: ignore[arg-type]
+                length = len(value) * slot.weight  # type: ignore[arg-type]
+                if slot.weight == 1 and length >= LARGE_BYTES:  # now long: written apart
+                    return self._prepare(outputs)
+                size += length
+                held += length
+            setattr(binding, slot.field, checked)
+        self._held += held
         if size > codec.policy.max_message_bytes:
             codec._fits(outputs)
-        return response
+        return _joined(response, large) if large else response
 
-    def _prepare(self, outputs: Mapping[str, object]) -> pb.DoStepResponse:
+    def _prepare(self, outputs: Mapping[str, object]) -> Answer:
         self._response = None  # until the new one is complete
-        response = step_response(outputs, self._codec)
+        response, large = _response_apart(outputs, self._codec)
         table = self._codec._table(_OUTPUTS)
-        self._bindings = {b.channel: (b, table[b.channel]) for b in response.outputs}
+        bindings: dict[str, tuple[pb.VariableBinding | None, _Slot]] = {
+            b.channel: (b, table[b.channel]) for b in response.outputs
+        }
+        bindings.update((name, (None, table[name])) for name, _ in large)
+        self._bindings = bindings
+        self._held = 0
         self._response = response
-        return response
+        return _joined(response, large) if large else response
 
 
 def outputs_from_pb(
@@ -562,14 +616,20 @@ def termination_requested(response: pb.DoStepResponse) -> str | None:
 #
 # A camera frame (1.44 MB) would be copied three times on its way into a request (into the
 # message, into its serialization, into the transport's buffer) and four times on its way out
-# of an answer. Protobuf's encoding lets a message be written in pieces (its fields in any
-# order, each a key, a length and the bytes), so the native step channel sends a request from
-# pieces, a long Binary value one of them as it is, and takes such values out of an answer's
-# bytes with one copy each; everything else is protobuf's own work.
+# of an answer; and protobuf (upb) is slow at it: a fresh message with such a value set and
+# serialized took 4.3 ms, a value set into a reused message 1.3 ms (and stayed in its memory).
+# Protobuf's encoding lets a message be written in pieces (its fields in any order, each a key,
+# a length and the bytes), so long Binary values travel apart on both sides: the native step
+# channel sends a request from pieces, a value one of them as it is (``step_pieces``), and the
+# participant runtime answers with the message serialized and each value joined after it once
+# (``step_response``, ``StepAnswers``); each side takes such values out of the bytes it
+# receives with one copy each (``step_answer``, ``step_request``); everything else is
+# protobuf's own work.
 
 LARGE_BYTES = 64 * 1024
-"""A Binary value this long or longer travels apart: written into a request without a copy
-(``step_pieces``), cut out of an answer with one (``step_answer``)."""
+"""A Binary value this long or longer travels apart: written into a message without protobuf
+(``step_pieces``, ``step_response``), cut out of one with a copy (``step_request``,
+``step_answer``)."""
 _LEN = 2
 """The wire type of a length-delimited field."""
 
@@ -608,6 +668,29 @@ def _read_varint(data: memoryview, at: int) -> tuple[int, int]:
             raise ValueError("varint longer than 10 bytes")
 
 
+def _apart(key: int, large: Iterable[tuple[str, bytes]]) -> list[bytes]:
+    """Each long Binary value as a binding in the repeated field whose key is ``key``: its
+    key, lengths and channel as one piece, then the value itself (the same object)."""
+    pieces: list[bytes] = []
+    for name, value in large:
+        channel = name.encode()
+        head = (
+            _varint(_CHANNEL_KEY)
+            + _varint(len(channel))
+            + channel
+            + _varint(_BINARY_KEY)
+            + _varint(len(value))
+        )
+        pieces += [_varint(key) + _varint(len(head) + len(value)) + head, value]
+    return pieces
+
+
+def _joined(response: pb.DoStepResponse, large: Iterable[tuple[str, bytes]]) -> bytes:
+    """``response`` serialized with the long Binary outputs ``large`` after it, joined once:
+    one copy of each value, where protobuf takes two (into the message, out of it)."""
+    return b"".join([response.SerializeToString(), *_apart(_OUTPUTS_KEY, large)])
+
+
 def step_pieces(
     run: RunKey, time: float, step: float, inputs: Mapping[str, object], codec: Codec
 ) -> list[bytes]:
@@ -618,37 +701,50 @@ def step_pieces(
         run_id=run.id, run_secret=run.secret, current_time=time, step_size=step
     )
     large = codec.encode_apart(request.inputs, inputs, _INPUTS)
-    pieces = [request.SerializeToString()]
-    for name, value in large:
-        channel = name.encode()
-        head = (
-            _varint(_CHANNEL_KEY)
-            + _varint(len(channel))
-            + channel
-            + _varint(_BINARY_KEY)
-            + _varint(len(value))
-        )
-        pieces += [_varint(_INPUTS_KEY) + _varint(len(head) + len(value)) + head, value]
-    return pieces
+    return [request.SerializeToString(), *_apart(_INPUTS_KEY, large)]
+
+
+StepRequest: TypeAlias = tuple[pb.DoStepRequest, list[tuple[str, bytes]]]
+"""A DoStep request as the participant runtime receives it (``step_request``): the message
+without its long Binary inputs, and those by channel."""
+
+
+def step_request(data: bytes) -> StepRequest:
+    """A serialized DoStepRequest parsed, its long Binary inputs cut out with one copy each (by
+    channel; ``step_from_pb`` takes them): the participant runtime's request deserializer.
+    Protobuf would copy them into the message and again out of it."""
+    return _parsed(pb.DoStepRequest, _INPUTS_KEY, data)
 
 
 def step_answer(data: bytes | memoryview) -> tuple[pb.DoStepResponse, list[tuple[str, bytes]]]:
     """A serialized DoStepResponse parsed, its long Binary outputs cut out with one copy each
     (by channel; ``outputs_from_pb`` takes them): protobuf would copy them into the message
-    and again out of it. A message that is not as expected is left whole to protobuf, which
+    and again out of it."""
+    return _parsed(pb.DoStepResponse, _OUTPUTS_KEY, data)
+
+
+_M = TypeVar("_M", pb.DoStepRequest, pb.DoStepResponse)
+
+
+def _parsed(
+    message: type[_M], key: int, data: bytes | memoryview
+) -> tuple[_M, list[tuple[str, bytes]]]:
+    """``data`` parsed as ``message``, the long Binary values of its bindings in the field of
+    key ``key`` cut out. A message that is not as expected is left whole to protobuf, which
     parses it or says what is wrong."""
+    if len(data) < LARGE_BYTES:
+        return message.FromString(bytes(data) if type(data) is not bytes else data), []
     view = memoryview(data)
-    if len(view) < LARGE_BYTES:
-        return pb.DoStepResponse.FromString(bytes(view)), []
     try:
-        rest, large = _cut(view)
+        rest, large = _cut(view, key)
     except (IndexError, ValueError):
         rest, large = bytes(view), []
-    return pb.DoStepResponse.FromString(rest), large
+    return message.FromString(rest), large
 
 
-def _cut(data: memoryview) -> tuple[bytes, list[tuple[str, bytes]]]:
-    """``data`` without its ``outputs`` that carry a long Binary value, and those values."""
+def _cut(data: memoryview, field: int) -> tuple[bytes, list[tuple[str, bytes]]]:
+    """``data`` without its bindings (field key ``field``) that carry a long Binary value, and
+    those values."""
     kept: list[memoryview] = []
     large: list[tuple[str, bytes]] = []
     start = at = 0
@@ -666,7 +762,7 @@ def _cut(data: memoryview) -> tuple[bytes, list[tuple[str, bytes]]]:
             raise ValueError("a group")
         if after > len(data):
             raise ValueError("truncated")
-        if key == _OUTPUTS_KEY and after - body >= LARGE_BYTES:
+        if key == field and after - body >= LARGE_BYTES:
             binding = _binary_binding(data[body:after])
             if binding is not None:
                 kept.append(data[start:at])

@@ -4,8 +4,9 @@ Inputs: ``camera`` (a ``coupler.v1.Image``, rgb8) and ``detections`` (a
 ``coupler.v1.BaliseDetections``). A perception participant judges the frame of the step's
 start, so its detections arrive a step after their frame; the view keeps the last few frames
 and shows the one the latest detections belong to (by time), with their boxes, else the newest
-frame. DoStep only keeps references; a frame is encoded as JPEG (Pillow) when a browser asks
-for it, once.
+frame. DoStep only reads a frame's header and keeps its bytes as they came (the pixels a view
+of them, never copied: ``coupler.messages.without_bytes``); a frame is encoded as JPEG (Pillow)
+when a browser asks for it, once.
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ import structlog
 from PIL import Image as PillowImage
 
 from coupler.channels import Value
+from coupler.messages import without_bytes
 from coupler.v1.railway_pb2 import BaliseDetections
 from coupler.v1.sensors_pb2 import Image
 from coupler_railway.messages import RGB8
@@ -38,7 +40,8 @@ class Frame:
     sensor: str
     width: int
     height: int
-    pixels: bytes
+    pixels: memoryview
+    """The pixels, a view of the ``coupler.v1.Image`` bytes the step brought (not copied)."""
 
 
 class CameraView:
@@ -136,21 +139,21 @@ class CameraView:
         return self._jpeg[1]
 
     def _frame(self, data: bytes) -> Frame | None:
-        image = Image()
+        """The frame ``data`` carries: its header parsed, its pixels a view of ``data``."""
         try:
-            image.ParseFromString(data)
+            image, pixels = without_bytes(Image, data, "data")
         except Exception as exc:  # a DecodeError: warn once, the map goes on
             self._warn(f"camera is not a coupler.v1.Image: {exc}")
             return None
-        if image.encoding != RGB8 or len(image.data) != image.width * image.height * 3:
+        if image.encoding != RGB8 or len(pixels) != image.width * image.height * 3:
             self._warn(
                 f"camera frame of sensor '{image.sensor}' is '{image.encoding}' "
-                f"{image.width} x {image.height} with {len(image.data)} bytes; the map shows "
+                f"{image.width} x {image.height} with {len(pixels)} bytes; the map shows "
                 f"rgb8 frames of width * height * 3 bytes"
             )
             return None
         self._count += 1
-        return Frame(self._count, image.time_s, image.sensor, image.width, image.height, image.data)
+        return Frame(self._count, image.time_s, image.sensor, image.width, image.height, pixels)
 
     def _warn(self, problem: str) -> None:
         if not self._warned:  # once per run: a bad input would otherwise log every step

@@ -420,14 +420,14 @@ class OpenRailsAdapter(Adapter):
         )
         answer = await self.client.send("GET", path, call=call, limit=(size, declared))
         self.client.check(answer, "GET", path, call=call)
-        if len(answer.body) != size:
+        if answer.size != size:
             raise self.client.error(
-                f"OpenRails at {self.base_url}{path} answered a frame of {len(answer.body)} "
+                f"OpenRails at {self.base_url}{path} answered a frame of {answer.size} "
                 f"bytes, but CameraSensors declares sensor '{sensor.name}' {sensor.width} x "
                 f"{sensor.height} {sensor.type}: {size} bytes",
                 call=call,
             )
-        return image(sensor, described, answer.body, time_s)
+        return image(sensor, described, answer.pieces, time_s)
 
     async def _get_map(self) -> LatLonDirection:
         return await self.client.fetch("GET", "/API/MAP", LatLonDirection)

@@ -1,7 +1,8 @@
 """``OpenRailsClient``: OpenRails' web API over ONE aiohttp session, trusting nothing it answers.
 
 Every request has a deadline; every body is read as a stream and refused past
-``max_body_bytes`` (without reading the rest); JSON is parsed straight into the models of
+``max_body_bytes`` (without reading the rest), and kept in the pieces it arrived in (a camera
+frame's 1.44 MB joined once, where it is used); JSON is parsed straight into the models of
 ``replies`` (strict types, nesting limited by the parser). Transport errors, timeouts, error
 statuses and answers that are too big, not JSON or of the wrong shape become
 ``ParticipantUnavailable`` naming the URL -- and the field, for a wrong shape -- here and
@@ -20,8 +21,6 @@ from pydantic import BaseModel, TypeAdapter, ValidationError
 from coupler.errors import ParticipantUnavailable
 
 T = TypeVar("T")
-CHUNK_BYTES = 64 * 1024
-"""Read size of response bodies."""
 SHOWN_PROBLEMS = 3
 """How many of a reply's problems an error message lists."""
 
@@ -31,7 +30,17 @@ class Answer:
     """An HTTP answer: status and (size-capped) body."""
 
     status: int
-    body: bytes
+    pieces: tuple[bytes, ...]
+    """The body in the pieces aiohttp's parser handed over (joined: ``body``)."""
+
+    @property
+    def body(self) -> bytes:
+        return self.pieces[0] if len(self.pieces) == 1 else b"".join(self.pieces)
+
+    @property
+    def size(self) -> int:
+        """Bytes of the body."""
+        return sum(map(len, self.pieces))
 
     @property
     def text(self) -> str:
@@ -150,31 +159,33 @@ class OpenRailsClient:
         url: str,
         call: str,
         limit: tuple[int, str] | None,
-    ) -> bytes:
-        """The body, at most ``max_body_bytes`` (or ``limit``): a bigger one is refused as soon
-        as it shows, and the connection dropped rather than drained."""
+    ) -> tuple[bytes, ...]:
+        """The body in pieces, at most ``max_body_bytes`` (or ``limit``): a bigger one is
+        refused as soon as it shows, and the connection dropped rather than drained. The pieces
+        are those aiohttp's parser made (``iter_chunks``), not joined: ``read()`` would join
+        them twice."""
         cap, why = limit or (
             self.max_body_bytes,
             f"the {self.max_body_bytes} bytes the bridge reads (OPENRAILS_BRIDGE_MAX_BODY_BYTES)",
         )
         declared = response.content_length
-        if declared is not None and declared <= cap:
-            return await response.read()  # a declared length is all aiohttp reads: one buffer
-        body = bytearray()
-        if declared is None:
-            async for chunk in response.content.iter_chunked(CHUNK_BYTES):
-                body += chunk
-                if len(body) > cap:
+        pieces: list[bytes] = []
+        size = 0
+        if declared is None or declared <= cap:  # a declared length is all aiohttp reads
+            async for chunk, _ in response.content.iter_chunks():
+                pieces.append(chunk)
+                size += len(chunk)
+                if size > cap:
                     break
             else:
-                return bytes(body)
+                return tuple(pieces)
         response.close()
         if declared is not None and declared > cap:
-            size, refused = f"{declared} bytes, more than", "unread"
+            told, refused = f"{declared} bytes, more than", "unread"
         else:
-            size, refused = "more than", f"after {len(body)} bytes"
+            told, refused = "more than", f"after {size} bytes"
         raise self.error(
-            f"OpenRails at {url} answered {method} with {size} {why}; refused {refused}",
+            f"OpenRails at {url} answered {method} with {told} {why}; refused {refused}",
             call=call,
         )
 

@@ -11,13 +11,15 @@ sensor, on its one aiohttp session, and checks the frame against the size the st
 ``CameraSensors`` declares (``width * height`` times 3 bytes for RGB, 6 for depth). The Image
 carries the bytes unchanged, the Coupler time, the encoding (``rgb8``, ``depth16-class-id``),
 the intrinsics from ``h_scale``/``v_scale`` (fx = width / 2 * h_scale, fy = height / 2 *
-v_scale, cx = width / 2 - 0.5, cy = height / 2 - 0.5) and a depth sensor's ``max_distance``.
+v_scale, cx = width / 2 - 0.5, cy = height / 2 - 0.5) and a depth sensor's ``max_distance``;
+the frame's bytes go into it without passing through protobuf (``image``).
 """
 
 from __future__ import annotations
 
 import json
 import re
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
@@ -25,6 +27,7 @@ from typing import Literal
 from coupler.adapter import ChannelMap
 from coupler.channels import Causality, ValueType
 from coupler.errors import ScenarioError
+from coupler.messages import with_bytes
 from coupler.v1.sensors_pb2 import CameraIntrinsics, Image
 from coupler_railway.messages import BYTES_PER_PIXEL, DEPTH16_CLASS_ID, IMAGE, RGB8
 
@@ -108,10 +111,13 @@ def load_sensors(path: Path) -> tuple[Sensor, ...]:
     return tuple(sensors)
 
 
-def image(sensor: Sensor, described: CameraSensor, data: bytes, time_s: float) -> bytes:
-    """A frame as a serialized ``coupler.v1.Image``."""
+def image(sensor: Sensor, described: CameraSensor, data: Sequence[bytes], time_s: float) -> bytes:
+    """A frame as a serialized ``coupler.v1.Image``: its header (every field but ``data``)
+    serialized, followed by the frame's bytes in the pieces they arrived in (``data``), joined
+    once (``coupler.messages.with_bytes``: the bytes protobuf would write, without the pixels
+    passing through it)."""
     width, height = described.width, described.height
-    message = Image(
+    header = Image(
         sensor=sensor.name,
         time_s=time_s,
         width=width,
@@ -124,6 +130,5 @@ def image(sensor: Sensor, described: CameraSensor, data: bytes, time_s: float) -
             cy=height / 2.0 - 0.5,
         ),
         max_distance_m=described.max_distance or 0.0,
-        data=data,
     )
-    return message.SerializeToString(deterministic=True)
+    return with_bytes(header, "data", *data)
