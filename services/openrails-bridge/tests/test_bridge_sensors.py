@@ -66,6 +66,9 @@ async def test_describe_offers_one_image_channel_per_sensor(
         assert channel is not None
         assert channel.type is ValueType.BINARY and channel.message_type == IMAGE
     assert "800 x 600, rgb8" in description.channel("front").description  # type: ignore[union-attr]
+    # the largest frame of each: the Image's other fields and width * height pixels, declared
+    maxima = {c.name: c.max_bytes for c in outputs[-2:]}
+    assert maxima == {"front": 256 + 800 * 600 * 3, "lidar": 256 + 200 * 150 * 6}
 
 
 async def test_frames_arrive_unchanged_in_images(mock: Mock, bridge: Bridge, sensors: Path) -> None:

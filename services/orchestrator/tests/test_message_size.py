@@ -17,6 +17,8 @@ Over both step paths (the native step channel and grpc.aio), with ``coupler run`
 
 from __future__ import annotations
 
+import asyncio
+import zipfile
 from collections.abc import Iterator, Mapping
 from contextlib import ExitStack
 from pathlib import Path
@@ -25,8 +27,11 @@ import pytest
 
 from coupler.channels import Causality, Channel, Description, RunSetup, Value, ValueType
 from coupler.examples.gain import GainParticipant
+from coupler.fmu import FmuParticipant
 from coupler.participant import Participant, Values
 from coupler.testing import SystemStructure, remote
+from coupler_orchestrator import recording
+from coupler_orchestrator.pipeline.replay import ReplayParticipant
 
 from .conftest import Coupler, serving
 
@@ -107,6 +112,14 @@ class Fleet:
         ):
             server = self.stack.enter_context(serving(participant, max_message_bytes=limit))
             self.monkeypatch.setenv(f"{name}_PORT", str(server.port))
+
+
+async def described(participant: Participant) -> Description:
+    """``participant``'s description, closed again after."""
+    try:
+        return await participant.describe()
+    finally:
+        await participant.close()
 
 
 def run(ssd: Path, out: Path, step_path: str, *options: str) -> tuple[int, str, dict]:
@@ -238,14 +251,19 @@ def test_a_declared_channel_carries_a_frame_past_lower_defaults(
     """Both servers default to 1 MiB; the 2 MB the channel declares raises theirs and lowers
     the run's (64 MiB) to what is declared."""
     serve_declared(fleet, Camera(FRAME, maximum=2_000_000), 2_000_000, limit=MIB)
+    out = tmp_path / "out"
     code, err, summary = run(
-        declared, tmp_path / "out", step_path, "--output-variables", "Viewer.*"
+        declared, out, step_path, "--output-variables", "Viewer.*", "--record", "Camera"
     )
     assert code == 0, err
     assert summary["status"] == "completed"
     assert summary["steps"] == 4
-    sizes = [row["Viewer.size"] for row in Coupler.results(tmp_path / "out")]
+    sizes = [row["Viewer.size"] for row in Coupler.results(out)]
     assert sizes == ["0", "0", str(FRAME), str(FRAME), str(FRAME)]  # Jacobi: a step later
+    recorded = recording.read(out / "recordings" / "Camera.crec").description
+    assert recorded.channel("frame").max_bytes == 2_000_000  # type: ignore[union-attr]
+    replayed = asyncio.run(described(ReplayParticipant(out, "Camera")))  # declares the same
+    assert replayed.channel("frame").max_bytes == 2_000_000  # type: ignore[union-attr]
 
 
 def test_an_output_declaring_more_than_its_input_accepts_is_refused(
@@ -292,3 +310,51 @@ def test_a_frame_over_its_declared_maximum_fails_the_run_keeping_the_rows(
     assert expected in summary["reason"]
     rows = Coupler.results(tmp_path / "out")
     assert [row["time"] for row in rows] == ["0.0", "0.1", "0.2"]
+
+
+def test_an_fmus_binary_max_size_is_declared_and_kept(
+    tmp_path: Path, fmus: dict[str, Path]
+) -> None:
+    """FMI 3's ``maxSize`` of a Binary variable is the channel's declared maximum: an
+    in-process FMU whose output is over it fails the run naming it."""
+    sized = tmp_path / "Feedthrough3.fmu"
+    with zipfile.ZipFile(fmus["Feedthrough3"]) as source, zipfile.ZipFile(sized, "w") as copy:
+        for item in source.infolist():
+            data = source.read(item)
+            if item.filename == "modelDescription.xml":
+                data = data.replace(
+                    b'<Binary name="binary_out"', b'<Binary maxSize="4" name="binary_out"'
+                )
+            copy.writestr(item, data)
+    channel = asyncio.run(described(FmuParticipant(sized))).channel("binary_out")
+    assert channel is not None and channel.max_bytes == 4
+    fits = Coupler.process(
+        "run",
+        sized,
+        "--stop-time",
+        "0.2",
+        "--step",
+        "0.1",
+        "--param",
+        "binary_in=01020304",
+        "--out",
+        tmp_path / "fits",
+    )
+    assert fits.code == 0, fits.err
+    over = Coupler.process(
+        "run",
+        sized,
+        "--stop-time",
+        "0.2",
+        "--step",
+        "0.1",
+        "--param",
+        "binary_in=0102030405",
+        "--out",
+        tmp_path / "over",
+    )
+    assert over.code == 1, over.err
+    assert (
+        "Feedthrough.Initialize [RESOURCE_EXHAUSTED]: output Feedthrough.binary_out carries 5 "
+        "bytes, over its declared maximum of 4 bytes (max_bytes)"
+    ) in over.err
