@@ -47,10 +47,11 @@ DEFAULT_POLICY = ValuePolicy()
 
 def message_limit(channels: Iterable[Channel], policy: ValuePolicy = DEFAULT_POLICY) -> int:
     """Bytes the Binary and String values of one message on ``channels`` may have together:
-    the sum of their declared maxima when each of them declares one (at most the policy's
-    ``max_message_bytes`` with ``cap_declared``), else the policy's ``max_message_bytes``."""
+    the sum of their declared maxima when there are such channels and each of them declares
+    one (at most the policy's ``max_message_bytes`` with ``cap_declared``), else the policy's
+    ``max_message_bytes`` (a message of numbers only keeps the default: it declares nothing)."""
     sized = [c for c in channels if c.sized]
-    if any(c.max_bytes <= 0 for c in sized):
+    if not sized or any(c.max_bytes <= 0 for c in sized):
         return policy.max_message_bytes
     total = sum(c.max_bytes for c in sized)
     return min(total, policy.max_message_bytes) if policy.cap_declared else total

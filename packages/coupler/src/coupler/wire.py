@@ -3,8 +3,8 @@
 Every value is checked against its channel's description (``coupler.values.check``): the
 type, the int32 range, the NaN/Inf policy, the maximum a Binary or String channel declares and
 the message limit of Binary and String values together. Errors name the channel and what it
-expects. ``coupler.server`` and ``coupler.client`` call these functions;
-the rest of Coupler speaks Python values.
+expects. ``coupler.server`` and ``coupler.client`` call these functions; the rest of Coupler
+speaks Python values.
 """
 
 from __future__ import annotations
@@ -154,7 +154,7 @@ def client_limits(description: Description, max_message_bytes: int) -> MessageLi
 
     def limit(channels: Iterable[Channel]) -> int:
         sized = [c for c in channels if c.sized]
-        if any(c.max_bytes <= 0 for c in sized):
+        if not sized or any(c.max_bytes <= 0 for c in sized):
             return floor
         return message_limit(sized, policy)
 

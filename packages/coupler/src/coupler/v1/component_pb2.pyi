@@ -168,7 +168,7 @@ class ChannelDescription(_message.Message):
     an input or parameter over its own with RESOURCE_EXHAUSTED naming the channel, its size
     and the maximum; it sets its gRPC server's receive limit to the sum of its declared input
     and parameter maxima plus room for everything else a message carries (Coupler: 8 MiB),
-    and to its default when any of them is undeclared.
+    and to its default when any of them is undeclared (or it has none).
     """
     @_builtins.property
     def start(self) -> Global___VariableBinding:
