@@ -358,3 +358,23 @@ def test_an_fmus_binary_max_size_is_declared_and_kept(
         "Feedthrough.Initialize [RESOURCE_EXHAUSTED]: output Feedthrough.binary_out carries 5 "
         "bytes, over its declared maximum of 4 bytes (max_bytes)"
     ) in over.err
+
+
+def test_declarations_over_the_runs_limit_are_warned_about_and_capped(
+    declared: Path, tmp_path: Path, fleet: Fleet, step_path: str
+) -> None:
+    """--max-message-size caps what participants declare: 2 MB declared, 1 MiB allowed, a
+    1.44 MB frame fails the run naming the channel and the way to raise the cap, which the
+    checks warned about before the run."""
+    serve_declared(fleet, Camera(FRAME, maximum=2_000_000), 2_000_000)
+    code, err, summary = run(declared, tmp_path / "out", step_path, "--max-message-size", "1")
+    assert code == 1, err
+    assert (
+        "Camera.DoStep [RESOURCE_EXHAUSTED]: output Camera.frame carries 1440000 bytes: over the "
+        "message limit of 1048576 bytes (1 MiB); raise the limit"
+    ) in err
+    assert (
+        "participant 'Camera' declares outputs of up to 2000000 bytes together, more than the "
+        "run's message limit of 1048576 bytes (1 MiB): a step carrying more fails the run; "
+        "raise --max-message-size to 2"
+    ) in " ".join(summary["warnings"])

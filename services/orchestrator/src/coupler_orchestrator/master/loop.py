@@ -66,7 +66,7 @@ def _within(member: str, call: str, outputs: Values, maxima: Mapping[str, int]) 
     maximum its channel declares."""
     for name, maximum in maxima.items():
         value = outputs[name]
-        size = len(value.encode()) if isinstance(value, str) else len(value)  # type: ignore[arg-type]
+        size = len(value.encode()) if isinstance(value, str) else len(value)
         if size > maximum:
             exc = ValueTooLarge(channel=name, kind="output", size=size, maximum=maximum)
             raise ParticipantError(
