@@ -26,10 +26,12 @@ from coupler.channels import Causality, Channel, Description, RunSetup, Value, V
 from coupler.client import RemoteParticipant
 from coupler.errors import ParticipantError
 from coupler.participant import Participant, Values
+from coupler.security import ClientSecurity, ServerSecurity
 from coupler.server import ParticipantServer
 from coupler.testing import served
 from coupler.v1 import component_pb2 as pb
 from coupler.v1 import component_pb2_grpc as pb_grpc
+from coupler_dev.devcerts import write_pki
 
 FRAME = 800 * 600 * 3
 MAXIMUM = 2_000_000
@@ -223,3 +225,25 @@ async def test_a_server_on_a_unix_socket_is_bound_again_there(tmp_path: Path) ->
             await remote.initialize(setup())
             assert (await remote.do_step(0.0, 0.1, {"frame": bytes(FRAME)}))["size"] == FRAME
             await remote.terminate()
+
+
+async def test_a_server_with_mutual_tls_and_a_token_is_bound_again_with_them(
+    tmp_path: Path,
+) -> None:
+    pki = write_pki(tmp_path / "pki")
+    security = ServerSecurity(
+        cert=pki.server_cert, key=pki.server_key, client_ca=pki.ca, token_file=pki.token
+    )
+    client = ClientSecurity(
+        ca=pki.ca, cert=pki.client_cert, key=pki.client_key, token_file=pki.token
+    )
+    async with served(Echo(), security=security) as server:
+        assert server.address.startswith("grpcs://")
+        async with RemoteParticipant(server.address, security=client) as remote:
+            await remote.initialize(setup())
+            assert (await remote.do_step(0.0, 0.1, {"frame": bytes(FRAME)}))["size"] == FRAME
+            await remote.terminate()
+        stranger = RemoteParticipant(server.address, connect_timeout=1.0)
+        with pytest.raises(ParticipantError):
+            await stranger.open()
+        await stranger.close()
