@@ -36,6 +36,11 @@ const option = (name, fallback) => {
 };
 const NAME = option('--name', 'Scale');
 
+// Every channel is Real or Integer, so none declares ChannelDescription.max_bytes (the largest
+// value of a Binary or String channel): 0, not declared, which the .proto allows. Its values
+// are a few bytes a message, well within gRPC's default limits (4 MiB received), which it keeps.
+// A participant with Binary or String channels would declare max_bytes for each and set its
+// server's grpc.max_receive_message_length to its inputs' maxima together plus 8 MiB.
 const CHANNELS = [
   { name: 'gain', causality: 'CAUSALITY_PARAMETER', type: 'VALUE_TYPE_REAL', start: 2 },
   { name: 'u', causality: 'CAUSALITY_INPUT', type: 'VALUE_TYPE_REAL', start: 0 },

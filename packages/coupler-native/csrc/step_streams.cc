@@ -109,12 +109,12 @@ extern "C" {
 
 // Opens the step stream to `target` (host:port or unix:PATH); with `tls`, PEM texts (each may
 // be empty) for the roots, the client's key and its chain. `metadata` holds `count` pairs
-// (key, value). Messages of up to `max_message` bytes travel either way (gRPC's channel
-// arguments); a larger answer ends the stream with RESOURCE_EXHAUSTED. Never NULL: cs_error()
+// (key, value). Answers of up to `max_receive` bytes and requests of up to `max_send` travel
+// (gRPC's channel arguments); a larger answer ends the stream with RESOURCE_EXHAUSTED. Never NULL: cs_error()
 // is empty when the stream is open, else says why (the stream must still be closed).
 cs_stream* cs_open(const char* target, int tls, const char* roots, const char* key,
                    const char* chain, const char* const* metadata, int count, double timeout,
-                   int max_message) {
+                   int max_receive, int max_send) {
   auto* s = new cs_stream();
   std::shared_ptr<grpc::ChannelCredentials> credentials = grpc::InsecureChannelCredentials();
   if (tls) {
@@ -126,8 +126,8 @@ cs_stream* cs_open(const char* target, int tls, const char* roots, const char* k
   }
   Deadline deadline = after(timeout);
   grpc::ChannelArguments arguments;
-  arguments.SetMaxReceiveMessageSize(max_message);
-  arguments.SetMaxSendMessageSize(max_message);
+  arguments.SetMaxReceiveMessageSize(max_receive);
+  arguments.SetMaxSendMessageSize(max_send);
   s->channel = grpc::CreateCustomChannel(target, credentials, arguments);
   if (!s->channel->WaitForConnected(deadline)) {
     s->error = "no connection within the deadline";

@@ -14,12 +14,12 @@ enum { CS_OK = 0, CS_FAILED = 1, CS_TIMEOUT = 2 };
 
 /* Opens the step stream to `target` (host:port or unix:PATH); with `tls`, PEM texts (each may
  * be empty) for the roots, the client's key and its chain. `metadata` holds `count` pairs
- * (key, value). Messages of up to `max_message` bytes travel either way (gRPC's channel
- * arguments); a larger answer ends the stream with RESOURCE_EXHAUSTED. Never NULL: cs_error()
+ * (key, value). Answers of up to `max_receive` bytes and requests of up to `max_send` travel
+ * (gRPC's channel arguments); a larger answer ends the stream with RESOURCE_EXHAUSTED. Never NULL: cs_error()
  * is empty when the stream is open, else says why (the stream must still be closed). */
 cs_stream *cs_open(const char *target, int tls, const char *roots, const char *key,
                    const char *chain, const char *const *metadata, int count, double timeout,
-                   int max_message);
+                   int max_receive, int max_send);
 
 /* Why the stream failed (empty while it is fine); valid until the next call on it. */
 const char *cs_error(cs_stream *s);

@@ -3,6 +3,7 @@ from __future__ import annotations
 import itertools
 import math
 import os
+from dataclasses import replace
 
 import pytest
 from google.protobuf import source_context_pb2
@@ -12,7 +13,7 @@ from hypothesis import strategies as st
 
 from coupler import messages, values, wire
 from coupler.channels import Causality, Channel, Description, ValueType, fits_fixed_step
-from coupler.errors import ChannelValueError, MessageTooLarge
+from coupler.errors import ChannelValueError, MessageTooLarge, ValueTooLarge
 from coupler.v1.sensors_pb2 import CameraIntrinsics, Image
 
 REAL = Channel(name="speed", causality=Causality.OUTPUT, type=ValueType.REAL, unit="m/s")
@@ -98,11 +99,13 @@ def test_description_round_trips() -> None:
                 causality=Causality.OUTPUT,
                 type=ValueType.BINARY,
                 message_type="coupler.v1.TrainState",
+                max_bytes=128,
             ),
         ),
         implementation="test",
     )
     assert wire.description_from_pb(wire.description_to_pb(description)) == description
+    assert wire.description_to_pb(description).channels[2].max_bytes == 128
 
 
 def test_registered_message_round_trips_and_reads_as_json() -> None:
@@ -482,3 +485,93 @@ def test_a_request_with_long_values_is_parsed_apart() -> None:
             assert (step.run_id, step.time, step.step, step.inputs) == ("run-1", 1.5, 0.2, inputs)
     with pytest.raises(DecodeError):
         wire.step_request(b"".join(wire.step_pieces(run, 0.0, 0.2, {"blob": FRAME}, codec))[:-1])
+
+
+# --- declared maxima (Channel.max_bytes) ---------------------------------------------------------
+
+SIZED = Description(
+    name="Camera",
+    channels=(
+        Channel(name="blob", causality=Causality.INPUT, type=ValueType.BINARY, max_bytes=10),
+        Channel(name="label", causality=Causality.INPUT, type=ValueType.STRING, max_bytes=4),
+        Channel(name="gain", causality=Causality.PARAMETER, type=ValueType.REAL),
+        Channel(name="frame", causality=Causality.OUTPUT, type=ValueType.BINARY, max_bytes=20),
+        Channel(name="speed", causality=Causality.OUTPUT, type=ValueType.REAL),
+    ),
+)
+
+
+def test_a_value_over_its_declared_maximum_is_refused_both_ways() -> None:
+    """Encoding and decoding, a message whole or in pieces, a prepared stream answer: a value
+    over the maximum its channel declares names the channel, its size and the maximum; a
+    String counts its UTF-8 bytes."""
+    codec = wire.Codec(SIZED)
+    assert codec.decode(codec.encode({"blob": bytes(10), "label": "abcd"}))
+    with pytest.raises(ValueTooLarge) as info:
+        codec.encode({"blob": bytes(11)})
+    assert (info.value.channel, info.value.size, info.value.maximum) == ("blob", 11, 10)
+    assert str(info.value).startswith(
+        "input 'blob' carries 11 bytes, over its declared maximum of 10 bytes (max_bytes); send "
+        "at most that"
+    )
+    assert info.value.naming("Camera").startswith("input Camera.blob carries 11 bytes")
+    assert codec.encode({"label": "äbc"})  # 3 characters, 4 bytes: fits
+    with pytest.raises(ValueTooLarge, match="input 'label' carries 5 bytes, over its declared"):
+        codec.encode({"label": "äbcd"})
+    undeclared = wire.Codec(
+        replace(SIZED, channels=tuple(replace(c, max_bytes=0) for c in SIZED.channels))
+    )
+    with pytest.raises(ValueTooLarge, match="input 'blob' carries 11 bytes"):
+        codec.decode(undeclared.encode({"blob": bytes(11)}))
+    run = wire.RunKey("run-1", bytes(32))
+    big = Description(
+        name="Camera", channels=(replace(SIZED.channels[0], max_bytes=len(FRAME) - 1),)
+    )
+    with pytest.raises(ValueTooLarge, match=f"input 'blob' carries {len(FRAME)} bytes"):
+        wire.step_pieces(run, 0.0, 0.1, {"blob": FRAME}, wire.Codec(big))
+    answers = wire.StepAnswers(codec)
+    answers.answer({"frame": bytes(20), "speed": 1.0})
+    with pytest.raises(ValueTooLarge, match="output 'frame' carries 21 bytes") as info:
+        answers.answer({"frame": bytes(21), "speed": 1.0})
+    assert "the participant must send at most that, or declare a larger maximum" in str(info.value)
+
+
+def test_declared_maxima_make_the_message_limit() -> None:
+    """With every Binary and String channel of a message declared, its limit is their sum:
+    above the policy's limit for a participant's own declarations, at most it where the
+    policy caps them (the orchestrator's --max-message-size); one undeclared channel: the
+    policy's limit."""
+    policy = values.ValuePolicy(max_message_bytes=8)
+    codec = wire.Codec(SIZED, policy)
+    assert (codec.limit([Causality.INPUT]), codec.limit([Causality.OUTPUT])) == (14, 20)
+    assert codec.decode(codec.encode({"blob": bytes(10), "label": "abcd"}))
+    capped = wire.Codec(SIZED, replace(policy, cap_declared=True))
+    assert (capped.limit([Causality.INPUT]), capped.limit([Causality.OUTPUT])) == (8, 8)
+    with pytest.raises(MessageTooLarge, match="over the message limit of 8 bytes"):
+        capped.encode({"blob": bytes(10)})
+    mixed = replace(SIZED, channels=(*SIZED.channels, BIN))
+    assert wire.Codec(mixed, policy).limit([Causality.INPUT]) == 8
+
+
+def test_limits_of_servers_and_clients() -> None:
+    """A participant's server receives parameters and inputs, sends outputs; its client the
+    other way round, declared maxima capped by the run's limit, undeclared channels at least
+    the default so an answer over the run's limit arrives and is named."""
+    mib = 2**20
+    assert wire.served_limits(SIZED, 64 * mib) == wire.MessageLimits(received=14, sent=20)
+    assert wire.client_limits(SIZED, 64 * mib) == wire.MessageLimits(received=20, sent=14)
+    assert wire.client_limits(SIZED, 16) == wire.MessageLimits(received=16, sent=14)
+    assert wire.MessageLimits(received=20, sent=14).transport == (
+        20 + wire.FRAMING_BYTES,
+        14 + wire.FRAMING_BYTES,
+    )
+    undeclared = Description(name="P", channels=(REAL, BIN))  # and numbers only: the default
+    assert wire.served_limits(undeclared, mib) == wire.MessageLimits(received=mib, sent=mib)
+    assert wire.client_limits(undeclared, mib) == wire.MessageLimits()
+    huge = Description(
+        name="P",
+        channels=(
+            Channel(name="x", causality=Causality.INPUT, type=ValueType.BINARY, max_bytes=2**40),
+        ),
+    )
+    assert wire.served_limits(huge, mib).transport[0] == 2**31 - 1

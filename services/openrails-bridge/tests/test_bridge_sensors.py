@@ -60,6 +60,7 @@ async def test_describe_offers_one_image_channel_per_sensor(
 ) -> None:
     async with mock(sensors=sensors) as url, bridge(url, sensors=sensors) as remote:
         description = await remote.describe()
+        received = remote.limits.received
     outputs = description.of(Causality.OUTPUT)
     assert [c.name for c in outputs][-2:] == ["front", "lidar"]
     for name in ("front", "lidar"):
@@ -67,6 +68,15 @@ async def test_describe_offers_one_image_channel_per_sensor(
         assert channel is not None
         assert channel.type is ValueType.BINARY and channel.message_type == IMAGE
     assert "800 x 600, rgb8" in description.channel("front").description  # type: ignore[union-attr]
+    # the largest frame of each: the Image's other fields and width * height pixels, declared
+    # and a train state, so the run's limit towards the bridge is theirs, not the default
+    maxima = {c.name: c.max_bytes for c in outputs if c.sized}
+    assert maxima == {
+        "train_state": 128,
+        "front": 256 + 800 * 600 * 3,
+        "lidar": 256 + 200 * 150 * 6,
+    }
+    assert received == sum(maxima.values())  # what its client lets through (plus framing)
 
 
 async def test_frames_arrive_unchanged_in_images(mock: Mock, bridge: Bridge, sensors: Path) -> None:

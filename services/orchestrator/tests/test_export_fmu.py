@@ -320,6 +320,61 @@ def test_a_changed_participant_is_refused_at_instantiation(
     assert "export the FMU again" in printed
 
 
+def test_a_changed_maximum_is_refused_at_instantiation(
+    gain_description: Description,
+    gain: ParticipantServer,
+    proxy_binaries: Path,
+    tmp_path: Path,
+) -> None:
+    """Exported when `blob` declared its largest value (1000 bytes): the participant now
+    declares none, and the FMU says so; the fingerprint of a description that declares
+    nothing is what it was before declarations existed."""
+    then = replace(
+        gain_description,
+        channels=tuple(
+            replace(c, max_bytes=1000) if c.name == "blob" else c for c in gain_description.channels
+        ),
+    )
+    assert fingerprint(then) != fingerprint(gain_description)
+    fmu = write_fmu(
+        then, address=address(gain), out=tmp_path / "Old.fmu", binaries=proxy_binaries
+    ).path
+    answer, printed = drive(tmp_path, [gain_run(fmu)])
+    assert "instantiate" in answer.get("error", ""), printed
+    assert "is not the one this FMU was exported from" in printed
+    assert "'blob' changed its largest value 1000 -> 0 bytes (max_bytes)" in printed
+
+
+def test_the_fmus_limits_come_from_the_declarations(
+    gain_description: Description, proxy_binaries: Path, tmp_path: Path
+) -> None:
+    """The proxy receives what the outputs declare together and sends what the inputs and
+    parameters accept (plus framing); an undeclared side keeps Coupler's default. FMI 3's
+    Binary variables carry the maximum as ``maxSize``."""
+    declared = replace(
+        gain_description,
+        channels=tuple(
+            replace(c, max_bytes={"blob_out": 2_000_000, "echo": 100}.get(c.name, 0))
+            for c in gain_description.channels
+        ),
+    )
+    fmu = write_fmu(
+        declared,
+        address="grpc://127.0.0.1:1",
+        out=tmp_path / "Declared.fmu",
+        fmi_version=3,
+        binaries=proxy_binaries,
+    ).path
+    with zipfile.ZipFile(fmu) as archive:
+        resources = archive.read("resources/coupler-proxy.txt").decode()
+        model = archive.read("modelDescription.xml").decode()
+    framing = 8 * 2**20
+    assert f"\nmax_receive\t{2_000_100 + framing}\n" in resources
+    assert f"\nmax_send\t{64 * 2**20 + framing}\n" in resources  # label and blob: undeclared
+    assert re.search(r'<Binary name="blob_out"[^>]* maxSize="2000000"', model), model
+    assert not re.search(r'<Binary name="blob"[^>]* maxSize', model)
+
+
 @pytest.mark.slow
 def test_a_participant_that_is_down_is_an_error_naming_its_address(
     exported: dict[int, Path], tmp_path: Path
@@ -472,8 +527,8 @@ def test_values_up_to_couplers_message_limit_pass_the_fmu(
         for item in original.infolist():
             data = original.read(item)
             if item.filename == "resources/coupler-proxy.txt":
-                assert b"\nmax_message\t" in data
-                data = re.sub(rb"\nmax_message\t[0-9]+", b"", data)
+                assert b"\nmax_receive\t" in data and b"\nmax_send\t" in data
+                data = re.sub(rb"\nmax_(receive|send)\t[0-9]+", b"", data)
             copy.writestr(item, data)
     answer, printed = drive(tmp_path, [run | {"fmu": str(without)}], env=env)
     assert "error" in answer, printed

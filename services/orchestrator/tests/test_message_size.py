@@ -3,14 +3,22 @@
     Frames (frame: Binary, `size` bytes) --frame--> Gain.blob --> Gain.blob_out
       participant       orchestrator            participant      orchestrator
 
+    Declared (frame: at most `maximum` bytes) --frame--> Viewer.frame (at most `accepts`)
+
 A 1.44 MB frame (800 x 600 x 3) passes both ways; a frame over the limit -- the run's
 (``--max-message-size``) or a participant server's (``max_message_bytes``), sending or
 receiving -- fails the run with one error naming the channel, its size, the limit and the fix.
+With declared maxima (``Channel.max_bytes``) the limits come from the declarations: a 2 MB
+channel carries the frame between servers whose default is 1 MiB; an output declaring more than
+its input accepts is refused before anything runs; a frame over its declared maximum fails the
+run naming the channel, its size and the maximum, keeping the rows before it.
 Over both step paths (the native step channel and grpc.aio), with ``coupler run`` as a process.
 """
 
 from __future__ import annotations
 
+import asyncio
+import zipfile
 from collections.abc import Iterator, Mapping
 from contextlib import ExitStack
 from pathlib import Path
@@ -19,8 +27,11 @@ import pytest
 
 from coupler.channels import Causality, Channel, Description, RunSetup, Value, ValueType
 from coupler.examples.gain import GainParticipant
+from coupler.fmu import FmuParticipant
 from coupler.participant import Participant, Values
 from coupler.testing import SystemStructure, remote
+from coupler_orchestrator import recording
+from coupler_orchestrator.pipeline.replay import ReplayParticipant
 
 from .conftest import Coupler, serving
 
@@ -38,14 +49,23 @@ SSD = SystemStructure(
 
 
 class Camera(Participant):
-    """One Binary output: ``size`` bytes per step, a different pattern each step."""
+    """One Binary output: ``size`` bytes per step (``larger`` from step ``larger_from`` on), a
+    different pattern each step; declaring at most ``maximum`` bytes (0: nothing)."""
 
-    def __init__(self, size: int) -> None:
-        self.size = size
+    def __init__(
+        self, size: int, *, maximum: int = 0, larger: int = 0, larger_from: int = 0
+    ) -> None:
+        self.size, self.maximum = size, maximum
+        self.larger, self.larger_from = larger, larger_from
         self.steps = 0
 
     async def describe(self) -> Description:
-        frame = Channel(name="frame", causality=Causality.OUTPUT, type=ValueType.BINARY)
+        frame = Channel(
+            name="frame",
+            causality=Causality.OUTPUT,
+            type=ValueType.BINARY,
+            max_bytes=self.maximum,
+        )
         return Description(name="Camera", channels=(frame,), implementation="tests.Camera")
 
     async def initialize(self, setup: RunSetup) -> Values:
@@ -54,7 +74,8 @@ class Camera(Participant):
 
     async def do_step(self, time: float, step: float, inputs: Mapping[str, Value]) -> Values:
         self.steps += 1
-        return {"frame": bytes([self.steps % 256]) * self.size}
+        size = self.larger if self.larger and self.steps >= self.larger_from else self.size
+        return {"frame": bytes([self.steps % 256]) * size}
 
     async def terminate(self, reason: str = "") -> None:
         self.steps = 0
@@ -91,6 +112,14 @@ class Fleet:
         ):
             server = self.stack.enter_context(serving(participant, max_message_bytes=limit))
             self.monkeypatch.setenv(f"{name}_PORT", str(server.port))
+
+
+async def described(participant: Participant) -> Description:
+    """``participant``'s description, closed again after."""
+    try:
+        return await participant.describe()
+    finally:
+        await participant.close()
 
 
 def run(ssd: Path, out: Path, step_path: str, *options: str) -> tuple[int, str, dict]:
@@ -162,3 +191,190 @@ def test_the_limit_must_be_a_size(ssd: Path, tmp_path: Path) -> None:
     outcome = Coupler.process("run", ssd, "--max-message-size", "0", "--out", tmp_path / "o")
     assert outcome.code == 2
     assert "--max-message-size: '0' is not a size in MiB above 0 and at most 1024" in outcome.err
+
+
+DECLARED = SystemStructure(
+    "Declared",
+    components=[
+        remote("Camera", "grpc://127.0.0.1:${CAMERA_PORT}", outputs=["frame"]),
+        remote("Viewer", "grpc://127.0.0.1:${VIEWER_PORT}", inputs=["frame"], outputs=["size"]),
+    ],
+    connections=[("Camera.frame", "Viewer.frame")],
+    stop_time=0.4,
+)
+
+
+class Viewer(Participant):
+    """Takes frames of at most ``accepts`` bytes (``frame``) and tells their size (``size``)."""
+
+    def __init__(self, accepts: int) -> None:
+        self.accepts = accepts
+
+    async def describe(self) -> Description:
+        channels = (
+            Channel(
+                name="frame",
+                causality=Causality.INPUT,
+                type=ValueType.BINARY,
+                start=b"",
+                max_bytes=self.accepts,
+            ),
+            Channel(name="size", causality=Causality.OUTPUT, type=ValueType.INTEGER),
+        )
+        return Description(name="Viewer", channels=channels, implementation="tests.Viewer")
+
+    async def initialize(self, setup: RunSetup) -> Values:
+        return {"size": len(setup.inputs.get("frame", b""))}  # type: ignore[arg-type]
+
+    async def do_step(self, time: float, step: float, inputs: Mapping[str, Value]) -> Values:
+        return {"size": len(inputs["frame"])}  # type: ignore[arg-type]
+
+    async def terminate(self, reason: str = "") -> None:
+        return None
+
+
+@pytest.fixture
+def declared(tmp_path: Path) -> Path:
+    return DECLARED.write(tmp_path / "declared.ssd")
+
+
+def serve_declared(fleet: Fleet, camera: Camera, accepts: int, *, limit: int = 64 * MIB) -> None:
+    """Camera and Viewer, their servers' default limit ``limit``."""
+    for name, participant in (("CAMERA", camera), ("VIEWER", Viewer(accepts))):
+        server = fleet.stack.enter_context(serving(participant, max_message_bytes=limit))
+        fleet.monkeypatch.setenv(f"{name}_PORT", str(server.port))
+
+
+def test_a_declared_channel_carries_a_frame_past_lower_defaults(
+    declared: Path, tmp_path: Path, fleet: Fleet, step_path: str
+) -> None:
+    """Both servers default to 1 MiB; the 2 MB the channel declares raises theirs and lowers
+    the run's (64 MiB) to what is declared."""
+    serve_declared(fleet, Camera(FRAME, maximum=2_000_000), 2_000_000, limit=MIB)
+    out = tmp_path / "out"
+    code, err, summary = run(
+        declared, out, step_path, "--output-variables", "Viewer.*", "--record", "Camera"
+    )
+    assert code == 0, err
+    assert summary["status"] == "completed"
+    assert summary["steps"] == 4
+    sizes = [row["Viewer.size"] for row in Coupler.results(out)]
+    assert sizes == ["0", "0", str(FRAME), str(FRAME), str(FRAME)]  # Jacobi: a step later
+    recorded = recording.read(out / "recordings" / "Camera.crec").description
+    assert recorded.channel("frame").max_bytes == 2_000_000  # type: ignore[union-attr]
+    replayed = asyncio.run(described(ReplayParticipant(out, "Camera")))  # declares the same
+    assert replayed.channel("frame").max_bytes == 2_000_000  # type: ignore[union-attr]
+
+
+def test_an_output_declaring_more_than_its_input_accepts_is_refused(
+    declared: Path, tmp_path: Path, fleet: Fleet
+) -> None:
+    serve_declared(fleet, Camera(FRAME, maximum=2_000_000), 1_500_000)
+    expected = (
+        "connection Camera.frame -> Viewer.frame: 'Camera.frame' declares values of up to "
+        "2000000 bytes, but 'Viewer.frame' accepts at most 1500000 bytes (max_bytes); connect "
+        "an input that accepts 2000000 bytes, or have the output's participant send (and "
+        "declare) at most 1500000"
+    )
+    line = next(
+        n
+        for n, text in enumerate(declared.read_text().splitlines(), start=1)
+        if "<ssd:Connection " in text
+    )
+    for command in (("validate",), ("run", "--out", tmp_path / "run")):
+        outcome = Coupler.process(*command[:1], declared, *command[1:])
+        assert outcome.code == 1, outcome.err
+        assert f"declared.ssd line {line}: {expected}" in outcome.err
+        assert "Traceback" not in outcome.err
+    assert not (tmp_path / "run" / "results.csv").exists()
+
+
+def test_a_frame_over_its_declared_maximum_fails_the_run_keeping_the_rows(
+    declared: Path, tmp_path: Path, fleet: Fleet, step_path: str
+) -> None:
+    """The camera declares 1.5 MB and sends 1.6 MB at its third step: its server refuses to
+    send it, and the run fails naming the channel, the size and the maximum."""
+    camera = Camera(FRAME, maximum=1_500_000, larger=1_600_000, larger_from=3)
+    serve_declared(fleet, camera, 2_000_000)
+    code, err, summary = run(
+        declared, tmp_path / "out", step_path, "--output-variables", "Viewer.*"
+    )
+    assert code == 1, err
+    expected = (
+        "Camera.DoStep [RESOURCE_EXHAUSTED]: output 'frame' carries 1600000 bytes, over its "
+        "declared maximum of 1500000 bytes (max_bytes)"
+    )
+    assert expected in err
+    assert "Traceback" not in err
+    assert summary["status"] == "failed"
+    assert expected in summary["reason"]
+    rows = Coupler.results(tmp_path / "out")
+    assert [row["time"] for row in rows] == ["0.0", "0.1", "0.2"]
+
+
+def test_an_fmus_binary_max_size_is_declared_and_kept(
+    tmp_path: Path, fmus: dict[str, Path]
+) -> None:
+    """FMI 3's ``maxSize`` of a Binary variable is the channel's declared maximum: an
+    in-process FMU whose output is over it fails the run naming it."""
+    sized = tmp_path / "Feedthrough3.fmu"
+    with zipfile.ZipFile(fmus["Feedthrough3"]) as source, zipfile.ZipFile(sized, "w") as copy:
+        for item in source.infolist():
+            data = source.read(item)
+            if item.filename == "modelDescription.xml":
+                data = data.replace(
+                    b'<Binary name="binary_out"', b'<Binary maxSize="4" name="binary_out"'
+                )
+            copy.writestr(item, data)
+    channel = asyncio.run(described(FmuParticipant(sized))).channel("binary_out")
+    assert channel is not None and channel.max_bytes == 4
+    fits = Coupler.process(
+        "run",
+        sized,
+        "--stop-time",
+        "0.2",
+        "--step",
+        "0.1",
+        "--param",
+        "binary_in=01020304",
+        "--out",
+        tmp_path / "fits",
+    )
+    assert fits.code == 0, fits.err
+    over = Coupler.process(
+        "run",
+        sized,
+        "--stop-time",
+        "0.2",
+        "--step",
+        "0.1",
+        "--param",
+        "binary_in=0102030405",
+        "--out",
+        tmp_path / "over",
+    )
+    assert over.code == 1, over.err
+    assert (
+        "Feedthrough.Initialize [RESOURCE_EXHAUSTED]: output Feedthrough.binary_out carries 5 "
+        "bytes, over its declared maximum of 4 bytes (max_bytes)"
+    ) in over.err
+
+
+def test_declarations_over_the_runs_limit_are_warned_about_and_capped(
+    declared: Path, tmp_path: Path, fleet: Fleet, step_path: str
+) -> None:
+    """--max-message-size caps what participants declare: 2 MB declared, 1 MiB allowed, a
+    1.44 MB frame fails the run naming the channel and the way to raise the cap, which the
+    checks warned about before the run."""
+    serve_declared(fleet, Camera(FRAME, maximum=2_000_000), 2_000_000)
+    code, err, summary = run(declared, tmp_path / "out", step_path, "--max-message-size", "1")
+    assert code == 1, err
+    assert (
+        "Camera.DoStep [RESOURCE_EXHAUSTED]: output Camera.frame carries 1440000 bytes: over the "
+        "message limit of 1048576 bytes (1 MiB); raise the limit"
+    ) in err
+    assert (
+        "participant 'Camera' declares outputs of up to 2000000 bytes together, more than the "
+        "run's message limit of 1048576 bytes (1 MiB): a step carrying more fails the run; "
+        "raise --max-message-size to 2"
+    ) in " ".join(summary["warnings"])

@@ -29,6 +29,10 @@ async def test_describe(perception: RemoteParticipant) -> None:
     assert [c.name for c in description.of(Causality.INPUT)] == ["image", "train_state"]
     assert description.channel("image").message_type == IMAGE  # type: ignore[union-attr]
     assert description.channel("train_state").message_type == TRAIN_STATE  # type: ignore[union-attr]
+    # the largest frame it takes (4K UHD, rgb8) and a train state, declared: the run's limits
+    # and its server's follow (docs/protocol.md "Message size")
+    maxima = {c.name: c.max_bytes for c in description.of(Causality.INPUT)}
+    assert maxima == {"image": 256 + 3840 * 2160 * 3, "train_state": 128}
     assert [c.name for c in description.of(Causality.OUTPUT)] == ["detections", "detection_count"]
     assert description.channel("detections").message_type == BALISE_DETECTIONS  # type: ignore[union-attr]
 
@@ -104,3 +108,4 @@ def test_the_service_starts_and_answers_describe() -> None:
             process.terminate()
     assert described.returncode == 0, described.stderr
     assert "detections" in described.stdout and "coupler.v1.BaliseDetections" in described.stdout
+    assert "Binary(coupler.v1.Image) max 24883456 B" in described.stdout  # 4K UHD, rgb8

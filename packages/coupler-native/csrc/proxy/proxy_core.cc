@@ -126,6 +126,7 @@ std::string fingerprint_of(const pb::DescribeResponse& description) {
   for (const auto& c : description.channels()) {
     std::ostringstream line;
     line << c.name() << '|' << c.causality() << '|' << c.type() << '|' << c.unit();
+    if (c.max_bytes()) line << '|' << c.max_bytes();
     lines.push_back(line.str());
   }
   std::sort(lines.begin(), lines.end());
@@ -217,7 +218,8 @@ bool Proxy::load(const std::string& resources) {
     else if (f[0] == "fingerprint") fingerprint_ = f[1];
     else if (f[0] == "timeout") timeout_ = to_double(f[1]);
     else if (f[0] == "step_size") step_size_ = to_double(f[1]);
-    else if (f[0] == "max_message") max_message_ = std::atoi(f[1].c_str());
+    else if (f[0] == "max_receive") max_receive_ = std::atoi(f[1].c_str());
+    else if (f[0] == "max_send") max_send_ = std::atoi(f[1].c_str());
     else if (f[0] == "time_vr")
       time_vr_ = static_cast<unsigned>(std::strtoul(f[1].c_str(), nullptr, 10));
     else if (f[0] == "channel" && f.size() >= 8) {
@@ -227,6 +229,7 @@ bool Proxy::load(const std::string& resources) {
       c.type = std::atoi(f[3].c_str());
       c.causality = std::atoi(f[4].c_str());
       c.unit = unescape(f[5]);
+      if (f.size() >= 9) c.max_bytes = std::strtoull(f[8].c_str(), nullptr, 10);
       const std::string& kind = f[6];
       c.kind = kind == "Real" ? Kind::REAL
              : kind == "Integer" ? Kind::INTEGER
@@ -273,6 +276,9 @@ std::string Proxy::changes(const pb::DescribeResponse& description) const {
           << " -> " << pb::Causality_Name(d->causality()) << ";";
     if (d->unit() != c.unit)
       out << " '" << c.name << "' changed unit '" << c.unit << "' -> '" << d->unit() << "';";
+    if (d->max_bytes() != c.max_bytes)
+      out << " '" << c.name << "' changed its largest value " << c.max_bytes << " -> "
+          << d->max_bytes() << " bytes (max_bytes);";
     now.erase(found);
   }
   for (const auto& entry : now) out << " '" << entry.first << "' is new;";
@@ -320,10 +326,8 @@ bool Proxy::set_address(const std::string& address) {
     }
   }
   grpc::ChannelArguments arguments;
-  if (max_message_ > 0) {
-    arguments.SetMaxReceiveMessageSize(max_message_);
-    arguments.SetMaxSendMessageSize(max_message_);
-  }
+  if (max_receive_ > 0) arguments.SetMaxReceiveMessageSize(max_receive_);
+  if (max_send_ > 0) arguments.SetMaxSendMessageSize(max_send_);
   channel_ = grpc::CreateCustomChannel(target, credentials, arguments);
   stub_ = pb::GRPCComponentService::NewStub(channel_);
   pb::DescribeRequest request;

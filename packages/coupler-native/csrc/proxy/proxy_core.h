@@ -6,6 +6,7 @@
 #pragma once
 
 #include <chrono>
+#include <cstdint>
 #include <condition_variable>
 #include <functional>
 #include <map>
@@ -33,6 +34,7 @@ struct Channel {
   int causality = 0;  // proto Causality: 1 input, 2 output, 3 parameter
   int type = 0;       // proto ValueType, as described at export
   std::string unit;
+  uint64_t max_bytes = 0;  // largest value declared (Binary, String); 0: none, as at export
   double real = 0.0;
   int integer = 0;
   bool boolean = false;
@@ -116,9 +118,11 @@ class Proxy {
   std::string fingerprint_;
   double timeout_ = 30.0;
   double step_size_ = 0.0;
-  // Bytes a message may have either way (coupler-proxy.txt's max_message: Coupler's message
-  // limit plus its framing, as `coupler run` sets it); 0: gRPC's own (4 MiB received).
-  int max_message_ = 0;
+  // Bytes an answer and a request may have (coupler-proxy.txt's max_receive and max_send: the
+  // participant's declared maxima, else Coupler's message limit, plus framing, as `coupler
+  // run` sets them); 0: gRPC's own (4 MiB received).
+  int max_receive_ = 0;
+  int max_send_ = 0;
   std::vector<Channel> channels_;
   std::map<unsigned, size_t> by_vr_;
   std::map<std::string, size_t> by_name_;

@@ -20,6 +20,13 @@ file, so renaming a channel or exposing another field is a configuration edit::
     type = "Real"
     field = "THROTTLE"        # key apply_inputs() receives
     start = 0.0
+
+    [[channel]]
+    name = "frame"
+    causality = "output"
+    type = "Binary"
+    field = "camera.frame"
+    max_bytes = 1440256       # the largest value sent (Binary and String; docs/protocol.md)
 """
 
 from __future__ import annotations
@@ -106,6 +113,9 @@ class ChannelMap(BaseModel):
     """Free text."""
     message_type: str = ""
     """Binary channels: full protobuf message name."""
+    max_bytes: int = Field(default=0, ge=0)
+    """Binary and String channels: the largest value sent on this output or accepted on this
+    input or parameter [bytes]; 0: not declared (``Channel.max_bytes``)."""
 
 
 class AdapterConfig(BaseModel):
@@ -184,6 +194,7 @@ class AdapterParticipant(Participant):
                     start=coerce(c.type, c.start) if c.start is not None else None,
                     description=c.description,
                     message_type=c.message_type,
+                    max_bytes=c.max_bytes,
                 )
                 for c in self.config.channel
             ),

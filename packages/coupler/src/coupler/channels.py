@@ -50,6 +50,17 @@ class Channel:
     """Free text for people."""
     message_type: str = ""
     """For binary channels: full protobuf message name carried, e.g. ``coupler.v1.TrainState``."""
+    max_bytes: int = 0
+    """For Binary and String channels: the largest value in bytes (a String's UTF-8 bytes) the
+    participant sends on this output, or accepts on this input or parameter; 0: not declared
+    (the message limit applies). Values over it are refused naming the channel; the
+    participant's and the orchestrator's gRPC limits are derived from these maxima
+    (docs/protocol.md "Message size")."""
+
+    @property
+    def sized(self) -> bool:
+        """Whether the channel's values count towards a message's size (Binary and String)."""
+        return self.type in (ValueType.BINARY, ValueType.STRING)
 
 
 @dataclass(frozen=True, kw_only=True)

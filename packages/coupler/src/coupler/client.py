@@ -34,6 +34,7 @@ from coupler.errors import (
     ParticipantTimeout,
     ParticipantUnavailable,
     ScenarioError,
+    ValueTooLarge,
 )
 from coupler.participant import HEALTH_REASON, EndRun, Participant, Values
 from coupler.security import ClientSecurity
@@ -101,8 +102,12 @@ class RemoteParticipant(Participant):
     describes it; every call then has a deadline of ``call_timeout`` seconds. With
     ``streaming`` (and a participant that supports it) steps travel over one StepStream;
     given ``steps`` (a ``StepTransport``), over that transport when it takes them.
-    The values of one message (Binary and String together) may have ``max_message_bytes``; one
-    over it, either way, fails naming its channel (``MessageTooLarge``).
+    The values of one message (Binary and String together) may have ``max_message_bytes``, or
+    what the participant's channels declare (``Channel.max_bytes``) when that is less; one over
+    it, either way, fails naming its channel (``MessageTooLarge``), and so does a value over
+    its channel's declared maximum (``ValueTooLarge``). The gRPC channel's limits follow
+    (``wire.client_limits``): once described, the participant is reached over a channel made
+    with them.
     """
 
     def __init__(
@@ -124,6 +129,9 @@ class RemoteParticipant(Participant):
         self._transported = False
         """Whether ``steps`` carries this run's steps."""
         self.max_message_bytes = max_message_bytes
+        self.limits = wire.MessageLimits(*[max(max_message_bytes, MAX_MESSAGE_BYTES)] * 2)
+        """What the gRPC channel lets through (``wire.client_limits`` once described; before,
+        at least what a participant's server sends by default)."""
         self.target = parse_address(address)
         self.security = security or ClientSecurity()
         self._metadata = self.security.metadata()
@@ -167,8 +175,16 @@ class RemoteParticipant(Participant):
                 wire.DescribeRequest(), timeout=self.call_timeout, metadata=self._metadata
             ),
         )
-        policy = ValuePolicy(max_message_bytes=self.max_message_bytes)
-        self._codec = wire.Codec(wire.description_from_pb(response), policy)
+        description = wire.description_from_pb(response)
+        policy = ValuePolicy(max_message_bytes=self.max_message_bytes, cap_declared=True)
+        self._codec = wire.Codec(description, policy)
+        limits = wire.client_limits(description, self.max_message_bytes)
+        if limits != self.limits:  # gRPC fixes a channel's limits when it is made
+            self.limits = limits
+            channel, self._channel = self._channel, None
+            if channel is not None:
+                await channel.close()
+            self._ensure_channel()
 
     async def wait_until_serving(self) -> None:
         """Poll the health service until SERVING; ParticipantUnavailable after the deadline, or
@@ -234,15 +250,9 @@ class RemoteParticipant(Participant):
                 why, participant=self.name, call="health", status="UNAVAILABLE"
             )
 
-    @property
-    def transport_limit(self) -> int:
-        """What the channel lets through: at least what a participant's server sends by default,
-        so that an answer over ``max_message_bytes`` arrives and is refused naming its channel."""
-        return max(self.max_message_bytes, MAX_MESSAGE_BYTES)
-
     def _ensure_channel(self) -> None:
         if self._channel is None:
-            options = wire.transport_options(self.transport_limit)
+            options = self.limits.options()
             if uses_tls(self.address):
                 credentials = self.security.channel_credentials()
                 self._channel = grpc.aio.secure_channel(self.target, credentials, options)
@@ -389,7 +399,7 @@ class RemoteParticipant(Participant):
     def _request(self, call: str, build: Any) -> Any:
         try:
             return build()
-        except MessageTooLarge as exc:
+        except (MessageTooLarge, ValueTooLarge) as exc:
             raise ParticipantError(
                 exc.naming(self.name), participant=self.name, call=call, status="RESOURCE_EXHAUSTED"
             ) from exc
@@ -401,7 +411,7 @@ class RemoteParticipant(Participant):
     def _response(self, call: str, read: Any) -> Values:
         try:
             outputs: Values = read()
-        except MessageTooLarge as exc:
+        except (MessageTooLarge, ValueTooLarge) as exc:
             raise ParticipantError(
                 exc.naming(self.name), participant=self.name, call=call, status="RESOURCE_EXHAUSTED"
             ) from exc

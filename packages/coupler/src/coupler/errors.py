@@ -5,7 +5,8 @@
     │   ├── ValidationError    several problems found together (``.problems``)
     │   └── PortInUse          a server's port is taken (``.port``, ``.holders``: pid + command)
     ├── ChannelValueError      a value does not fit its channel (``channel``, ``expected``)
-    │   └── MessageTooLarge    a message is over the message limit (``size``, ``total``, ``limit``)
+    │   ├── MessageTooLarge    a message is over the message limit (``size``, ``total``, ``limit``)
+    │   └── ValueTooLarge      a value is over its channel's maximum (``size``, ``maximum``)
     └── ParticipantError       a participant failed at run time (participant, call, status)
         ├── ParticipantUnavailable   cannot be reached, or the wrapped simulator is down
         └── ParticipantTimeout       a call exceeded its deadline
@@ -81,6 +82,33 @@ class MessageTooLarge(ChannelValueError):
             f"{self.limit} bytes ({self.limit / 2**20:g} MiB); raise the limit on both sides "
             f"(coupler run --max-message-size MiB; a participant's server: max_message_bytes, "
             f'docs/protocol.md "Message size") or send smaller values'
+        )
+
+
+class ValueTooLarge(ChannelValueError):
+    """A Binary or String value is over the maximum its channel declares (``Channel.max_bytes``):
+    ``size`` bytes against ``maximum``."""
+
+    def __init__(self, *, channel: str, kind: str, size: int, maximum: int) -> None:
+        self.kind = kind
+        """``input``, ``output`` or ``parameter``."""
+        self.size, self.maximum = size, maximum
+        self.channel = channel
+        super().__init__(self.naming(""), channel=channel, expected=f"at most {maximum} bytes")
+
+    def naming(self, owner: str) -> str:
+        """The message, the channel written ``owner.channel`` when ``owner`` is given."""
+        where = f"{owner}.{self.channel}" if owner else f"'{self.channel}'"
+        fix = (
+            "the participant must send at most that, or declare a larger maximum"
+            if self.kind == "output"
+            else "send at most that (declare the connected output's maximum: coupler validate "
+            "then checks the connection), or declare a larger maximum"
+        )
+        return (
+            f"{self.kind} {where} carries {self.size} bytes, over its declared maximum of "
+            f"{self.maximum} bytes (max_bytes); {fix} "
+            f'(docs/protocol.md "Message size")'
         )
 
 

@@ -19,7 +19,12 @@ Rules every participant gets for free (docs/protocol.md has the table):
   still ends the run). The secret is never logged and never shown to the participant;
 - an unknown channel or a wrong type is INVALID_ARGUMENT naming the channel and the expected
   type; an exception inside the participant is INTERNAL with its message while the server
-  keeps serving; a participant that raises ``EndRun`` answers with ``terminate`` set.
+  keeps serving; a participant that raises ``EndRun`` answers with ``terminate`` set;
+- sizes: a value over the maximum its channel declares (``Channel.max_bytes``), received or
+  about to be sent, and a message over the message limit are RESOURCE_EXHAUSTED naming the
+  channel; the server's gRPC limits are derived from the declarations (``wire.served_limits``:
+  received, the parameters' and inputs' maxima together; sent, the outputs'; the default,
+  ``max_message_bytes``, where one is undeclared), plus framing.
 """
 
 from __future__ import annotations
@@ -47,6 +52,7 @@ from coupler.errors import (
     MessageTooLarge,
     ParticipantUnavailable,
     ScenarioError,
+    ValueTooLarge,
 )
 from coupler.participant import HEALTH_REASON, EndRun, Participant
 from coupler.security import ServerSecurity
@@ -422,7 +428,7 @@ async def _refuse(context: grpc.aio.ServicerContext, exc: Exception) -> NoReturn
     the participant's code while serving it."""
     if isinstance(exc, _NotReady):
         await _abort(context, grpc.StatusCode.UNAVAILABLE, "participant is starting; not ready yet")
-    if isinstance(exc, MessageTooLarge):
+    if isinstance(exc, MessageTooLarge | ValueTooLarge):
         await _abort(context, grpc.StatusCode.RESOURCE_EXHAUSTED, str(exc))
     if isinstance(exc, ChannelValueError | ScenarioError):
         await _abort(context, grpc.StatusCode.INVALID_ARGUMENT, str(exc))
@@ -472,8 +478,12 @@ class ParticipantServer:
     ):
         self.participant = participant
         self.max_message_bytes = max_message_bytes
-        """The values of one message, Binary and String together, may have this many bytes;
+        """The values of one message, Binary and String together, may have this many bytes
+        where the participant's channels do not all declare a maximum (``Channel.max_bytes``);
         more fails the call as RESOURCE_EXHAUSTED naming the channel (docs/protocol.md)."""
+        self.limits = wire.MessageLimits(max_message_bytes, max_message_bytes)
+        """What the server lets through (``wire.served_limits`` once the participant is
+        described; until then ``max_message_bytes`` either way)."""
         self.unix_socket = Path(os.path.abspath(unix_socket)) if unix_socket else None
         self.host = host
         self.requested_port = port
@@ -500,19 +510,45 @@ class ParticipantServer:
 
     async def start(self) -> int:
         """Bind, open the participant, describe it, then report its health (SERVING unless
-        ``Participant.watch_health`` says otherwise). Returns the port."""
+        ``Participant.watch_health`` says otherwise). Returns the port.
+
+        The server binds before the participant is open (its health says NOT_SERVING
+        meanwhile), with the default limits; when the description's declared maxima give
+        others (``wire.served_limits``), it is bound again on the same address with those,
+        since gRPC fixes a server's limits when it is made."""
         # a unix socket stays on this machine, protected by its file permissions
         warning = self.security.check("localhost" if self.unix_socket else self.host)
         if warning:
             log.warning("insecure_interface", host=self.host, detail=warning)
         credentials = self.security.credentials()
-        server = grpc.aio.server(
-            interceptors=self.security.interceptors(),
-            options=ports.GRPC_SERVER_OPTIONS + wire.transport_options(self.max_message_bytes),
-        )
-        self._server = server
         await self._set_health(health_pb2.HealthCheckResponse.NOT_SERVING)
         self._servicer = _Servicer(self.participant, self.max_message_bytes)
+        self._server = await self._serve(credentials, self.requested_port)
+        if self.security.health_port is not None:
+            await self._start_health_server(self.security.health_port)
+        await self.participant.open()
+        description = await self.participant.describe()
+        limits = wire.served_limits(description, self.max_message_bytes)
+        if limits != self.limits:
+            self.limits = limits
+            server, self._server = self._server, None
+            await server.stop(0)
+            self._server = await self._serve(credentials, self.port)
+        self._servicer.ready(description)
+        self._name = description.name
+        await self.participant.watch_health(self._report_health)
+        return self.port
+
+    async def _serve(
+        self, credentials: grpc.ServerCredentials | None, port: int
+    ) -> grpc.aio.Server:
+        """A started gRPC server of the participant and its health, with ``self.limits``, on
+        the unix socket or on ``port`` (0: a free one, then ``self.port``)."""
+        assert self._servicer is not None
+        server = grpc.aio.server(
+            interceptors=self.security.interceptors(),
+            options=ports.GRPC_SERVER_OPTIONS + self.limits.options(),
+        )
         _add_service(self._servicer, server)
         health_pb2_grpc.add_HealthServicer_to_server(self.health, server)
         if self.reflection:
@@ -522,18 +558,9 @@ class ParticipantServer:
         if self.unix_socket is not None:
             ports.add_grpc_socket(server, self.unix_socket, credentials, "the participant")
         else:
-            self.port = ports.add_grpc_port(
-                server, self.host, self.requested_port, credentials, "the participant"
-            )
+            self.port = ports.add_grpc_port(server, self.host, port, credentials, "the participant")
         await server.start()
-        if self.security.health_port is not None:
-            await self._start_health_server(self.security.health_port)
-        await self.participant.open()
-        description = await self.participant.describe()
-        self._servicer.ready(description)
-        self._name = description.name
-        await self.participant.watch_health(self._report_health)
-        return self.port
+        return server
 
     async def stop(self, grace: float = 2.0) -> None:
         """NOT_SERVING, end the active run, stop the server, close the participant."""

@@ -9,6 +9,7 @@ Protobuf lives in ``coupler.wire``; nothing here imports it.
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
 from dataclasses import dataclass
 from typing import Any
 
@@ -31,11 +32,29 @@ class ValuePolicy:
     allow_nonfinite: bool = False
     """Accept NaN and +/-Inf on Real channels."""
     max_message_bytes: int = MAX_MESSAGE_BYTES
-    """Largest sum of the Binary and String values of one message [bytes] (``coupler.wire``
-    checks it per message, naming the largest channel)."""
+    """Largest sum of the Binary and String values of one message [bytes] when one of its
+    Binary or String channels declares no maximum (``Channel.max_bytes``); with every one
+    declared, their sum (``message_limit``). ``coupler.wire`` checks it per message, naming
+    the largest channel."""
+    cap_declared: bool = False
+    """Declared maxima count up to ``max_message_bytes`` at most: the orchestrator's
+    ``--max-message-size`` is a cap the user raises, where a participant's own declarations
+    stand."""
 
 
 DEFAULT_POLICY = ValuePolicy()
+
+
+def message_limit(channels: Iterable[Channel], policy: ValuePolicy = DEFAULT_POLICY) -> int:
+    """Bytes the Binary and String values of one message on ``channels`` may have together:
+    the sum of their declared maxima when there are such channels and each of them declares
+    one (at most the policy's ``max_message_bytes`` with ``cap_declared``), else the policy's
+    ``max_message_bytes`` (a message of numbers only keeps the default: it declares nothing)."""
+    sized = [c for c in channels if c.sized]
+    if not sized or any(c.max_bytes <= 0 for c in sized):
+        return policy.max_message_bytes
+    total = sum(c.max_bytes for c in sized)
+    return min(total, policy.max_message_bytes) if policy.cap_declared else total
 
 
 def check(channel: Channel, value: object, policy: ValuePolicy = DEFAULT_POLICY) -> Value:

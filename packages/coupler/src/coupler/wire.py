@@ -1,9 +1,10 @@
 """Python values <-> protobuf messages of the protocol. The only module that builds or reads them.
 
 Every value is checked against its channel's description (``coupler.values.check``): the
-type, the int32 range, the NaN/Inf policy and the size limit of binary values. Errors name the
-channel and what it expects. ``coupler.server`` and ``coupler.client`` call these functions;
-the rest of Coupler speaks Python values.
+type, the int32 range, the NaN/Inf policy, the maximum a Binary or String channel declares and
+the message limit of Binary and String values together. Errors name the channel and what it
+expects. ``coupler.server`` and ``coupler.client`` call these functions; the rest of Coupler
+speaks Python values.
 """
 
 from __future__ import annotations
@@ -22,7 +23,7 @@ from coupler.channels import (
     Value,
     ValueType,
 )
-from coupler.errors import ChannelValueError, MessageTooLarge
+from coupler.errors import ChannelValueError, MessageTooLarge, ValueTooLarge
 from coupler.v1 import component_pb2 as pb
 
 if TYPE_CHECKING:
@@ -37,6 +38,7 @@ from coupler.values import (
     MAX_MESSAGE_BYTES,
     ValuePolicy,
     check,
+    message_limit,
 )
 
 _FIELD_OF_TYPE = {
@@ -97,14 +99,69 @@ SERVICE_NAME = pb.DESCRIPTOR.services_by_name["GRPCComponentService"].full_name
 
 FRAMING_BYTES = 8 * 1024 * 1024
 """What a message may carry beyond its Binary and String values (names, numbers, ids) [bytes]."""
+_GRPC_MAX = 2**31 - 1
+"""The largest message gRPC's limits can express (a C int) [bytes]."""
 
 
-def transport_options(limit: int = MAX_MESSAGE_BYTES) -> tuple[tuple[str, int], ...]:
-    """gRPC channel/server options for messages whose values fit ``limit`` bytes: the codec
-    names the channel of a message over ``limit``; the transport refuses only what is larger
-    still (its RESOURCE_EXHAUSTED names no channel)."""
-    size = limit + FRAMING_BYTES
-    return (("grpc.max_receive_message_length", size), ("grpc.max_send_message_length", size))
+@dataclass(frozen=True, slots=True)
+class MessageLimits:
+    """The Binary and String values one message may carry together [bytes], received and sent
+    by one end of a gRPC connection; its transport lets ``FRAMING_BYTES`` more through, so the
+    codec names the channel of a message over the limit and the transport refuses only what is
+    larger still (its RESOURCE_EXHAUSTED names no channel)."""
+
+    received: int = MAX_MESSAGE_BYTES
+    sent: int = MAX_MESSAGE_BYTES
+
+    @property
+    def transport(self) -> tuple[int, int]:
+        """gRPC's receive and send limits [bytes]: the values' plus framing."""
+        return (
+            min(self.received + FRAMING_BYTES, _GRPC_MAX),
+            min(self.sent + FRAMING_BYTES, _GRPC_MAX),
+        )
+
+    def options(self) -> tuple[tuple[str, int], ...]:
+        """gRPC channel/server options for these limits."""
+        receive, send = self.transport
+        return (
+            ("grpc.max_receive_message_length", receive),
+            ("grpc.max_send_message_length", send),
+        )
+
+
+def served_limits(description: Description, max_message_bytes: int) -> MessageLimits:
+    """A participant's server's limits: it receives its parameters and inputs (the sum of
+    their declared maxima; ``max_message_bytes`` when one is undeclared) and sends its outputs
+    (likewise)."""
+    policy = ValuePolicy(max_message_bytes=max_message_bytes)
+    return MessageLimits(
+        received=message_limit(
+            (c for c in description.channels if c.causality is not Causality.OUTPUT), policy
+        ),
+        sent=message_limit(description.of(Causality.OUTPUT), policy),
+    )
+
+
+def client_limits(description: Description, max_message_bytes: int) -> MessageLimits:
+    """The limits of a client of the participant ``description``: it receives the outputs (the
+    sum of their declared maxima, at most ``max_message_bytes``) and sends parameters and
+    inputs (likewise). Where one is undeclared: at least what a participant's server sends by
+    default, so that an answer over ``max_message_bytes`` arrives and is refused naming its
+    channel."""
+    policy = ValuePolicy(max_message_bytes=max_message_bytes, cap_declared=True)
+    floor = max(max_message_bytes, MAX_MESSAGE_BYTES)
+
+    def limit(channels: Iterable[Channel]) -> int:
+        sized = [c for c in channels if c.sized]
+        if not sized or any(c.max_bytes <= 0 for c in sized):
+            return floor
+        return message_limit(sized, policy)
+
+    return MessageLimits(
+        received=limit(description.of(Causality.OUTPUT)),
+        sent=limit(c for c in description.channels if c.causality is not Causality.OUTPUT),
+    )
 
 
 @dataclass(frozen=True, slots=True)
@@ -120,6 +177,8 @@ class _Slot:
     """``_PLAIN``, ``_FINITE`` or ``_INT32``: what such a value still needs checked."""
     weight: int
     """A value's length times this bounds its bytes in a message (0: not counted)."""
+    maximum: int
+    """The largest value the channel declares [bytes]; 0: none declared (or not counted)."""
 
     @classmethod
     def of(cls, channel: Channel) -> _Slot:
@@ -130,6 +189,7 @@ class _Slot:
             python=_PYTHON_TYPE[channel.type],
             limit=_LIMIT_OF_TYPE.get(channel.type, _PLAIN),
             weight=weight,
+            maximum=max(channel.max_bytes, 0) if weight else 0,
         )
 
 
@@ -144,8 +204,9 @@ class Codec:
     are worked out once (``_Slot``); a value of the right type within its limits is taken as
     it is, anything else goes through ``coupler.values.check`` (which converts or names the
     channel); a decoded value's type is the protobuf field's own, so only a Real's finiteness
-    is checked; and a message's size only when the lengths of its Binary and String values
-    could exceed the limit.
+    is checked; and a value's or a message's size only when its length could exceed its
+    channel's declared maximum or the message limit (``coupler.values.message_limit``: the
+    declared maxima of the channels a message may carry, or the policy's limit).
     """
 
     def __init__(self, description: Description, policy: ValuePolicy = DEFAULT_POLICY) -> None:
@@ -153,6 +214,7 @@ class Codec:
         self.policy = policy
         self._channels = {c.name: c for c in description.channels}
         self._tables: dict[_Allowed, dict[str, _Slot]] = {}
+        self._limits: dict[_Allowed, int] = {}
         self._finite = not policy.allow_nonfinite
 
     def channel(self, name: str, allowed: Iterable[Causality] | None = None) -> Channel:
@@ -183,7 +245,14 @@ class Codec:
                 if allowed is None or c.causality in allowed
             }
             self._tables[allowed] = table
+            self._limits[allowed] = message_limit((s.channel for s in table.values()), self.policy)
         return table
+
+    def limit(self, allowed: Iterable[Causality] | None = None) -> int:
+        """The message limit of values of the causalities ``allowed`` [bytes]."""
+        key = tuple(allowed) if allowed is not None else None
+        self._table(key)
+        return self._limits[key]
 
     def encode(
         self, values: Mapping[str, object], allowed: Iterable[Causality] | None = None
@@ -215,9 +284,12 @@ class Codec:
             binding.channel = name
             setattr(binding, slot.field, self._checked(slot, value))
             if slot.weight:
-                size += len(value) * slot.weight  # type: ignore[arg-type]
-        if size > self.policy.max_message_bytes:
-            self._fits(values)
+                length = len(value) * slot.weight  # type: ignore[arg-type]
+                if slot.maximum and length > slot.maximum:
+                    _within(slot, value)  # type: ignore[arg-type]
+                size += length
+        if size > self._limits[allowed]:
+            self._fits(values, allowed)
 
     def _checked(self, slot: _Slot, value: object) -> object:
         """``value`` as its channel carries it (``check``), at once when it is already."""
@@ -253,7 +325,11 @@ class Codec:
             return large
         apart = {name for name, _ in large}
         self.encode_into(bindings, {n: v for n, v in values.items() if n not in apart}, allowed)
-        self._fits(values)
+        for name, value in large:
+            slot = table[name]
+            if slot.maximum and len(value) > slot.maximum:
+                _within(slot, value)
+        self._fits(values, allowed)
         return large
 
     def decode(
@@ -278,16 +354,21 @@ class Codec:
             if slot.limit == _FINITE and self._finite and not math.isfinite(value):
                 check(slot.channel, value, self.policy)  # raises, naming the channel
             elif slot.weight:
-                size += len(value) * slot.weight
+                length = len(value) * slot.weight
+                if slot.maximum and length > slot.maximum:
+                    _within(slot, value)
+                size += length
             values[name] = value
         for name, data in large:
             slot = table.get(name)
             if slot is None or slot.field != "binary":
                 self._refuse(pb.VariableBinding(channel=name, binary=b""), allowed)
+            if slot.maximum and len(data) > slot.maximum:
+                _within(slot, data)
             size += len(data)
             values[name] = data
-        if size > self.policy.max_message_bytes:
-            self._fits(values)
+        if size > self._limits[allowed]:
+            self._fits(values, allowed)
         return values
 
     def _refuse(self, binding: pb.VariableBinding, allowed: _Allowed) -> NoReturn:
@@ -301,12 +382,12 @@ class Codec:
             expected=str(channel.type),
         )
 
-    def _fits(self, values: Mapping[str, object]) -> None:
+    def _fits(self, values: Mapping[str, object], allowed: _Allowed) -> None:
         """MessageTooLarge naming the largest channel when the Binary and String ``values`` of
-        one message together are over the policy's message limit."""
+        one message (of the causalities ``allowed``) together are over its message limit."""
         sizes = {n: _size(v) for n, v in values.items() if isinstance(v, bytes | bytearray | str)}
         total = sum(sizes.values())
-        limit = self.policy.max_message_bytes
+        limit = self.limit(allowed)
         if total <= limit:
             return
         name = max(sizes, key=sizes.__getitem__)
@@ -324,6 +405,17 @@ def _size(value: bytes | bytearray | str) -> int:
     if isinstance(value, str) and not value.isascii():
         return len(value.encode())
     return len(value)
+
+
+def _within(slot: _Slot, value: bytes | bytearray | str) -> None:
+    """ValueTooLarge when ``value`` is over the maximum its channel declares (its length
+    times the slot's weight only bounds a String's bytes)."""
+    size = _size(value)
+    if size > slot.maximum:
+        channel = slot.channel
+        raise ValueTooLarge(
+            channel=channel.name, kind=str(channel.causality), size=size, maximum=slot.maximum
+        )
 
 
 def _untyped_binding(name: str, value: Value) -> pb.VariableBinding:
@@ -369,6 +461,7 @@ def description_to_pb(description: Description) -> pb.DescribeResponse:
                 unit=c.unit,
                 description=c.description,
                 message_type=c.message_type,
+                max_bytes=c.max_bytes,
                 start=_untyped_binding(c.name, c.start) if c.start is not None else None,
             )
             for c in description.channels
@@ -394,6 +487,7 @@ def description_from_pb(response: pb.DescribeResponse) -> Description:
                 unit=c.unit,
                 description=c.description,
                 message_type=c.message_type,
+                max_bytes=c.max_bytes,
                 start=_untyped_value(c.start) if c.HasField("start") else None,
             )
         )
@@ -547,6 +641,7 @@ class StepAnswers:
 
     def __init__(self, codec: Codec) -> None:
         self._codec = codec
+        self._limit = codec.limit(_OUTPUTS)
         self._response: pb.DoStepResponse | None = None
         self._bindings: dict[str, tuple[pb.VariableBinding | None, _Slot]] = {}
         """Each channel's binding in the message (None: a long Binary value, written apart)."""
@@ -566,6 +661,8 @@ class StepAnswers:
             if binding is None:  # written apart, unless it is no longer a long Binary value
                 if type(value) is not bytes or len(value) < LARGE_BYTES:
                     return self._prepare(outputs)
+                if slot.maximum and len(value) > slot.maximum:
+                    _within(slot, value)
                 large.append((name, value))
                 size += len(value)
                 continue
@@ -574,12 +671,14 @@ class StepAnswers:
                 length = len(value) * slot.weight  # type: ignore[arg-type]
                 if slot.weight == 1 and length >= LARGE_BYTES:  # now long: written apart
                     return self._prepare(outputs)
+                if slot.maximum and length > slot.maximum:
+                    _within(slot, value)  # type: ignore[arg-type]
                 size += length
                 held += length
             setattr(binding, slot.field, checked)
         self._held += held
-        if size > codec.policy.max_message_bytes:
-            codec._fits(outputs)
+        if size > self._limit:
+            codec._fits(outputs, _OUTPUTS)
         return _joined(response, large) if large else response
 
     def _prepare(self, outputs: Mapping[str, object]) -> Answer:

@@ -39,3 +39,19 @@ DEPTH16_CLASS_ID = "depth16-class-id"
 little-endian uint16 per pixel."""
 BYTES_PER_PIXEL = {RGB8: 3, DEPTH16_CLASS_ID: 6}
 """Size of one pixel of each encoding."""
+
+IMAGE_HEADER_BYTES = 256
+"""What a serialized ``Image`` carries besides its pixels, at most [bytes]: every field's key
+and length, a sensor name of up to 64 bytes (what the OpenRails bridge allows), the longest
+encoding above, the numbers and the intrinsics -- 158 bytes, rounded up."""
+MAX_FRAME = (3840, 2160)
+"""The largest frame (width, height) the railway's participants take in: 4K UHD."""
+TRAIN_STATE_BYTES = 128
+"""A serialized ``TrainState`` at most [bytes]: every field set, its integers negative (105
+bytes), rounded up."""
+
+
+def image_bytes(width: int, height: int, encoding: str) -> int:
+    """The largest serialized ``Image`` of ``width`` x ``height`` pixels of ``encoding``: what a
+    channel carrying such frames declares as its largest value (``Channel.max_bytes``)."""
+    return IMAGE_HEADER_BYTES + width * height * BYTES_PER_PIXEL[encoding]

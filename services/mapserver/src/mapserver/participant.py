@@ -12,14 +12,29 @@ from collections.abc import Mapping
 from coupler.channels import Capabilities, Causality, Channel, Description, RunSetup, Value
 from coupler.channels import ValueType as T
 from coupler.participant import Participant, Values
-from coupler_railway.messages import BALISE_DETECTIONS, BALISE_READING, IMAGE, TRAIN_STATE
+from coupler_railway.messages import (
+    BALISE_DETECTIONS,
+    BALISE_READING,
+    IMAGE,
+    MAX_FRAME,
+    RGB8,
+    TRAIN_STATE,
+    TRAIN_STATE_BYTES,
+    image_bytes,
+)
 from mapserver.state import RunState
 
 NAME = "MapServer"
 
 
 def _input(
-    name: str, type: T, start: Value, unit: str = "", description: str = "", message: str = ""
+    name: str,
+    type: T,
+    start: Value,
+    unit: str = "",
+    description: str = "",
+    message: str = "",
+    max_bytes: int = 0,
 ) -> Channel:
     return Channel(
         name=name,
@@ -29,6 +44,7 @@ def _input(
         start=start,
         description=description,
         message_type=message,
+        max_bytes=max_bytes,
     )
 
 
@@ -47,11 +63,27 @@ CHANNELS = (
         "",
         'Balises crossed in the last step, "id:group:distance;..." in travel order',
     ),
-    _input("train_state", T.BINARY, b"", "", "Train state (empty: not connected)", TRAIN_STATE),
+    _input(
+        "train_state",
+        T.BINARY,
+        b"",
+        "",
+        "Train state (empty: not connected)",
+        TRAIN_STATE,
+        TRAIN_STATE_BYTES,
+    ),
     _input(
         "balise_reading", T.BINARY, b"", "", "Last balise reading (empty: none)", BALISE_READING
     ),
-    _input("camera", T.BINARY, b"", "", "Camera frame, rgb8 (empty: no camera)", IMAGE),
+    _input(
+        "camera",
+        T.BINARY,
+        b"",
+        "",
+        "Camera frame, rgb8, up to 3840 x 2160 (empty: no camera)",
+        IMAGE,
+        image_bytes(*MAX_FRAME, RGB8),
+    ),
     _input(
         "detections",
         T.BINARY,

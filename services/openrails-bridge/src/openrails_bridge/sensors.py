@@ -29,7 +29,7 @@ from coupler.channels import Causality, ValueType
 from coupler.errors import ScenarioError
 from coupler.messages import with_bytes
 from coupler.v1.sensors_pb2 import CameraIntrinsics, Image
-from coupler_railway.messages import BYTES_PER_PIXEL, DEPTH16_CLASS_ID, IMAGE, RGB8
+from coupler_railway.messages import BYTES_PER_PIXEL, DEPTH16_CLASS_ID, IMAGE, RGB8, image_bytes
 
 from .replies import CameraSensor
 
@@ -55,7 +55,8 @@ class Sensor:
         return self.width * self.height * BYTES_PER_PIXEL[ENCODING[self.type]]
 
     def channel(self) -> ChannelMap:
-        """Its output channel: Binary, ``coupler.v1.Image``."""
+        """Its output channel: Binary, ``coupler.v1.Image``, declaring the largest frame of the
+        sensor's size (``max_bytes``: the Image's other fields and width * height pixels)."""
         kind = "camera frame" if self.type == "rgb" else "depth frame (class/id, distance)"
         return ChannelMap(
             name=self.name,
@@ -63,6 +64,7 @@ class Sensor:
             type=ValueType.BINARY,
             field=f"{FIELD}.{self.name}",
             message_type=IMAGE,
+            max_bytes=image_bytes(self.width, self.height, ENCODING[self.type]),
             description=(
                 f"OpenRails sensor '{self.name}': {kind}, {self.width} x {self.height}, "
                 f"{ENCODING[self.type]} (empty until OpenRails has sent a step reply)"

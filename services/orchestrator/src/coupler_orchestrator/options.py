@@ -89,8 +89,9 @@ class RunOptions:
     its process and is told the run failed (or was aborted)."""
     max_message_bytes: int = MAX_MESSAGE_BYTES
     """The Binary and String values of one message to or from a remote participant may have
-    this many bytes together; more fails the run naming the channel (docs/protocol.md
-    "Message size")."""
+    this many bytes together where its channels declare no maximum (``Channel.max_bytes``),
+    and at most this many where they do (the sum of their maxima, else); more fails the run
+    naming the channel (docs/protocol.md "Message size")."""
     unpack_limit: int = DEFAULT_BUDGET_BYTES
     """Bytes an .ssp and the FMUs it runs may unpack to, together (zip bombs)."""
     isolate_fmus: bool = False

@@ -614,6 +614,7 @@ def _description_to_json(description: Description) -> dict[str, Any]:
                 "message_type": c.message_type,
                 "description": c.description,
                 "start": c.start.hex() if isinstance(c.start, bytes) else c.start,
+                **({"max_bytes": c.max_bytes} if c.max_bytes else {}),
             }
             for c in description.channels
         ],
@@ -636,6 +637,7 @@ def _description_from_json(data: dict[str, Any]) -> Description:
                 message_type=c.get("message_type", ""),
                 description=c.get("description", ""),
                 start=start,
+                max_bytes=int(c.get("max_bytes", 0)),
             )
         )
     caps = data.get("capabilities", {})

@@ -28,7 +28,15 @@ from coupler.errors import ChannelValueError
 from coupler.participant import Participant, Values
 from coupler.v1.railway_pb2 import BaliseDetection, BaliseDetections, PixelBox, TrainState
 from coupler.v1.sensors_pb2 import Image
-from coupler_railway.messages import BALISE_DETECTIONS, IMAGE, RGB8, TRAIN_STATE
+from coupler_railway.messages import (
+    BALISE_DETECTIONS,
+    IMAGE,
+    MAX_FRAME,
+    RGB8,
+    TRAIN_STATE,
+    TRAIN_STATE_BYTES,
+    image_bytes,
+)
 
 from .detector import Intrinsics, Mounting, detect
 
@@ -44,8 +52,11 @@ def _channel(
 _IN, _OUT, _PAR = Causality.INPUT, Causality.OUTPUT, Causality.PARAMETER
 CHANNELS = (
     _channel("image", _IN, T.BINARY, b"", message_type=IMAGE,
-             description="Camera frame (coupler.v1.Image, rgb8); empty: no frame yet"),
+             max_bytes=image_bytes(*MAX_FRAME, RGB8),
+             description="Camera frame (coupler.v1.Image, rgb8, up to 3840 x 2160); empty: no "
+                         "frame yet"),
     _channel("train_state", _IN, T.BINARY, b"", message_type=TRAIN_STATE,
+             max_bytes=TRAIN_STATE_BYTES,
              description="Train state of the frame's time: distance travelled (odometry)"),
     _channel("camera_height", _PAR, T.REAL, 2.5, "m",
              description="Camera above the top of the rails"),

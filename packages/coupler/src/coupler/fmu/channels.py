@@ -114,6 +114,8 @@ class Exposed:
     names: tuple[str, ...]
     starts: tuple[Value | None, ...]
     is_array: bool
+    max_bytes: int = 0
+    """FMI 3 ``Binary``: its ``maxSize``, the largest value (0: none given)."""
 
     @property
     def type(self) -> ValueType:
@@ -130,6 +132,7 @@ class Exposed:
                 unit=unit,
                 start=start,
                 description=v.description or "",
+                max_bytes=self.max_bytes,
             )
             for name, start in zip(self.names, self.starts, strict=True)
         ]
@@ -150,6 +153,7 @@ class Layout:
     def of(cls, md: ModelDescription, path: Path) -> Layout:
         exposed: list[Exposed] = []
         fixed: dict[str, tuple[int, list[str]]] = {}
+        sizes = binary_sizes(path) if any(v.type == "Binary" for v in md.modelVariables) else {}
         for v in md.modelVariables:
             if v.causality not in CAUSALITIES or v.type not in VALUE_TYPES:
                 continue
@@ -157,7 +161,7 @@ class Layout:
             names = element_names(v.name, shape)
             if names:
                 starts = _starts(v, len(names), bool(shape), path)
-                exposed.append(Exposed(v, names, starts, bool(shape)))
+                exposed.append(Exposed(v, names, starts, bool(shape), sizes.get(v.name, 0)))
         return cls(
             exposed=tuple(exposed),
             fixed={name: (size, tuple(arrays)) for name, (size, arrays) in fixed.items()},
@@ -287,6 +291,26 @@ def _parse(fmi_type: str, text: str) -> Value:
     if value_type is ValueType.BINARY:
         return bytes.fromhex(text)
     return text
+
+
+def binary_sizes(path: Path) -> dict[str, int]:
+    """The ``maxSize`` of the FMU's ``Binary`` variables that give one (FMI 3), by name: what
+    their channels declare as their largest value. FMPy does not read the attribute."""
+    try:
+        with zipfile.ZipFile(path) as fmu:
+            text = fmu.read("modelDescription.xml")
+        if b"maxSize" not in text:
+            return {}
+        root = ElementTree.fromstring(text)
+    except (OSError, KeyError, zipfile.BadZipFile, ElementTree.ParseError):
+        return {}
+    variables = root.find("ModelVariables")
+    sizes = {}
+    for v in variables if variables is not None else ():
+        size = v.get("maxSize", "")
+        if v.tag == "Binary" and size.isdigit() and v.get("name"):
+            sizes[str(v.get("name"))] = int(size)
+    return sizes
 
 
 def unsized_array(path: Path) -> str | None:

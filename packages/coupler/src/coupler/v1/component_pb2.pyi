@@ -145,6 +145,7 @@ class ChannelDescription(_message.Message):
     START_FIELD_NUMBER: _builtins.int
     DESCRIPTION_FIELD_NUMBER: _builtins.int
     MESSAGE_TYPE_FIELD_NUMBER: _builtins.int
+    MAX_BYTES_FIELD_NUMBER: _builtins.int
     name: _builtins.str
     causality: Global___Causality.ValueType
     type: Global___ValueType.ValueType
@@ -153,6 +154,22 @@ class ChannelDescription(_message.Message):
     description: _builtins.str
     message_type: _builtins.str
     """For binary channels: full name of the protobuf message carried, e.g. coupler.v1.TrainState."""
+    max_bytes: _builtins.int
+    """For Binary and String channels: the largest value in bytes (a String's UTF-8 bytes) the
+    participant will send on this output, or accepts on this input or parameter. 0: not
+    declared -- the run's message limit applies (Coupler's default: 64 MiB for the Binary and
+    String values of one message together), as for a participant that predates this field.
+    Ignored for other types. Declaring lets the other side size its limits: the orchestrator
+    refuses, before anything runs, a connection whose output declares more than its input
+    accepts; derives its gRPC message limits towards the participant from the declarations
+    (received: the outputs' maxima together; sent: the inputs' and parameters'); and fails the
+    run naming participant, channel, size and maximum when a value is over its channel's
+    maximum. A participant refuses to send an output over its declared maximum and may refuse
+    an input or parameter over its own with RESOURCE_EXHAUSTED naming the channel, its size
+    and the maximum; it sets its gRPC server's receive limit to the sum of its declared input
+    and parameter maxima plus room for everything else a message carries (Coupler: 8 MiB),
+    and to its default when any of them is undeclared (or it has none).
+    """
     @_builtins.property
     def start(self) -> Global___VariableBinding:
         """Start value; unset when the channel has none."""
@@ -167,10 +184,11 @@ class ChannelDescription(_message.Message):
         start: Global___VariableBinding | None = ...,
         description: _builtins.str = ...,
         message_type: _builtins.str = ...,
+        max_bytes: _builtins.int = ...,
     ) -> None: ...
     _HasFieldArgType: _TypeAlias = _typing.Literal["start", b"start"]  # noqa: Y015
     def HasField(self, field_name: _HasFieldArgType) -> _builtins.bool: ...
-    _ClearFieldArgType: _TypeAlias = _typing.Literal["causality", b"causality", "description", b"description", "message_type", b"message_type", "name", b"name", "start", b"start", "type", b"type", "unit", b"unit"]  # noqa: Y015
+    _ClearFieldArgType: _TypeAlias = _typing.Literal["causality", b"causality", "description", b"description", "max_bytes", b"max_bytes", "message_type", b"message_type", "name", b"name", "start", b"start", "type", b"type", "unit", b"unit"]  # noqa: Y015
     def ClearField(self, field_name: _ClearFieldArgType) -> None: ...
     def WhichOneof(self, oneof_group: _Never) -> None: ...
 

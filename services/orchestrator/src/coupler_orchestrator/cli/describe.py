@@ -64,7 +64,8 @@ def format_description(description: Description) -> str:
         (
             c.name,
             str(c.causality),
-            f"{c.type}({c.message_type})" if c.message_type else str(c.type),
+            (f"{c.type}({c.message_type})" if c.message_type else str(c.type))
+            + (f" max {c.max_bytes} B" if c.sized and c.max_bytes else ""),
             c.unit or "-",
             "-" if c.start is None else repr(c.start),
             c.description,

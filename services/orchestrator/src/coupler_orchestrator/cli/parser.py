@@ -163,8 +163,9 @@ def run_options(command: argparse.ArgumentParser) -> None:
         default=MAX_MESSAGE_BYTES // 2**20,
         metavar="MiB",
         help="the Binary and String values of one message to or from a participant may have "
-        f"this many MiB together (default {MAX_MESSAGE_BYTES // 2**20}; at most "
-        f"{MAX_MESSAGE_MIB}); a larger message fails the run naming its channel",
+        "this many MiB together where its channels declare no maximum, and at most this many "
+        f"where they do (default {MAX_MESSAGE_BYTES // 2**20}; at most {MAX_MESSAGE_MIB}); a "
+        "larger message fails the run naming its channel",
     )
     command.add_argument(
         "--unpack-limit",

@@ -28,7 +28,7 @@ from dataclasses import dataclass, field
 import structlog
 
 from coupler.channels import RunSetup, Value
-from coupler.errors import CouplerError, ParticipantError, ParticipantTimeout
+from coupler.errors import CouplerError, ParticipantError, ParticipantTimeout, ValueTooLarge
 from coupler.participant import EndRun, Values
 from coupler_orchestrator.master import native_fmu_step, native_step_channel
 from coupler_orchestrator.master.steppers import Split, StepNow, stepper_of
@@ -61,6 +61,19 @@ async def _let_others_run() -> None:
         await asyncio.sleep(0)
 
 
+def _within(member: str, call: str, outputs: Values, maxima: Mapping[str, int]) -> None:
+    """ParticipantError naming the output, its size and its maximum when a value is over the
+    maximum its channel declares."""
+    for name, maximum in maxima.items():
+        value = outputs[name]
+        size = len(value.encode()) if isinstance(value, str) else len(value)
+        if size > maximum:
+            exc = ValueTooLarge(channel=name, kind="output", size=size, maximum=maximum)
+            raise ParticipantError(
+                exc.naming(member), participant=member, call=call, status="RESOURCE_EXHAUSTED"
+            )
+
+
 @dataclass
 class _Feed:
     """The inputs of one member: (input, source key, converter)."""
@@ -82,6 +95,11 @@ class Master:
         self.observers = list(observers)
         self._output_names = {m.name: frozenset(c.name for c in m.outputs) for m in plan.order}
         """What every answer of each member must hold, no more, no less."""
+        self._maxima = {
+            m.name: {c.name: c.max_bytes for c in m.outputs if c.sized and c.max_bytes > 0}
+            for m in plan.order
+        }
+        """The outputs of each member that declare their largest value, and that value."""
         self.feeds: dict[str, _Feed] = defaultdict(_Feed)
         for link in plan.links:
             self.feeds[link.target].entries.append(
@@ -494,6 +512,9 @@ class Master:
         """Keep a member's outputs; every output it describes must be there, and no other."""
         if outputs.keys() != self._output_names[m.name]:
             raise self._refused(m, outputs, call, time)
+        maxima = self._maxima[m.name]
+        if maxima:  # a remote member's were checked as they arrived; an in-process one's here
+            _within(m.name, call, outputs, maxima)
         store, keys = self.store, self._store_keys[m.name]
         for channel, value in outputs.items():
             store[keys[channel]] = value

@@ -101,7 +101,7 @@ class NativeSteps(StepTransport):
             metadata,
             len(remote.metadata),
             remote.call_timeout,
-            remote.transport_limit + wire.FRAMING_BYTES,
+            *remote.limits.transport,  # received, sent: from the participant's declarations
         )
         error = self._ffi.string(self._lib.cs_error(stream)).decode(errors="replace")
         if error:

@@ -14,9 +14,10 @@ source (the SSD connector's unit, else the participant's declared unit: an FMU's
 definitions, else the unit symbol) — convertible units are converted, units of another dimension
 are refused, units nobody understands are warned about; transformations fit their ends; the
 time grid is finite and reachable by whole steps; step multiples and fixed step sizes fit;
-``--param`` values and parameter bindings name parameters or inputs and fit their types; and for
-Gauss-Seidel every loop (a component feeding itself included) is broken by a decoupled
-connection.
+``--param`` values and parameter bindings name parameters or inputs and fit their types; no
+output declares larger values than the input it drives accepts (``max_bytes``; declared maxima
+together over ``--max-message-size`` are warned about); and for Gauss-Seidel every loop (a
+component feeding itself included) is broken by a decoupled connection.
 """
 
 from __future__ import annotations
@@ -103,6 +104,7 @@ class _Checker:
         for candidate in self.roster.candidates.values():
             if candidate.description is not None:
                 self.candidate(candidate, candidate.description)
+                self.message_sizes(candidate, candidate.description)
         routes = [r for c in scenario.connections if (r := self.route(c)) is not None]
         grid = self.guard(lambda: grid_of(scenario, self.options))
         overrides = self.overrides()
@@ -296,6 +298,7 @@ class _Checker:
         start = self.scenario.connector(c.start_element, c.start_connector)
         end = self.scenario.connector(c.end_element, c.end_connector)
         ok = self.types(c, what, source.type, target.type)
+        self.sizes(c, what, source, target)
         conversion: Affine | OpenMcxUnits | None = None
         if c.suppress_unit_conversion:
             pass
@@ -313,6 +316,33 @@ class _Checker:
             source_enum=self.scenario.enumerations.get(start.enumeration or "") if start else None,
             target_enum=self.scenario.enumerations.get(end.enumeration or "") if end else None,
         )
+
+    def sizes(self, c: ssp.Connection, what: str, source: Channel, target: Channel) -> None:
+        """An output that declares larger values than its input accepts (``max_bytes``)."""
+        if not (source.sized and target.sized and source.max_bytes and target.max_bytes):
+            return
+        if source.max_bytes > target.max_bytes:
+            self.problems.append(
+                f"{what}: '{c.start}' declares values of up to {source.max_bytes} bytes, but "
+                f"'{c.end}' accepts at most {target.max_bytes} bytes (max_bytes); connect an "
+                f"input that accepts {source.max_bytes} bytes, or have the output's participant "
+                f"send (and declare) at most {target.max_bytes}"
+            )
+
+    def message_sizes(self, candidate: Candidate, description: Description) -> None:
+        """Warns where a participant's declared maxima together exceed the run's message
+        limit: a message over it would fail the run."""
+        cap = self.options.max_message_bytes
+        for causality, what in ((Causality.OUTPUT, "outputs"), (Causality.INPUT, "inputs")):
+            sized = [c for c in description.of(causality) if c.sized]
+            total = sum(c.max_bytes for c in sized)
+            if sized and all(c.max_bytes for c in sized) and total > cap:
+                self.warnings.append(
+                    f"{where(candidate.component)}: participant '{candidate.name}' declares "
+                    f"{what} of up to {total} bytes together, more than the run's message "
+                    f"limit of {cap} bytes ({cap / 2**20:g} MiB): a step carrying more fails "
+                    f"the run; raise --max-message-size to {math.ceil(total / 2**20)}"
+                )
 
     def types(self, c: ssp.Connection, what: str, a: ValueType, b: ValueType) -> bool:
         t = c.transformation

@@ -10,9 +10,9 @@ run a Coupler participant as if it were an FMU. The FMU holds:
   not part of the base system (``$ORIGIN`` run path), so the FMU runs where gRPC is not
   installed: the folder ``coupler_native.PROXY``, compiled from ``csrc/proxy/`` when the
   coupler-native wheel was built and copied here as it is (no compiler at export time);
-- ``resources/coupler-proxy.txt``: the address, the call deadline, the message limit (Coupler's,
-  not gRPC's 4 MiB default), the description's fingerprint and one line per channel, read by
-  the binary at instantiation.
+- ``resources/coupler-proxy.txt``: the address, the call deadline, the message limits (from the
+  participant's declared maxima, else Coupler's default; not gRPC's 4 MiB default), the
+  description's fingerprint and one line per channel, read by the binary at instantiation.
 
 The GUID (FMI 3: instantiation token) is ``{coupler-proxy-<fingerprint>}``; the binary asks the
 participant for its description at instantiation and refuses one that changed since the export,
@@ -73,10 +73,14 @@ class Exported:
 
 
 def fingerprint(description: Description) -> str:
-    """FNV-1a 64 (hex) of the sorted lines ``name|causality|type|unit`` of every channel, the
-    enums as their protobuf numbers: what the binary compares at instantiation."""
+    """FNV-1a 64 (hex) of the sorted lines ``name|causality|type|unit`` of every channel (with
+    ``|max_bytes`` appended where it declares one), the enums as their protobuf numbers: what
+    the binary compares at instantiation."""
     response = wire.description_to_pb(description)
-    lines = sorted(f"{c.name}|{c.causality}|{c.type}|{c.unit}" for c in response.channels)
+    lines = sorted(
+        f"{c.name}|{c.causality}|{c.type}|{c.unit}" + (f"|{c.max_bytes}" if c.max_bytes else "")
+        for c in response.channels
+    )
     value = 0xCBF29CE484222325
     for byte in "\n".join(lines).encode():
         value = ((value ^ byte) * 0x100000001B3) & 0xFFFFFFFFFFFFFFFF
@@ -267,6 +271,8 @@ def _variable(parent: ElementTree.Element, fmi_version: int, vr: int, channel: C
         return
     if channel.unit and channel.type is ValueType.REAL:
         attributes["unit"] = channel.unit
+    if channel.type is ValueType.BINARY and channel.max_bytes > 0:
+        attributes["maxSize"] = str(channel.max_bytes)
     variable = ElementTree.SubElement(parent, _FMI3_TYPE[channel.type], attributes)
     if start:
         if channel.type in (ValueType.STRING, ValueType.BINARY):
@@ -282,6 +288,8 @@ def _resources(
     address: str,
     call_timeout: float,
 ) -> str:
+    served = wire.served_limits(description, MAX_MESSAGE_BYTES)  # the proxy receives what
+    receive, send = wire.MessageLimits(received=served.sent, sent=served.received).transport
     lines = [
         "# read by the FMU's binary at instantiation; written by coupler export-fmu",
         f"name\t{_escape(description.name)}",
@@ -290,7 +298,8 @@ def _resources(
         f"timeout\t{call_timeout!r}",
         f"step_size\t{description.capabilities.fixed_step_size!r}",
         f"time_vr\t{len(exported) + 1}",
-        f"max_message\t{MAX_MESSAGE_BYTES + wire.FRAMING_BYTES}",
+        f"max_receive\t{receive}",
+        f"max_send\t{send}",
     ]
     shown = {c.name for _, c in exported}
     codes = {c.name: c for c in wire.description_to_pb(description).channels}
@@ -309,6 +318,7 @@ def _resources(
                     _escape(channel.unit),
                     kind,
                     _escape(_start_text(channel)),
+                    str(channel.max_bytes),
                 )
             )
         )
