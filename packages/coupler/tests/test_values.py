@@ -575,3 +575,16 @@ def test_limits_of_servers_and_clients() -> None:
         ),
     )
     assert wire.served_limits(huge, mib).transport[0] == 2**31 - 1
+
+
+def test_step_answers_check_a_long_value_against_its_declared_maximum() -> None:
+    """A long Binary output written apart is held to its channel's maximum on every answer,
+    not only on the first (the prepared one)."""
+    channels = tuple(
+        replace(c, max_bytes=len(FRAME)) if c.name == "frame" else c for c in FRAMES.channels
+    )
+    answers = wire.StepAnswers(wire.Codec(replace(FRAMES, channels=channels)))
+    answers.answer({"speed": 1.0, "frame": FRAME})
+    answers.answer({"speed": 2.0, "frame": FRAME[::-1]})
+    with pytest.raises(ValueTooLarge, match=f"{len(FRAME) + 1}"):
+        answers.answer({"speed": 3.0, "frame": FRAME + b"x"})
