@@ -291,7 +291,8 @@ class WrapsASimulator(GainParticipant):
 async def test_health_carries_the_participants_reason() -> None:
     participant = WrapsASimulator()
     async with served(participant) as server:
-        remote = RemoteParticipant(server.address, connect_timeout=0.3)
+        # NOT_SERVING throughout: open fails at the deadline saying why (room to connect)
+        remote = RemoteParticipant(server.address, connect_timeout=1.5)
         with pytest.raises(ParticipantUnavailable) as waiting:
             await remote.open()
         with pytest.raises(ParticipantUnavailable) as probed:
