@@ -47,6 +47,8 @@ _FIELD_OF_TYPE = {
     ValueType.STRING: "text",
     ValueType.BINARY: "binary",
 }
+_FIELD_NUMBER = {f.name: f.number for f in pb.VariableBinding.DESCRIPTOR.fields}
+"""Each field of ``VariableBinding`` by name: its number on the wire."""
 _KIND_OF_FIELD = {
     "real": "Real",
     "integer": "Integer",
@@ -290,6 +292,16 @@ class Codec:
             self._fits(values)
         return values
 
+    def answer_fields(self) -> dict[str, tuple[int, int, bool]]:
+        """Each output channel -> its ``VariableBinding`` field number, the weight of a value's
+        length in a message's size, and whether a value must be finite: what a reader of step
+        answers other than protobuf's needs to read them as ``decode`` does (the native step
+        channel's, ``coupler_native._answers``); ``policy.max_message_bytes`` bounds the sum."""
+        return {
+            name: (_FIELD_NUMBER[slot.field], slot.weight, slot.limit == _FINITE and self._finite)
+            for name, slot in self._table(_OUTPUTS).items()
+        }
+
     def _refuse(self, binding: pb.VariableBinding, allowed: _Allowed) -> NoReturn:
         """ChannelValueError for a binding of no such channel or of the wrong type."""
         channel = self.channel(binding.channel, allowed)
@@ -503,7 +515,39 @@ def step_response(
     return response
 
 
-class StepAnswers:
+class _Prepared:
+    """One message whose bindings get each step's values in place while they name the same
+    channels as the last step's (``StepAnswers``, ``StepRequests``): building a message and
+    its bindings anew each step costs several times what setting the values costs."""
+
+    def __init__(self, codec: Codec, allowed: tuple[Causality, ...]) -> None:
+        self._codec = codec
+        self._allowed = allowed
+        self._bindings: dict[str, tuple[pb.VariableBinding, _Slot]] = {}
+
+    def _fits(self, values: Mapping[str, object]) -> bool:
+        """Whether the prepared bindings name the channels of ``values``."""
+        return values.keys() == self._bindings.keys()
+
+    def _set(self, values: Mapping[str, object]) -> None:
+        """The values into the prepared bindings, each checked as ``Codec`` checks it."""
+        codec, bindings = self._codec, self._bindings
+        size = 0
+        for name, value in values.items():
+            binding, slot = bindings[name]
+            setattr(binding, slot.field, codec._checked(slot, value))
+            if slot.weight:
+                size += len(value) * slot.weight  # type: ignore[arg-type]
+        if size > codec.policy.max_message_bytes:
+            codec._fits(values)
+
+    def _prepared(self, repeated: RepeatedBindings) -> None:
+        """Take the bindings of a message just built as the prepared ones."""
+        table = self._codec._table(self._allowed)
+        self._bindings = {b.channel: (b, table[b.channel]) for b in repeated}
+
+
+class StepAnswers(_Prepared):
     """The answers to the steps of one step stream, written into one prepared message.
 
     The first answer is built as ``step_response`` builds it; while a step's outputs name the
@@ -513,33 +557,61 @@ class StepAnswers:
     """
 
     def __init__(self, codec: Codec) -> None:
-        self._codec = codec
+        super().__init__(codec, _OUTPUTS)
         self._response: pb.DoStepResponse | None = None
-        self._bindings: dict[str, tuple[pb.VariableBinding, _Slot]] = {}
 
     def answer(self, outputs: Mapping[str, object]) -> pb.DoStepResponse:
         """The answer carrying ``outputs`` (each checked against its channel)."""
-        response, bindings = self._response, self._bindings
-        if response is None or outputs.keys() != bindings.keys():
+        response = self._response
+        if response is None or not self._fits(outputs):
             return self._prepare(outputs)
-        codec = self._codec
-        size = 0
-        for name, value in outputs.items():
-            binding, slot = bindings[name]
-            setattr(binding, slot.field, codec._checked(slot, value))
-            if slot.weight:
-                size += len(value) * slot.weight  # type: ignore[arg-type]
-        if size > codec.policy.max_message_bytes:
-            codec._fits(outputs)
+        self._set(outputs)
         return response
 
     def _prepare(self, outputs: Mapping[str, object]) -> pb.DoStepResponse:
         self._response = None  # until the new one is complete
         response = step_response(outputs, self._codec)
-        table = self._codec._table(_OUTPUTS)
-        self._bindings = {b.channel: (b, table[b.channel]) for b in response.outputs}
+        self._prepared(response.outputs)
         self._response = response
         return response
+
+
+class StepRequests(_Prepared):
+    """The requests of one run's steps (``step_pieces``), written into one prepared message as
+    ``StepAnswers`` writes answers: the run's id and secret set once, each step's time, step
+    size and inputs set in place while the inputs name the same channels as the last step's.
+    A step with a long Binary input is made by ``step_pieces`` (its value sent apart)."""
+
+    def __init__(self, codec: Codec, run: RunKey) -> None:
+        super().__init__(codec, _INPUTS)
+        self._run = run
+        self._request: pb.DoStepRequest | None = None
+        self._binary = False
+        """A prepared binding is a Binary one (a long value would be sent apart)."""
+
+    def pieces(self, time: float, step: float, inputs: Mapping[str, object]) -> list[bytes]:
+        """``step_pieces(run, time, step, inputs, codec)``: the same message."""
+        request = self._request
+        if request is None or not self._fits(inputs) or (self._binary and _long_binary(inputs)):
+            return self._prepare(time, step, inputs)
+        self._set(inputs)
+        request.current_time, request.step_size = time, step
+        return [request.SerializeToString()]
+
+    def _prepare(self, time: float, step: float, inputs: Mapping[str, object]) -> list[bytes]:
+        self._request = None  # until a new one is complete
+        if _long_binary(inputs):
+            return step_pieces(self._run, time, step, inputs, self._codec)
+        request = step_to_pb(self._run, time, step, inputs, self._codec)
+        self._prepared(request.inputs)
+        self._binary = any(slot.field == "binary" for _, slot in self._bindings.values())
+        self._request = request
+        return [request.SerializeToString()]
+
+
+def _long_binary(values: Mapping[str, object]) -> bool:
+    """Whether a value is a Binary one long enough to be sent apart (``step_pieces``)."""
+    return any(type(v) is bytes and len(v) >= LARGE_BYTES for v in values.values())
 
 
 def outputs_from_pb(
