@@ -26,6 +26,7 @@ import time as wallclock
 from collections import defaultdict
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
+from operator import itemgetter
 
 import structlog
 
@@ -109,7 +110,11 @@ class Master:
             step_size=plan.grid.step,
             steps=plan.grid.steps,
         )
-        self._keys = [(m.name, c.name) for m in plan.members for c in m.outputs]
+        keys = [(m.name, c.name) for m in plan.members for c in m.outputs]
+        self._row: Callable[[Mapping[Key, Value]], Sequence[Value]] = (
+            itemgetter(*keys) if len(keys) > 1 else lambda store: [store[k] for k in keys]
+        )
+        """The row of results from ``store``, in column order (a tuple: one call in C)."""
         self._store_keys = {
             m.name: {c.name: (m.name, c.name) for c in m.outputs} for m in plan.order
         }
@@ -565,10 +570,7 @@ class Master:
         )
 
     def _record(self, time: float) -> None:
-        if self._kernel is not None:
-            row = self._kernel.row()
-        else:
-            row = [self.store[k] for k in self._keys]
+        row = self._kernel.row() if self._kernel is not None else self._row(self.store)
         for stepped in self._stepped:
             stepped(time, row)
         timing = self._timing

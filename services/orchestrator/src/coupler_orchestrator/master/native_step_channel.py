@@ -73,6 +73,9 @@ class NativeSteps(StepTransport):
         self._data = native.ffi.new("const char **")
         self._size = native.ffi.new("size_t *")
         self._code = native.ffi.new("int *")
+        self._piece = native.ffi.new("const char *[1]")
+        self._piece_size = native.ffi.new("size_t[1]")
+        """A request of one piece, as ``cs_send`` takes it (made once)."""
         self._remote: RemoteParticipant | None = None
         self._native: Any = None
         """The open stream (a ``cs_stream *``)."""
@@ -136,9 +139,15 @@ class NativeSteps(StepTransport):
         """Send a request given as pieces whose concatenation is the message."""
         assert self._remote is not None
         # sent from these objects, not copied: kept until the next step or the stream's end
-        self._sent = [self._ffi.from_buffer(piece) for piece in pieces]
-        sizes = [len(piece) for piece in pieces]
-        if self._lib.cs_send(self._native, self._sent, sizes, len(pieces)) != self._lib.CS_OK:
+        if len(pieces) == 1:  # a step's request without a long Binary input
+            self._sent = [self._ffi.from_buffer(pieces[0])]
+            self._piece[0], self._piece_size[0] = self._sent[0], len(pieces[0])
+            sent = self._lib.cs_send(self._native, self._piece, self._piece_size, 1)
+        else:
+            self._sent = [self._ffi.from_buffer(piece) for piece in pieces]
+            sizes = [len(piece) for piece in pieces]
+            sent = self._lib.cs_send(self._native, self._sent, sizes, len(pieces))
+        if sent != self._lib.CS_OK:
             self._answer()  # the stream has ended: its status says why
             raise ParticipantError(
                 "a step was sent before the previous answer was received",
