@@ -332,20 +332,27 @@ class _Clock:
     """Times a run from its first to its last communication point, and the first one."""
 
     def __init__(self, begun: float) -> None:
-        from coupler_orchestrator.observer import Observer
+        from coupler_orchestrator.observer import Observer, Steps
 
         class Observe(Observer):
             def stepped(inner, time_s: float, row: Sequence[Any]) -> None:
-                now = time.perf_counter()
-                if self.first is None:
-                    self.first = now
-                self.last, self.points = now, self.points + 1
+                self.reached(1)
+
+            def stepped_batch(inner, steps: Steps) -> None:  # several steps told at once
+                self.reached(len(steps.times))
 
         self.begun = begun
         self.first: float | None = None
         self.last = 0.0
         self.points = 0
         self.observer = Observe()
+
+    def reached(self, points: int) -> None:
+        """``points`` more communication points, the last one now."""
+        now = time.perf_counter()
+        if self.first is None:
+            self.first = now
+        self.last, self.points = now, self.points + points
 
     @property
     def rate(self) -> float:

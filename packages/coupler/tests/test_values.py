@@ -265,6 +265,49 @@ def test_a_step_answer_is_what_encode_makes() -> None:
     assert codec.decode(answers.answer(OUTPUTS).outputs) == codec.decode(codec.encode(OUTPUTS))
 
 
+INPUTS = Description(
+    name="Q",
+    channels=(
+        BIN,
+        Channel(name="u", causality=Causality.INPUT, type=ValueType.REAL),
+        Channel(name="n", causality=Causality.INPUT, type=ValueType.INTEGER),
+        Channel(name="text", causality=Causality.INPUT, type=ValueType.STRING),
+    ),
+)
+
+
+def test_step_requests_are_what_step_pieces_makes() -> None:
+    """``StepRequests`` (one prepared request, the time and inputs set in place) gives the
+    pieces ``step_pieces`` gives at every step: the same channels, others, a long Binary input
+    sent apart, and back; a wrong input is refused naming its channel, in place too."""
+    codec, run = wire.Codec(INPUTS), wire.RunKey("run-1", bytes(32))
+    requests = wire.StepRequests(codec, run)
+    long = bytes(range(256)) * (wire.LARGE_BYTES // 256 + 1)
+    steps = [
+        (0.0, 0.5, {"u": 1, "n": 3, "text": "a,b", "blob": b"x"}),
+        (0.5, 0.5, {"u": -0.0, "n": -7, "text": "", "blob": bytearray(b"yz")}),
+        (1.0, 0.25, {"u": 2.5}),
+        (1.25, 0.25, {"u": 3.5}),
+        (1.5, 0.25, {"u": 3.5, "n": 0, "text": "\u00fc", "blob": long}),
+        (1.75, 0.25, {"u": 3.5, "n": 1, "text": "c", "blob": b""}),
+        (2.0, 0.25, {"u": 3.5, "n": 1, "text": "c", "blob": b"w"}),
+    ]
+    for time, step, inputs in steps:
+        assert requests.pieces(time, step, inputs) == wire.step_pieces(
+            run, time, step, inputs, codec
+        ), (time, inputs)
+    for wrong, message in [
+        ({"u": math.inf, "n": 1, "text": "c", "blob": b"w"}, "expects a finite Real"),
+        ({"u": 1.0, "n": 2**31, "text": "c", "blob": b"w"}, "within int32"),
+        ({"u": 1.0, "n": 1, "text": "c", "nope": b"w"}, "has no channel 'nope'"),
+    ]:
+        with pytest.raises(ChannelValueError, match=message):
+            requests.pieces(2.25, 0.25, wrong)
+    assert requests.pieces(2.25, 0.25, steps[-1][2]) == wire.step_pieces(
+        run, 2.25, 0.25, steps[-1][2], codec
+    )
+
+
 @pytest.mark.parametrize(
     ("values_", "message"),
     [

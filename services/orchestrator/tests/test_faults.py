@@ -236,8 +236,13 @@ def orchestrator(ssd: Path, out: Path, *args: str) -> subprocess.Popen[str]:
 
 
 def wait_for_rows(out: Path, count: int, within: float = 20.0) -> None:
+    """Until results.csv has ``count`` complete rows (its lines counted, not parsed: a fast
+    run writes megabytes between two looks)."""
     wait_until(
-        lambda: (out / "results.csv").exists() and len(rows(out)) >= count,
+        lambda: (
+            (out / "results.csv").exists()
+            and (out / "results.csv").read_bytes().count(b"\n") > count
+        ),
         within,
         what=f"{count} rows in {out}",
     )

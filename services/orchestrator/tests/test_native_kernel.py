@@ -7,21 +7,34 @@ would not mean the same (a string connection).
 
 The step in C is also run by test_fmu_termination.py (an FMU asking to end the run, FMI 2
 and 3) and test_faults.py (an FMU hanging in-process, an interrupt while it hangs, an
-interrupt of a fast run), each over both paths (the ``fmu_path`` fixture).
+interrupt of a fast run), each over both paths (the ``fmu_path`` fixture). Several base steps
+per call into C (``Kernel.steps``, its row log) give what one step per call gives: the same
+results.csv, rows, latencies counted and live history (test_row_log.py tests the log itself).
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+import asyncio
+import csv
+import io
+import tempfile
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from coupler.testing import Annotation, Connection, Connector, SystemStructure, fmu
 from coupler_orchestrator import native
+from coupler_orchestrator.master import loop
 from coupler_orchestrator.master import native_fmu_step as kernel
-from coupler_orchestrator.model import Plan
+from coupler_orchestrator.model import Algorithm, Plan
+from coupler_orchestrator.observer import Observer, Steps
+from coupler_orchestrator.options import RunOptions
+from coupler_orchestrator.outputs.monitor import MonitorState
+from coupler_orchestrator.runner import run_scenario
 
 from .conftest import Coupler, require_native
 
@@ -211,6 +224,7 @@ def test_the_row_read_in_c_is_the_row_sliced_in_python(
         return row
 
     monkeypatch.setattr(kernel.Kernel, "row", both)
+    monkeypatch.setattr(kernel.Kernel, "logs", property(lambda self: False))  # one step a call
     for source in ("Source2", "Source3"):
         (tmp_path / source).mkdir()
         ssd = chain(tmp_path / source, fmus, source, ROUTES)
@@ -219,3 +233,96 @@ def test_the_row_read_in_c_is_the_row_sliced_in_python(
     assert all(made is not None and made._read is not None for made in prepared)
     assert len(compared) == 2 * 201  # t = 0 .. 2 s, twice
     assert {type(v) for v in compared[-1]} == {float, int, bool, str}
+
+
+class Seen(Observer):
+    """Every point a run told, as ``stepped`` and ``timed`` were called (the default
+    ``stepped_batch`` calls them for each point of a batch), and how many batches."""
+
+    def __init__(self) -> None:
+        self.rows: list[tuple[float, list[tuple[type, Any]]]] = []
+        self.timed_for: list[list[bool]] = []
+        self.batches = 0
+
+    def stepped(self, time: float, row: Sequence[Any]) -> None:
+        self.rows.append((time, [(type(v), v) for v in row]))
+
+    def timed(self, seconds: Sequence[float | None]) -> None:
+        self.timed_for.append([s is not None for s in seconds])
+
+    def stepped_batch(self, steps: Steps) -> None:
+        self.batches += 1
+        super().stepped_batch(steps)
+
+
+PARAMETERS = {
+    "Feed2.gain": "-1.5",
+    "Feed1.int_offset": "3",
+    "Feed1.string_in": 'a, "b"',  # quoted in results.csv
+    "Feed2.string_in": "\u00fcber\nall",  # not ASCII, quoted
+}
+
+
+def run_chain(ssd: Path, out: Path, *, every: int, algorithm: str) -> tuple[Seen, MonitorState]:
+    seen, monitor = Seen(), MonitorState(points=16)
+    options = RunOptions(
+        stop_time=1.37,
+        step_size=0.01,
+        algorithm=Algorithm(algorithm),
+        output_interval=every * 0.01,
+        parameters=PARAMETERS,
+    )
+    outcome = asyncio.run(run_scenario(ssd, options, out_dir=out, observers=[seen, monitor]))
+    assert outcome.end.status == "completed", outcome.end.reason
+    return seen, monitor
+
+
+@settings(
+    max_examples=10, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
+)
+@given(
+    capacity=st.integers(1, 200),
+    budget=st.sampled_from([0.0, 1e-4, loop.YIELD_EVERY]),
+    every=st.integers(1, 7),
+    algorithm=st.sampled_from(["jacobi", "gauss-seidel"]),
+    source=st.sampled_from(["Source2", "Source3"]),
+)
+def test_several_steps_per_call_are_told_as_one_step_per_call_tells_them(
+    fmus: Mapping[str, Path],
+    prepared: list[kernel.Kernel | None],
+    capacity: int,
+    budget: float,
+    every: int,
+    algorithm: str,
+    source: str,
+) -> None:
+    """However many steps a call into C takes (the log's capacity, the time a batch may last),
+    results.csv has the same bytes, every observer sees the same rows with the same types,
+    each step's latencies are told, summary.json counts them, the monitor keeps the same
+    history: as when every base step is one call."""
+    require_native(kernel.rows)
+    with tempfile.TemporaryDirectory() as folder, pytest.MonkeyPatch.context() as patch:
+        work = Path(folder)
+        ssd = chain(work, fmus, source, ROUTES)
+        patch.setattr(kernel, "BATCH", capacity)
+        patch.setattr(loop, "YIELD_EVERY", budget)
+        batched = run_chain(ssd, work / "batched", every=every, algorithm=algorithm)
+        patch.setattr(kernel.Kernel, "logs", property(lambda self: False))
+        single = run_chain(ssd, work / "single", every=every, algorithm=algorithm)
+        recorded = [(work / d / "results.csv").read_bytes() for d in ("batched", "single")]
+        summaries = [Coupler.summary(work / d)["participants"] for d in ("batched", "single")]
+    assert batched[0].batches >= 137 // capacity and single[0].batches == 0
+    assert recorded[0] == recorded[1]
+    assert len(list(csv.reader(io.StringIO(recorded[0].decode())))) == 2 + 137 // every
+    assert batched[0].rows == single[0].rows
+    assert len(batched[0].rows) == 138
+    assert batched[0].timed_for == single[0].timed_for
+    for name, member in summaries[0].items():
+        assert member["steps"] == summaries[1][name]["steps"] == 137
+    for a, b in (
+        (batched[1].values, single[1].values),
+        (batched[1].latencies, single[1].latencies),
+    ):
+        assert a.times == b.times and a.stride == b.stride
+    assert batched[1].values.rows == single[1].values.rows
+    assert batched[1].row == single[1].row and batched[1].time == single[1].time

@@ -4,8 +4,11 @@
   a cffi API-mode module whose ``ffi`` declares the structs of ``csrc/fmu_steps.h``;
 - ``coupler_native._step_streams``: remote members' StepStream over C++ gRPC
   (``csrc/step_streams.cc``, declared by ``csrc/step_streams.h``);
-- ``coupler_native._rows``: results.csv's lines made in one pass (``csrc/rows.c``, a CPython
+- ``coupler_native._rows``: results.csv's lines made in one pass, the native FMU step's rows
+  read from its arrays and its row log, step latencies counted (``csrc/rows.c``, a CPython
   extension of the stable ABI);
+- ``coupler_native._answers``: a remote member's step answer read from its bytes
+  (``csrc/answers.c``, the same kind of extension);
 - ``PROXY``: the folder of the proxy FMU's binaries (``CouplerProxy.so``, FMI 2 and 3, its
   gRPC client library and every library they load), which ``coupler export-fmu`` copies
   into each FMU's ``binaries/<platform>/``.

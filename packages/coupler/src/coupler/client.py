@@ -146,6 +146,8 @@ class RemoteParticipant(Participant):
         self._stream: grpc.aio.StreamStreamCall | None = None
         self._run = wire.RunKey()
         """The run's id and secret, carried by every call after Initialize."""
+        self._requests: wire.StepRequests | None = None
+        """The run's step requests, one prepared message (``step_request_pieces``)."""
 
     @property
     def metadata(self) -> tuple[tuple[str, str], ...]:
@@ -278,6 +280,7 @@ class RemoteParticipant(Participant):
         request = self._request("Initialize", lambda: wire.initialize_to_pb(setup, self.codec))
         # Terminate names the run even when Initialize's answer is bad
         self._run = wire.RunKey(setup.run_id, setup.run_secret)
+        self._requests = None  # the run's requests are prepared with its id and secret
         response = await self._call(
             "Initialize",
             self._stubbed().Initialize(request, timeout=self.call_timeout, metadata=self._metadata),
@@ -303,9 +306,10 @@ class RemoteParticipant(Participant):
         """``step_request`` serialized as pieces whose concatenation is the message, each long
         Binary input a piece of its own (``wire.step_pieces``): for a transport that sends from
         them without copying."""
-        return self._request(
-            "DoStep", lambda: wire.step_pieces(self._run, time, step, inputs, self.codec)
-        )
+        requests = self._requests
+        if requests is None:
+            requests = self._requests = wire.StepRequests(self.codec, self._run)
+        return self._request("DoStep", lambda: requests.pieces(time, step, inputs))
 
     def step_outputs(
         self, response: wire.DoStepResponse, large: Iterable[tuple[str, bytes]] = ()

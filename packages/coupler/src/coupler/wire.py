@@ -49,6 +49,8 @@ _FIELD_OF_TYPE = {
     ValueType.STRING: "text",
     ValueType.BINARY: "binary",
 }
+_FIELD_NUMBER = {f.name: f.number for f in pb.VariableBinding.DESCRIPTOR.fields}
+"""Each field of ``VariableBinding`` by name: its number on the wire."""
 _KIND_OF_FIELD = {
     "real": "Real",
     "integer": "Integer",
@@ -371,6 +373,16 @@ class Codec:
             self._fits(values, allowed)
         return values
 
+    def answer_fields(self) -> dict[str, tuple[int, int, bool]]:
+        """Each output channel -> its ``VariableBinding`` field number, the weight of a value's
+        length in a message's size, and whether a value must be finite: what a reader of step
+        answers other than protobuf's needs to read them as ``decode`` does (the native step
+        channel's, ``coupler_native._answers``); ``policy.max_message_bytes`` bounds the sum."""
+        return {
+            name: (_FIELD_NUMBER[slot.field], slot.weight, slot.limit == _FINITE and self._finite)
+            for name, slot in self._table(_OUTPUTS).items()
+        }
+
     def _refuse(self, binding: pb.VariableBinding, allowed: _Allowed) -> NoReturn:
         """ChannelValueError for a binding of no such channel or of the wrong type."""
         channel = self.channel(binding.channel, allowed)
@@ -627,40 +639,39 @@ message's memory until the message goes, so a message reused for ever would grow
 value set into it [bytes]."""
 
 
-class StepAnswers:
-    """The answers to the steps of one step stream, written into one prepared message.
+class _Prepared:
+    """One message whose bindings get each step's values in place while they name the same
+    channels as the last step's (``StepAnswers``, ``StepRequests``): building a message and
+    its bindings anew each step costs several times what setting the values costs. Once the
+    String and Binary values set in place add up to ``HELD_BYTES``, the message is made anew
+    (the old one's memory goes with it)."""
 
-    The first answer is built as ``step_response`` builds it; while a step's outputs name the
-    same channels as the last one's (the long Binary ones among them the same), the next answer
-    is the same message with the new values set into its bindings in place, checked as
-    ``Codec`` checks them, and the long Binary values written after it (``step_response``).
-    Safe because a stream sends (serializes) each answer before the next is made; one object
-    per stream. Once the String and Binary values set in place add up to ``HELD_BYTES``, the
-    next answer is a message of its own (the old one's memory goes with it).
-    """
-
-    def __init__(self, codec: Codec) -> None:
+    def __init__(self, codec: Codec, allowed: tuple[Causality, ...]) -> None:
         self._codec = codec
-        self._limit = codec.limit(_OUTPUTS)
-        self._response: pb.DoStepResponse | None = None
+        self._allowed = allowed
+        self._limit = codec.limit(allowed)
         self._bindings: dict[str, tuple[pb.VariableBinding | None, _Slot]] = {}
         """Each channel's binding in the message (None: a long Binary value, written apart)."""
         self._held = 0
         """Bytes of String and Binary values set into the message in place."""
 
-    def answer(self, outputs: Mapping[str, object]) -> Answer:
-        """The answer carrying ``outputs`` (each checked against its channel)."""
-        response, bindings = self._response, self._bindings
-        if response is None or outputs.keys() != bindings.keys() or self._held > HELD_BYTES:
-            return self._prepare(outputs)
-        codec = self._codec
+    def _fits(self, values: Mapping[str, object]) -> bool:
+        """Whether the prepared bindings name the channels of ``values`` and the message may
+        take more values in place."""
+        return values.keys() == self._bindings.keys() and self._held <= HELD_BYTES
+
+    def _set(self, values: Mapping[str, object]) -> list[tuple[str, bytes]] | None:
+        """The values into the prepared bindings, each checked as ``Codec`` checks it, and the
+        long Binary values written apart (by channel); None when the prepared message does not
+        take them (a value written apart is short now, or one in place long): make it anew."""
+        codec, bindings = self._codec, self._bindings
         size = held = 0
         large: list[tuple[str, bytes]] = []
-        for name, value in outputs.items():
+        for name, value in values.items():
             binding, slot = bindings[name]
             if binding is None:  # written apart, unless it is no longer a long Binary value
                 if type(value) is not bytes or len(value) < LARGE_BYTES:
-                    return self._prepare(outputs)
+                    return None
                 if slot.maximum and len(value) > slot.maximum:
                     _within(slot, value)
                 large.append((name, value))
@@ -670,7 +681,7 @@ class StepAnswers:
             if slot.weight:
                 length = len(value) * slot.weight  # type: ignore[arg-type]
                 if slot.weight == 1 and length >= LARGE_BYTES:  # now long: written apart
-                    return self._prepare(outputs)
+                    return None
                 if slot.maximum and length > slot.maximum:
                     _within(slot, value)  # type: ignore[arg-type]
                 size += length
@@ -678,21 +689,88 @@ class StepAnswers:
             setattr(binding, slot.field, checked)
         self._held += held
         if size > self._limit:
-            codec._fits(outputs, _OUTPUTS)
+            codec._fits(values, self._allowed)
+        return large
+
+    def _prepared(
+        self, repeated: RepeatedBindings, large: Iterable[tuple[str, bytes]] = ()
+    ) -> None:
+        """Take the bindings of a message just built, and the long values written apart from
+        it, as the prepared ones."""
+        table = self._codec._table(self._allowed)
+        bindings: dict[str, tuple[pb.VariableBinding | None, _Slot]] = {
+            b.channel: (b, table[b.channel]) for b in repeated
+        }
+        bindings.update((name, (None, table[name])) for name, _ in large)
+        self._bindings = bindings
+        self._held = 0
+
+
+class StepAnswers(_Prepared):
+    """The answers to the steps of one step stream, written into one prepared message.
+
+    The first answer is built as ``step_response`` builds it; while a step's outputs name the
+    same channels as the last one's (the long Binary ones among them the same), the next answer
+    is the same message with the new values set into its bindings in place, checked as
+    ``Codec`` checks them, and the long Binary values written after it (``step_response``).
+    Safe because a stream sends (serializes) each answer before the next is made; one object
+    per stream.
+    """
+
+    def __init__(self, codec: Codec) -> None:
+        super().__init__(codec, _OUTPUTS)
+        self._response: pb.DoStepResponse | None = None
+
+    def answer(self, outputs: Mapping[str, object]) -> Answer:
+        """The answer carrying ``outputs`` (each checked against its channel)."""
+        response = self._response
+        if response is None or not self._fits(outputs):
+            return self._prepare(outputs)
+        large = self._set(outputs)
+        if large is None:
+            return self._prepare(outputs)
         return _joined(response, large) if large else response
 
     def _prepare(self, outputs: Mapping[str, object]) -> Answer:
         self._response = None  # until the new one is complete
         response, large = _response_apart(outputs, self._codec)
-        table = self._codec._table(_OUTPUTS)
-        bindings: dict[str, tuple[pb.VariableBinding | None, _Slot]] = {
-            b.channel: (b, table[b.channel]) for b in response.outputs
-        }
-        bindings.update((name, (None, table[name])) for name, _ in large)
-        self._bindings = bindings
-        self._held = 0
+        self._prepared(response.outputs, large)
         self._response = response
         return _joined(response, large) if large else response
+
+
+class StepRequests(_Prepared):
+    """The requests of one run's steps (``step_pieces``), written into one prepared message as
+    ``StepAnswers`` writes answers: the run's id and secret set once, each step's time, step
+    size and inputs set in place while the inputs name the same channels as the last step's.
+    A step with a long Binary input is made by ``step_pieces`` (its value sent apart)."""
+
+    def __init__(self, codec: Codec, run: RunKey) -> None:
+        super().__init__(codec, _INPUTS)
+        self._run = run
+        self._request: pb.DoStepRequest | None = None
+
+    def pieces(self, time: float, step: float, inputs: Mapping[str, object]) -> list[bytes]:
+        """``step_pieces(run, time, step, inputs, codec)``: the same message."""
+        request = self._request
+        if request is None or not self._fits(inputs) or self._set(inputs) is None:
+            return self._prepare(time, step, inputs)
+        request.current_time, request.step_size = time, step
+        return [request.SerializeToString()]
+
+    def _prepare(self, time: float, step: float, inputs: Mapping[str, object]) -> list[bytes]:
+        self._request = None  # until a new one is complete
+        if _long_binary(inputs):
+            return step_pieces(self._run, time, step, inputs, self._codec)
+        request = step_to_pb(self._run, time, step, inputs, self._codec)
+        self._prepared(request.inputs)
+        self._request = request
+        return [request.SerializeToString()]
+
+
+def _long_binary(values: Mapping[str, object]) -> bool:
+    """Whether a value is a Binary one long enough to be sent apart (``step_pieces``)."""
+    return any(type(v) is bytes and len(v) >= LARGE_BYTES for v in values.values())
 
 
 def outputs_from_pb(

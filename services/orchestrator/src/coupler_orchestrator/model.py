@@ -101,6 +101,17 @@ class TimeGrid:
     def stop(self) -> float:
         return self.time(self.steps)
 
+    def in_doubles(self) -> tuple[float, float, float] | None:
+        """(origin, stride, scale) as doubles when they and every numerator up to the last
+        point's are integers below 2**53: then (origin + k * stride) / scale computed in
+        doubles is ``time(k)`` (each operand exact, the one division correctly rounded, as
+        Python's int / int is); else None."""
+        exact = 2**53
+        last = abs(self._origin) + (self.steps + 1) * abs(self._stride)
+        if last >= exact or self._scale >= exact:
+            return None
+        return float(self._origin), float(self._stride), float(self._scale)
+
 
 def decimal_of(value: float) -> Fraction:
     """The decimal a user wrote for ``value``, exactly: the shortest text that reads back to

@@ -1,6 +1,9 @@
 """What a run tells its observers: the CSV recorder, the summary, the progress display, live
 views and tests all see the same events, in this order: ``started``, then ``stepped`` (and
 ``timed``) for every communication point from t_0 on, then ``finished`` — on every path.
+Where the master takes several base steps in one call into C (the native FMU step), it tells
+their points together, in order (``stepped_batch``, which by default calls ``stepped`` and
+``timed`` for each); a batch spans at most a few hundred steps and a fiftieth of a second.
 
 Observers are called on the event loop and must not block long; an observer that cannot do its
 job (a full disk) raises a CouplerError, which ends the run as ``failed`` with that reason.
@@ -10,6 +13,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from typing import Any, Protocol
 
 from coupler.channels import Value
 
@@ -85,6 +89,28 @@ class StepPath:
     reason: str
 
 
+class Steps(Protocol):
+    """Consecutive communication points told at once (``Observer.stepped_batch``)."""
+
+    times: Sequence[float]
+    """Each point's time, in order."""
+    log: Any
+    """Where the points were read from: the native FMU step's row log
+    (``coupler_native._rows.RowLog``, whose rows results.csv's lines are made of in C)."""
+
+    def row(self, j: int) -> Sequence[Value]:
+        """The outputs at ``times[j]``, as ``stepped`` would have been told them."""
+        ...
+
+    def seconds(self, j: int) -> Sequence[float | None]:
+        """What ``timed`` would have been told after the step to ``times[j]``."""
+        ...
+
+    def samples(self, member: int) -> Sequence[float]:
+        """The step latencies of ``RunInfo.members[member]`` over these points [s]."""
+        ...
+
+
 class Observer:
     """Override what you need."""
 
@@ -97,6 +123,16 @@ class Observer:
     def timed(self, seconds: Sequence[float | None]) -> None:
         """How long each member's step just taken lasted [s], aligned with ``RunInfo.members``;
         None for a member that was not due."""
+
+    def stepped_batch(self, steps: Steps) -> None:
+        """Several communication points at once, in order: ``stepped`` (and ``timed``, when
+        overridden) for each, by default. Override it where one call for all of them does the
+        same in less time."""
+        timed = type(self).timed is not Observer.timed
+        for j, time in enumerate(steps.times):
+            self.stepped(time, steps.row(j))
+            if timed:
+                self.timed(steps.seconds(j))
 
     def finished(self, end: RunEnd) -> None:
         """The run ended, however it ended."""

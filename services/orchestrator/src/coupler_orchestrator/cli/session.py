@@ -11,7 +11,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from coupler_orchestrator.cli.exits import EXIT_INTERRUPTED, EXIT_OK
-from coupler_orchestrator.observer import Observer, RunEnd, RunInfo
+from coupler_orchestrator.observer import Observer, RunEnd, RunInfo, Steps
 
 if TYPE_CHECKING:
     from coupler_orchestrator.outputs.monitor import MonitorServer
@@ -45,6 +45,9 @@ class Session(Observer):
 
     def stepped(self, time: float, row: Sequence[Any]) -> None:
         self.time = time
+
+    def stepped_batch(self, steps: Steps) -> None:
+        self.time = steps.times[-1]
 
     def finished(self, end: RunEnd) -> None:
         self.end = end

@@ -36,7 +36,7 @@ from typing import Any
 
 from coupler.lifetimes import die_with_parent
 from coupler_orchestrator.cli.exits import EXIT_INTERRUPTED
-from coupler_orchestrator.observer import Observer, RunInfo
+from coupler_orchestrator.observer import Observer, RunInfo, Steps
 
 SUPERVISED = frozenset({"run", "fleet"})
 """The commands that run a scenario in this process."""
@@ -78,6 +78,11 @@ class Beacon(Observer):
     def stepped(self, time: float, row: Sequence[Any]) -> None:
         self._count += 1
         self._time[0] = time
+        self._points[0] = self._count
+
+    def stepped_batch(self, steps: Steps) -> None:
+        self._count += len(steps.times)
+        self._time[0] = steps.times[-1]
         self._points[0] = self._count
 
     def read(self) -> tuple[float, int, float, Path | None]:

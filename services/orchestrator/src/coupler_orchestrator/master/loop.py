@@ -10,7 +10,8 @@ How each member steps is chosen once (``steppers``): members that compute in thi
 in flight — under the eye of a ``Watchdog`` that ends the run when such a step outlives its
 deadline. Remote members on the native step channel are sent their requests first and
 answered last, on this thread too; the others are awaited. A run of in-process FMUs only is stepped
-by one call into C per base step (``native_fmu_step``), with the same meaning.
+in C (``native_fmu_step``), with the same meaning: unpaced, several base steps per call, the
+observers told of them together (``Observer.stepped_batch``); else one base step per call.
 t_k is the double nearest to the exact decimal t_0 + k*h (``TimeGrid.time``); each member
 steps from t_k by exactly its configured step (its deltaTime, else h), never by a difference
 of two communication points.
@@ -20,10 +21,12 @@ from __future__ import annotations
 
 import asyncio
 import math
+import threading
 import time as wallclock
 from collections import defaultdict
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
+from operator import itemgetter
 
 import structlog
 
@@ -34,7 +37,7 @@ from coupler_orchestrator.master import native_fmu_step, native_step_channel
 from coupler_orchestrator.master.steppers import Split, StepNow, stepper_of
 from coupler_orchestrator.master.watchdog import Watchdog
 from coupler_orchestrator.model import Algorithm, Converter, Member, Plan
-from coupler_orchestrator.observer import Column, Observer, RunEnd, RunInfo, StepPath
+from coupler_orchestrator.observer import Column, Observer, RunEnd, RunInfo, StepPath, Steps
 
 log = structlog.get_logger("coupler.master")
 
@@ -125,7 +128,11 @@ class Master:
             step_size=plan.grid.step,
             steps=plan.grid.steps,
         )
-        self._keys = [(m.name, c.name) for m in plan.members for c in m.outputs]
+        keys = [(m.name, c.name) for m in plan.members for c in m.outputs]
+        self._row: Callable[[Mapping[Key, Value]], Sequence[Value]] = (
+            itemgetter(*keys) if len(keys) > 1 else lambda store: [store[k] for k in keys]
+        )
+        """The row of results from ``store``, in column order (a tuple: one call in C)."""
         self._store_keys = {
             m.name: {c.name: (m.name, c.name) for c in m.outputs} for m in plan.order
         }
@@ -167,6 +174,11 @@ class Master:
         self._timed: list[Callable[[Sequence[float | None]], None]] = []
         """The observers' ``stepped`` and the ``timed`` of those that take it (made when the
         run starts): what each communication point calls."""
+        self._batched: list[Callable[[Steps], None]] = []
+        """The observers' ``stepped_batch``: what the points of several steps call."""
+        self._telling = threading.Lock()
+        """Held while observers are told of several steps, or told the run's end by the
+        watchdog: either, never both at once."""
 
     async def run(self) -> RunEnd:
         """Initialize, step to the end, terminate; never raises for a participant's failure
@@ -183,6 +195,7 @@ class Master:
             algorithm=str(plan.algorithm),
         )
         self._stepped = [o.stepped for o in self.observers]
+        self._batched = [o.stepped_batch for o in self.observers]
         self._timed = [o.timed for o in self.observers if type(o).timed is not Observer.timed]
         try:
             for observer in self.observers:
@@ -191,10 +204,16 @@ class Master:
             self._watch_local_members()
             self._record(grid.start)
             yielded = wallclock.perf_counter()
-            for k in range(grid.steps):
-                await self._advance(k)
-                self.completed_steps = k + 1
-                self._record(grid.time(k + 1))
+            batches = self._kernel is not None and self._kernel.logs and not plan.realtime_factor
+            k = 0
+            while k < grid.steps:
+                if batches:
+                    k = self._native_steps(k, grid.steps - k)
+                else:
+                    await self._advance(k)
+                    k += 1
+                    self.completed_steps = k
+                    self._record(grid.time(k))
                 if self._ended is not None:
                     status, reason = "terminated", self._ended
                     break
@@ -343,18 +362,30 @@ class Master:
         return paths
 
     def _abandon(self, status: str, reason: str) -> None:
-        """End the run from the watchdog's thread: this thread is stuck in a participant."""
+        """End the run from the watchdog's thread: this thread is stuck in a participant
+        (the steps the native FMU step took whole before, in the same call, are told first)."""
         grid = self.plan.grid
-        end = RunEnd(
-            status=status,
-            reason=reason,
-            steps=self.completed_steps,
-            end_time=self._time_reached(),
-            wall_time=wallclock.perf_counter() - self._wall_start,
-            step_paths=self._paths,
-        )
-        self._finish(end)
-        self._abandoned = True
+        with self._telling:
+            steps = self._kernel.claim() if self._kernel is not None else None
+            if steps is not None:
+                self.completed_steps += len(steps.times)
+                for observer in self.observers:
+                    try:
+                        observer.stepped_batch(steps)
+                    except Exception as exc:
+                        log.error(
+                            "observer_failed", observer=type(observer).__name__, error=str(exc)
+                        )
+            end = RunEnd(
+                status=status,
+                reason=reason,
+                steps=self.completed_steps,
+                end_time=self._time_reached(),
+                wall_time=wallclock.perf_counter() - self._wall_start,
+                step_paths=self._paths,
+            )
+            self._finish(end)
+            self._abandoned = True
         told = self.plan.on_abandoned is not None  # the caller says it (the CLI: once)
         (log.info if told else log.error)(
             "run_abandoned",
@@ -428,21 +459,45 @@ class Master:
             raise asyncio.CancelledError
         return outputs
 
-    def _native_step(self, k: int) -> None:
+    def _native_steps(self, k: int, left: int) -> int:
+        """Base steps from k in one call into C (``Kernel.steps``: at most ``left``, and as many
+        as YIELD_EVERY allows), the observers told of them together; a step a member stopped
+        is finished as ``_native_step`` finishes it, and told alone. Returns the next step."""
+        native = self._kernel
+        assert native is not None
+        done, stopped = native.steps(k, left, YIELD_EVERY)
+        with self._telling:  # not while the watchdog ends the run (``_abandon``)
+            if self._abandoned:  # it came back after the watchdog had ended the run
+                raise asyncio.CancelledError
+            if done:
+                k += done
+                self.completed_steps = k
+                steps = native.logged()
+                for tell in self._batched:
+                    tell(steps)
+        if stopped is not None:
+            self._native_step(k, stopped)
+            k += 1
+            self.completed_steps = k
+            self._record(self.plan.grid.time(k))
+        return k
+
+    def _native_step(self, k: int, stopped: tuple[int, Exception] | None = None) -> None:
         """Every member stepped in C (``native_fmu_step``); a member that stops its step is told
         about as it is in Python: its error ends the run, its request to end it is kept and
-        the members after it step on."""
+        the members after it step on (from ``stopped``, when the step has begun so)."""
         native = self._kernel
         assert native is not None
         time = self.plan.grid.time(k)
-        start = 0
-        while (stopped := native.step(time, start)) is not None:
+        if stopped is None:
+            stopped = native.step(time)
+        while stopped is not None:
             index, meaning = stopped
             if not isinstance(meaning, EndRun):
                 raise meaning
             m = self.plan.order[index]
             native.place(m.name, self._ask_to_end(m, k, meaning))
-            start = index + 1
+            stopped = native.step(time, index + 1)
         if self._abandoned:  # it came back after the watchdog had ended the run
             raise asyncio.CancelledError
         self._timing = native.timing[:]
@@ -536,10 +591,7 @@ class Master:
         )
 
     def _record(self, time: float) -> None:
-        if self._kernel is not None:
-            row = self._kernel.row()
-        else:
-            row = [self.store[k] for k in self._keys]
+        row = self._kernel.row() if self._kernel is not None else self._row(self.store)
         for stepped in self._stepped:
             stepped(time, row)
         timing = self._timing

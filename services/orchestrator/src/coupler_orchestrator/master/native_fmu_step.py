@@ -39,6 +39,8 @@ from coupler_orchestrator.native import NativeModule, rows
 log = structlog.get_logger("coupler.kernel")
 
 USED = "every member is an in-process FMU, every connection a plain copy"
+BATCH = 512
+"""Most base steps one call into C takes (``Kernel.steps``): the rows its log holds."""
 OFF = "native steps are off (--no-native-steps or COUPLER_NATIVE_STEPS=0)"
 
 library = NativeModule("_fmu_steps", "the native FMU step")
@@ -125,6 +127,10 @@ class Kernel:
         self._row = _row_getter([plane.start + index for plane, index, _ in columns])
         self._read = _reader(columns)
         """Reads the row in C, when every column's type allows it; else None."""
+        self._grid = plan.grid.in_doubles()
+        self._grid_time = plan.grid.time
+        self._log, self._logged = self._row_log(columns, len(plan.members))
+        """The log ``steps`` fills and the ``RowLog`` reading it (None: no ``steps``)."""
 
         feeds: dict[str, list[tuple[str, tuple[str, str]]]] = {}
         for link in plan.links:
@@ -138,7 +144,7 @@ class Kernel:
                 self._members[i], m, slots[m.name], gets.get(m.name, []), feeds.get(m.name, [])
             )
         self.timing = (ctypes.c_double * len(plan.members))()
-        self._watch = (ctypes.c_double * 2)(-1.0, 0.0)
+        self._watch = (ctypes.c_double * 3)(-1.0, 0.0, 0.0)
         self._stop = (ctypes.c_int * 3)()
         pointer = self._ffi.cast
         self._arrays = (
@@ -148,9 +154,35 @@ class Kernel:
         )
         """``timing``, the watchdog's and the stop's arrays as the C side takes them."""
         self._jacobi = int(plan.algorithm is Algorithm.JACOBI)
-        self._time = 0.0
         self._what = [f"{m.name}.DoStep" for m in plan.members]
         self._deadline = [m.deadline for m in plan.members]
+
+    def _row_log(self, columns: Sequence[tuple[_Plane, int, Group]], slots: int) -> tuple[Any, Any]:
+        """A ``ck_log`` of every column (freed with this kernel) and its ``RowLog``; (None, None)
+        without ``coupler_native._rows``, for a column of a C type it does not read, or for a
+        grid whose times doubles do not compute exactly."""
+        native, codes = rows(), _codes(columns)
+        if native is None or codes is None or self._grid is None:
+            return None, None
+        ffi = self._ffi
+        cells = ffi.new(
+            "ck_cell[]",
+            [
+                (ffi.cast("void *", plane.address(index)), code.encode())
+                for (plane, index, _), code in zip(columns, codes, strict=True)
+            ]
+            or 1,
+        )
+        made = self._lib.ck_log_new(len(columns), cells, slots, BATCH)
+        if made == ffi.NULL:
+            raise MemoryError("no memory for the native FMU step's row log")
+        log = ffi.gc(made, self._lib.ck_log_free)
+        return log, native.RowLog(int(ffi.cast("uintptr_t", log)), log)
+
+    @property
+    def logs(self) -> bool:
+        """Whether ``steps`` can take several base steps per call."""
+        return self._log is not None
 
     @staticmethod
     def _participant(m: Member) -> FmuParticipant:
@@ -253,13 +285,43 @@ class Kernel:
         """Step the members from ``start`` (in stepping order) at ``time``; None when all
         stepped, else the index of the member that stopped the step and what it means (an
         error, or ``EndRun``: step on from the next member)."""
-        self._time = time
         index = self._lib.ck_step(
             self._members, len(self._order), self._jacobi, start, time, *self._arrays
         )
         if index == self._lib.CK_DONE:
             return None
         return index, self._meaning(index, time)
+
+    def steps(self, k: int, count: int, budget: float) -> tuple[int, tuple[int, Exception] | None]:
+        """Base steps k, k + 1, ... in one call into C (``logs`` must be true), each logged,
+        until ``count`` (at most BATCH) are done or ``budget`` seconds have passed; at least
+        one is taken. Returns how many were done whole (``logged()`` tells them), and, when a
+        member stopped the next one, its index and what it means, as ``step`` does (the members
+        after it have not stepped: ``step(time, index + 1)`` goes on)."""
+        assert self._grid is not None
+        lib = self._lib
+        index = lib.ck_steps(
+            self._members, len(self._order), self._jacobi, *self._grid, k, count, budget,
+            *self._arrays, self._log,
+        )  # fmt: skip
+        done = lib.ck_log_take(self._log)
+        if index in (lib.CK_DONE, lib.CK_CLAIMED):  # claimed: the watchdog tells the rows
+            return done, None
+        if index == lib.CK_NO_MEMORY:
+            raise MemoryError("no memory for the strings of the native FMU step's row log")
+        return done, (index, self._meaning(index, self._grid_time(k + done)))
+
+    def logged(self) -> LoggedSteps:
+        """The steps the last ``steps`` call took whole."""
+        return LoggedSteps(self._logged)
+
+    def claim(self) -> LoggedSteps | None:
+        """From another thread while ``steps`` is under way (a member hangs in its step): the
+        steps it has taken whole so far, which its caller will then not be given (``steps``
+        takes no more); None when there are none, or they were handed over already."""
+        if self._log is None or self._lib.ck_log_claim(self._log) == 0:
+            return None
+        return LoggedSteps(self._logged)
 
     def _meaning(self, index: int, time: float) -> Exception:
         m = self._order[index]
@@ -281,11 +343,32 @@ class Kernel:
     def under_way(self) -> Armed | None:
         """The member step under way for the watchdog: (what, simulated time, deadline,
         since [monotonic], cause); None between steps."""
-        slot, since = self._watch[0], self._watch[1]
+        slot, since, time = self._watch[0], self._watch[1], self._watch[2]
         if slot < 0:
             return None
         at = int(slot)
-        return self._what[at], self._time, self._deadline[at], since, IN_PROCESS
+        return self._what[at], time, self._deadline[at], since, IN_PROCESS
+
+
+class LoggedSteps:
+    """The base steps of one ``Kernel.steps`` call as observers read them
+    (``observer.Steps``): the rows RowRead would have read after each, from the log."""
+
+    def __init__(self, log: Any) -> None:
+        self.log = log
+        self.times: list[float] = log.times()
+
+    def row(self, j: int) -> list[Value]:
+        row: list[Value] = self.log.row(j)
+        return row
+
+    def seconds(self, j: int) -> list[float | None]:
+        seconds: list[float | None] = self.log.seconds(j)
+        return seconds
+
+    def samples(self, member: int) -> list[float]:
+        samples: list[float] = self.log.samples(member)
+        return samples
 
 
 class _Unsuitable(Exception):
@@ -297,12 +380,9 @@ CODES = {ctypes.c_double: "d", ctypes.c_int: "i", ctypes.c_int64: "q", ctypes.c_
 String's char *: "s")."""
 
 
-def _reader(columns: Sequence[tuple[_Plane, int, Group]]) -> Callable[[], list[Value]] | None:
-    """``RowRead(...).row`` over the columns' slots; None without the module, or for a C type
-    it does not read."""
-    native = rows()
-    if native is None:
-        return None
+def _codes(columns: Sequence[tuple[_Plane, int, Group]]) -> str | None:
+    """Each column's slot's C type as ``RowRead`` and ``ck_log`` name it; None for a type
+    they do not read."""
     codes = []
     for plane, _, group in columns:
         code = "s" if group.kind == "String" else CODES.get(plane.element)
@@ -311,8 +391,17 @@ def _reader(columns: Sequence[tuple[_Plane, int, Group]]) -> Callable[[], list[V
         if code is None:
             return None
         codes.append(code)
+    return "".join(codes)
+
+
+def _reader(columns: Sequence[tuple[_Plane, int, Group]]) -> Callable[[], list[Value]] | None:
+    """``RowRead(...).row`` over the columns' slots; None without the module, or for a C type
+    it does not read."""
+    native, codes = rows(), _codes(columns)
+    if native is None or codes is None:
+        return None
     addresses = [plane.address(index) for plane, index, _ in columns]
-    read: Callable[[], list[Value]] = native.RowRead(addresses, "".join(codes)).row
+    read: Callable[[], list[Value]] = native.RowRead(addresses, codes).row
     return read
 
 

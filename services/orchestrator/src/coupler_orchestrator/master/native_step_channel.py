@@ -7,7 +7,10 @@ The native step channel (``coupler_native._step_streams``:
 calling thread instead, through a completion queue of its own, and splits each step in two
 (``steppers.Split``): the master sends every due member its request, computes what it
 computes itself, then receives the answers. Requests and answers are encoded and decoded
-here, by the same codec as everywhere else, so the values are the same bytes either way.
+here, by the same codec as everywhere else, so the values are the same bytes either way; an
+answer in the plain form every participant writes (outputs only, each binding its channel and
+one value of its channel's type) is read from its bytes in C (``coupler_native._answers``),
+into the same values, and any other through protobuf and the codec, which say what is wrong.
 
 It is compiled, with C++ gRPC bundled, when the coupler-native wheel is built (its functions
 declared once, by ``csrc/step_streams.h``, which its cffi binding reads); without
@@ -36,6 +39,9 @@ _CODES = {code.value[0]: code for code in grpc.StatusCode}
 
 library = NativeModule("_step_streams", "the native step channel")
 """``library()``: the native step channel (``ffi``, ``lib``), or None (why is said once)."""
+answers = NativeModule("_answers", "the step answers read in C")
+"""``answers()``: ``coupler_native._answers``, which reads an answer's outputs from its bytes
+as the codec decodes them (else None: protobuf and the codec read every answer)."""
 
 
 def enabled(asked: bool = True) -> bool:
@@ -67,17 +73,26 @@ class NativeSteps(StepTransport):
         self._data = native.ffi.new("const char **")
         self._size = native.ffi.new("size_t *")
         self._code = native.ffi.new("int *")
+        self._piece = native.ffi.new("const char *[1]")
+        self._piece_size = native.ffi.new("size_t[1]")
+        """A request of one piece, as ``cs_send`` takes it (made once)."""
         self._remote: RemoteParticipant | None = None
         self._native: Any = None
         """The open stream (a ``cs_stream *``)."""
         self._sent: list[Any] = []
         """The pieces of the request under way (``_send``)."""
+        self._read: Callable[[memoryview], Values | None] | None = None
+        """Reads an answer's outputs in C when it is in its plain form (``_answers``)."""
 
     def start(self, participant: RemoteParticipant) -> bool:
         if not participant.codec.description.capabilities.streaming:
             return False
         self._remote = participant
         self._native = self._open(participant)
+        codec, read = participant.codec, answers()
+        if read is not None:
+            made = read.AnswerRead(codec.answer_fields(), codec.policy.max_message_bytes)
+            self._read = made.outputs
         return True
 
     def _open(self, remote: RemoteParticipant) -> Any:
@@ -124,9 +139,15 @@ class NativeSteps(StepTransport):
         """Send a request given as pieces whose concatenation is the message."""
         assert self._remote is not None
         # sent from these objects, not copied: kept until the next step or the stream's end
-        self._sent = [self._ffi.from_buffer(piece) for piece in pieces]
-        sizes = [len(piece) for piece in pieces]
-        if self._lib.cs_send(self._native, self._sent, sizes, len(pieces)) != self._lib.CS_OK:
+        if len(pieces) == 1:  # a step's request without a long Binary input
+            self._sent = [self._ffi.from_buffer(pieces[0])]
+            self._piece[0], self._piece_size[0] = self._sent[0], len(pieces[0])
+            sent = self._lib.cs_send(self._native, self._piece, self._piece_size, 1)
+        else:
+            self._sent = [self._ffi.from_buffer(piece) for piece in pieces]
+            sizes = [len(piece) for piece in pieces]
+            sent = self._lib.cs_send(self._native, self._sent, sizes, len(pieces))
+        if sent != self._lib.CS_OK:
             self._answer()  # the stream has ended: its status says why
             raise ParticipantError(
                 "a step was sent before the previous answer was received",
@@ -137,7 +158,10 @@ class NativeSteps(StepTransport):
     def receive(self) -> Values:
         """The answer to the request sent; blocks up to the call deadline."""
         assert self._remote is not None
-        response, large = wire.step_answer(self._answered())
+        data = self._answered()
+        if self._read is not None and (outputs := self._read(data)) is not None:
+            return outputs  # the plain answer of every step, read in C
+        response, large = wire.step_answer(data)
         return self._remote.step_outputs(response, large)
 
     def _answer(self) -> pb.DoStepResponse:

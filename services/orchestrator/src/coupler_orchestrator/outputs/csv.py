@@ -13,7 +13,8 @@ A row's line is made in one pass in C by the native CSV row (``coupler_native._r
 ``packages/coupler-native/csrc/rows.c``): the Real, Integer, Boolean and String cells there,
 the other columns' cells by their Python formatters; the same text as ``row_formatter``'s
 %-format, which makes it where coupler-native is not installed (``tests/test_csv_rows.py``
-compares them).
+compares them). The rows of several base steps the native FMU step took in one call are
+written from its row log in one call into C too (``RowFormat.lines``), the same lines.
 """
 
 from __future__ import annotations
@@ -30,7 +31,7 @@ from typing import IO, Any
 from coupler import messages
 from coupler.channels import Value
 from coupler_orchestrator.native import rows as native_rows
-from coupler_orchestrator.observer import Column, Observer, RunEnd, RunInfo
+from coupler_orchestrator.observer import Column, Observer, RunEnd, RunInfo, Steps
 from coupler_orchestrator.outputs.files import write_failed
 from coupler_orchestrator.outputs.frames import FrameStore, is_frame
 
@@ -83,10 +84,10 @@ KINDS = {
 value to that column's ``formatter``."""
 
 
-def native_row_formatter(
-    columns: Sequence[Column], picked: Sequence[int]
-) -> Callable[[float, Sequence[Value]], str] | None:
-    """``row_formatter``'s lines made in one pass in C; None without coupler-native."""
+def native_row_format(columns: Sequence[Column], picked: Sequence[int]) -> Any:
+    """The native CSV row (``coupler_native._rows.RowFormat``) of the ``picked`` columns:
+    ``line(time, row)`` makes ``row_formatter``'s lines in one pass in C, ``lines(log, first,
+    every)`` those of a native FMU step's row log; None without coupler-native."""
     native = native_rows()
     if native is None:
         return None
@@ -94,7 +95,16 @@ def native_row_formatter(
     cells = tuple(
         formatter(columns[i]) if k in "so" else None for k, i in zip(kinds, picked, strict=True)
     )
-    made = native.RowFormat(list(picked), kinds, cells)
+    return native.RowFormat(list(picked), kinds, cells)
+
+
+def native_row_formatter(
+    columns: Sequence[Column], picked: Sequence[int]
+) -> Callable[[float, Sequence[Value]], str] | None:
+    """``row_formatter``'s lines made in one pass in C; None without coupler-native."""
+    made = native_row_format(columns, picked)
+    if made is None:
+        return None
     line: Callable[[float, Sequence[Value]], str] = made.line
     return line
 
@@ -169,6 +179,8 @@ class CsvRecorder(Observer):
         """How its lines are made (summary.json's ``results_rows``, ``coupler run -v``)."""
         self._file: IO[str] | None = None
         self._line: Callable[[float, Sequence[Value]], str] = row_formatter([], [])
+        self._lines: Callable[[Any, int, int], str | None] | None = None
+        """The lines of a native row log (``RowFormat.lines``), when made in C."""
         self._count = 0
         self._flushed = 0.0
         self._good = 0
@@ -181,9 +193,9 @@ class CsvRecorder(Observer):
         picked = self.selection.columns(info.columns)
         columns = [info.columns[i] for i in picked]
         self._frames = [(i, info.columns[i].name) for i in picked if is_frame(info.columns[i])]
-        self._line = native_row_formatter(info.columns, picked) or row_formatter(
-            info.columns, picked
-        )
+        made = native_row_format(info.columns, picked)
+        self._line = made.line if made is not None else row_formatter(info.columns, picked)
+        self._lines = made.lines if made is not None and not self._frames else None
         try:
             self.path.parent.mkdir(parents=True, exist_ok=True)
             self._file = self.path.open("w", encoding="utf-8", newline="", buffering=1 << 16)
@@ -205,13 +217,39 @@ class CsvRecorder(Observer):
                 for i, name in self._frames:
                     row[i] = self._store.write(name, count, row[i])
             self._file.write(self._line(time, row))
-            now = wallclock.monotonic()
-            if now - self._flushed >= FLUSH_EVERY_S:
-                self._file.flush()
-                self._good = self._file.tell()
-                self._flushed = now
+            self._flush_due()
         except OSError as exc:
             self._fail(exc)
+
+    def stepped_batch(self, steps: Steps) -> None:
+        """The rows of several steps: their lines made from the native FMU step's row log in
+        one call into C, one write; else row by row."""
+        if self._file is None:
+            self._count += len(steps.times)
+            return
+        lines = None
+        if self._lines is not None and steps.log is not None:
+            every = self.selection.every
+            lines = self._lines(steps.log, -self._count % every, every)
+        if lines is None:  # a column the log cannot give in C
+            self._lines = None
+            super().stepped_batch(steps)
+            return
+        self._count += len(steps.times)
+        try:
+            self._file.write(lines)
+            self._flush_due()
+        except OSError as exc:
+            self._fail(exc)
+
+    def _flush_due(self) -> None:
+        """Flush once FLUSH_EVERY_S has passed since the last flush."""
+        assert self._file is not None
+        now = wallclock.monotonic()
+        if now - self._flushed >= FLUSH_EVERY_S:
+            self._file.flush()
+            self._good = self._file.tell()
+            self._flushed = now
 
     def finished(self, end: RunEnd) -> None:
         file = self._file

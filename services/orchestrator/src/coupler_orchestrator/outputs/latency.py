@@ -1,11 +1,14 @@
 """Step latencies in constant memory (a log-bucketed histogram): a run of a million steps costs
-what a run of ten does."""
+what a run of ten does. A batch's buckets are counted in C where coupler-native is installed
+(``coupler_native._rows.log_buckets``: the same buckets, ``tests/test_latency.py``)."""
 
 from __future__ import annotations
 
 import math
 from collections import Counter
 from collections.abc import Sequence
+
+from coupler_orchestrator.native import rows
 
 
 class LatencyStats:
@@ -26,11 +29,19 @@ class LatencyStats:
         every ``SummaryWriter.BATCH`` steps)."""
         if not samples:
             return
+        log, base = math.log, self._BASE
+        floor, per_bucket = log(base), 1 / self._WIDTH
+        native = rows()
+        if native is not None and type(samples) is list:
+            total, maximum, counts = native.log_buckets(samples, floor, per_bucket, base)
+            self.count += len(samples)
+            self.total += total
+            self.maximum = max(self.maximum, maximum)
+            self._buckets.update(counts)
+            return
         self.count += len(samples)
         self.total += sum(samples)
         self.maximum = max(self.maximum, *samples)
-        log, base = math.log, self._BASE
-        floor, per_bucket = log(base), 1 / self._WIDTH
         self._buckets.update(  # Counter counts an iterable in C
             [int((log(s) - floor) * per_bucket) if s > base else 0 for s in samples]
         )

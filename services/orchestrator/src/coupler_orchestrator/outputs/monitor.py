@@ -32,7 +32,7 @@ import contextlib
 import json
 import math
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -43,7 +43,7 @@ from aiohttp import web
 from coupler.channels import Value
 from coupler.errors import CouplerError, ScenarioError
 from coupler.ports import host_port, listening
-from coupler_orchestrator.observer import Observer, RunEnd, RunInfo
+from coupler_orchestrator.observer import Observer, RunEnd, RunInfo, Steps
 from coupler_orchestrator.outputs.frames import is_frame, png, read_image
 
 log = structlog.get_logger("coupler.monitor")
@@ -77,6 +77,14 @@ class Decimated:
         if len(self.times) >= self.points:
             self.times, self.rows = self.times[::2], self.rows[::2]
             self.stride *= 2
+
+    def offer_all(self, times: Sequence[float], row: Callable[[int], Sequence[Any]]) -> None:
+        """``offer`` each of ``times`` with ``row(j)``, made only for the points kept."""
+        for j, time_s in enumerate(times):
+            if self._offered % self.stride:
+                self._offered += 1
+            else:
+                self.offer(time_s, row(j))
 
     def after(self, time_s: float) -> tuple[list[float], list[Sequence[Any]]]:
         """The points later than ``time_s``."""
@@ -145,6 +153,24 @@ class MonitorState(Observer):
         self.latency = [None if s is None else s * 1e3 for s in seconds]
         if self.time is not None:
             self.latencies.offer(self.time, self.latency)
+
+    def stepped_batch(self, steps: Steps) -> None:
+        """Several steps: the rows (and latencies) the history keeps, and the last ones."""
+        times = steps.times
+        numeric = self._numeric
+
+        def kept(j: int) -> Sequence[Value]:
+            row = steps.row(j)
+            return row if self._whole else [row[i] for i in numeric]
+
+        def milliseconds(j: int) -> list[float | None]:
+            return [None if s is None else s * 1e3 for s in steps.seconds(j)]
+
+        self.values.offer_all(times, kept)
+        self.latencies.offer_all(times, milliseconds)
+        self.time, self.row = times[-1], steps.row(-1)
+        self.latency = milliseconds(-1)
+        self.version += 1
 
     def finished(self, end: RunEnd) -> None:
         self.status, self.reason = end.status, end.reason

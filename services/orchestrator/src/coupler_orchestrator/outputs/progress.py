@@ -13,7 +13,7 @@ from collections.abc import Sequence
 from typing import IO
 
 from coupler.channels import Value
-from coupler_orchestrator.observer import Observer, RunEnd, RunInfo
+from coupler_orchestrator.observer import Observer, RunEnd, RunInfo, Steps
 
 
 class _Progress(Observer):
@@ -31,6 +31,10 @@ class _Progress(Observer):
     def started(self, info: RunInfo) -> None:
         self._info = info
         self._started = time.monotonic()
+
+    def stepped_batch(self, steps: Steps) -> None:
+        """Several steps: where the last one got to is all either shows."""
+        self.stepped(steps.times[-1], ())
 
     def status(self, time_s: float, now: float) -> tuple[float, str]:
         """(fraction done, 't=.../... s  NN.N%  RTFx real time  ETA ...')."""

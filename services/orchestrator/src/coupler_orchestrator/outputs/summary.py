@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import Any
 
 from coupler.channels import Value
-from coupler_orchestrator.observer import Observer, RunEnd, RunInfo
+from coupler_orchestrator.observer import Observer, RunEnd, RunInfo, Steps
 from coupler_orchestrator.outputs.files import write_json
 from coupler_orchestrator.outputs.latency import LatencyStats
 from coupler_orchestrator.outputs.reports import make_reports
@@ -59,6 +59,15 @@ class SummaryWriter(Observer):
         self._timings.append(seconds)
         if len(self._timings) >= self.BATCH:
             self._fold()
+
+    def stepped_batch(self, steps: Steps) -> None:
+        """Several steps: each member's latencies counted in one batch."""
+        self._time = steps.times[-1]
+        self._points += len(steps.times)
+        for i, stats in enumerate(self._latency):
+            stats.add_all(steps.samples(i))
+        if wallclock.monotonic() - self._written >= SUMMARY_EVERY_S:
+            self._write(None)
 
     def finished(self, end: RunEnd) -> None:
         """The final summary; the reports first when the run got to its end (results.csv is

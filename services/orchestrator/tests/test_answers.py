@@ -1,0 +1,177 @@
+"""A step's answer read in C (``coupler_native._answers``, csrc/answers.c, used by the native
+step channel) gives exactly what protobuf and the codec give (``wire.step_answer``, then
+``RemoteParticipant.step_outputs``' decoding), or None, and the caller reads it that way:
+
+    answer bytes --AnswerRead.outputs--> dict  (the plain form: outputs only, channel + value)
+                 \\-> None --> step_answer --> Codec.decode --> dict, EndRun or the error
+
+Every answer a participant's runtime writes (``wire.StepAnswers``) is in the plain form; any
+message, and any bytes at all, give the same values both ways or None in C.
+"""
+
+from __future__ import annotations
+
+import math
+import struct
+from typing import Any
+
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from coupler import values, wire
+from coupler.channels import Causality, Channel, Description, ValueType
+from coupler_orchestrator.master import native_step_channel
+
+from .conftest import require_native
+
+OUTPUTS = {
+    "speed": ValueType.REAL,
+    "count": ValueType.INTEGER,
+    "mode": ValueType.ENUMERATION,
+    "on": ValueType.BOOLEAN,
+    "label": ValueType.STRING,
+    "data": ValueType.BINARY,
+}
+DESCRIPTION = Description(
+    name="Every",
+    channels=(
+        Channel(name="u", causality=Causality.INPUT, type=ValueType.REAL),
+        *(Channel(name=n, causality=Causality.OUTPUT, type=t) for n, t in OUTPUTS.items()),
+    ),
+)
+FIELDS = ("real", "integer", "boolean", "text", "binary")
+VALUES = {
+    "real": st.floats(width=64),
+    "integer": st.integers(-(2**31), 2**31 - 1),
+    "boolean": st.booleans(),
+    "text": st.text(max_size=6),
+    "binary": st.binary(max_size=6) | st.just(bytes(wire.LARGE_BYTES + 3)),
+}
+NAMES = st.sampled_from([*OUTPUTS, "u", "nope", ""])
+
+
+@st.composite
+def bindings(draw: st.DrawFn) -> wire.pb.VariableBinding:
+    """A binding of any channel name with any value (or none)."""
+    binding = wire.pb.VariableBinding(channel=draw(NAMES))
+    field = draw(st.sampled_from((*FIELDS, None)))
+    if field is not None:
+        setattr(binding, field, draw(VALUES[field]))
+    return binding
+
+
+def key(found: dict[str, Any]) -> list[tuple[str, type, Any]]:
+    """Values compared by type and bits (nan equals nan, -0.0 is not 0.0)."""
+    return [
+        (n, type(v), struct.pack("<d", v) if isinstance(v, float) else v) for n, v in found.items()
+    ]
+
+
+def protobufs(data: bytes, codec: wire.Codec) -> dict[str, Any] | None:
+    """What the native step channel makes of an answer without C: its outputs, or None when
+    it is refused or asks to end the run."""
+    try:
+        response, large = wire.step_answer(data)
+        found = wire.outputs_from_pb(response, codec, large)
+    except Exception:  # protobuf's DecodeError, the codec's refusals (CouplerError)
+        return None
+    return None if wire.termination_requested(response) is not None else found
+
+
+def reader(policy: values.ValuePolicy = values.DEFAULT_POLICY) -> tuple[Any, wire.Codec]:
+    native = native_step_channel.answers()
+    if native is None:
+        require_native(native_step_channel.answers)
+    codec = wire.Codec(DESCRIPTION, policy)
+    return native.AnswerRead(codec.answer_fields(), policy.max_message_bytes).outputs, codec
+
+
+POLICIES = st.sampled_from(
+    [
+        values.DEFAULT_POLICY,
+        values.ValuePolicy(allow_nonfinite=True),
+        values.ValuePolicy(max_message_bytes=8),
+    ]
+)
+
+
+@settings(max_examples=400, deadline=None)
+@given(
+    outputs=st.lists(bindings(), max_size=8),
+    terminate=st.sampled_from([None, "", "enough"]),
+    policy=POLICIES,
+)
+def test_any_answer_is_read_as_protobuf_reads_it_or_left_to_it(
+    outputs: list[wire.pb.VariableBinding], terminate: str | None, policy: values.ValuePolicy
+) -> None:
+    read, codec = reader(policy)
+    response = wire.pb.DoStepResponse(outputs=outputs)
+    if terminate is not None:
+        response.terminate, response.terminate_reason = True, terminate
+    data = response.SerializeToString()
+    found = read(memoryview(data))
+    if found is not None:
+        expected = protobufs(data, codec)
+        assert expected is not None, (outputs, found)
+        assert key(found) == key(expected)
+
+
+@settings(max_examples=400, deadline=None)
+@given(data=st.binary(max_size=60), policy=POLICIES)
+def test_any_bytes_are_read_as_protobuf_reads_them_or_left_to_it(
+    data: bytes, policy: values.ValuePolicy
+) -> None:
+    read, codec = reader(policy)
+    found = read(data)
+    if found is not None:
+        expected = protobufs(data, codec)
+        assert expected is not None and key(found) == key(expected)
+
+
+@given(
+    speed=VALUES["real"].filter(math.isfinite),
+    count=VALUES["integer"],
+    mode=VALUES["integer"],
+    on=st.booleans(),
+    label=st.text(max_size=20),
+    data=VALUES["binary"],
+)
+def test_every_answer_a_participant_writes_is_read_in_c(**outputs: Any) -> None:
+    """What the runtime answers (``StepAnswers``: the plain form) is read in C, the values
+    protobuf gives; a negative Integer (ten bytes on the wire) as well."""
+    read, codec = reader()
+    answers = wire.StepAnswers(codec)
+    for step in (outputs, {**outputs, "count": -1}):
+        data = answers.answer(step).SerializeToString()
+        found = read(memoryview(data))
+        assert found is not None
+        assert key(found) == key(protobufs(data, codec) or {})
+
+
+@pytest.mark.parametrize(
+    ("response", "why"),
+    [
+        (wire.pb.DoStepResponse(terminate=True, terminate_reason="done"), "ends the run"),
+        (wire.pb.DoStepResponse(outputs=[wire.pb.VariableBinding(channel="on")]), "no value"),
+        (
+            wire.pb.DoStepResponse(outputs=[wire.pb.VariableBinding(channel="on", real=1.0)]),
+            "a Real for a Boolean",
+        ),
+        (
+            wire.pb.DoStepResponse(
+                outputs=[wire.pb.VariableBinding(channel="speed", real=-math.inf)]
+            ),
+            "not finite",
+        ),
+        (
+            wire.pb.DoStepResponse(outputs=[wire.pb.VariableBinding(channel="u", real=1.0)]),
+            "an input",
+        ),
+    ],
+)
+def test_what_is_not_a_plain_answer_is_left_to_protobuf(
+    response: wire.pb.DoStepResponse, why: str
+) -> None:
+    read, _ = reader()
+    assert read(response.SerializeToString()) is None, why
