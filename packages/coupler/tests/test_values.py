@@ -631,3 +631,31 @@ def test_step_answers_check_a_long_value_against_its_declared_maximum() -> None:
     answers.answer({"speed": 2.0, "frame": FRAME[::-1]})
     with pytest.raises(ValueTooLarge, match=f"{len(FRAME) + 1}"):
         answers.answer({"speed": 3.0, "frame": FRAME + b"x"})
+
+
+def test_step_requests_hold_inputs_to_their_maxima_and_renew_their_message() -> None:
+    """The prepared request checks every step's inputs against their declared maxima (not only
+    the first step's), and is made anew once the Binary and String values set into it in place
+    add up to ``HELD_BYTES`` (protobuf keeps each earlier value until the message goes)."""
+    requests = wire.StepRequests(wire.Codec(SIZED), wire.RunKey("run-1", bytes(32)))
+    first = requests.pieces(0.0, 0.1, {"blob": b"0123456789", "label": "abcd"})
+    again = requests.pieces(0.1, 0.1, {"blob": b"9876543210", "label": "dcba"})
+    parsed = wire.DoStepRequest.FromString(b"".join(again))
+    assert (parsed.current_time, [b.binary or b.text for b in parsed.inputs]) == (
+        0.1,
+        [b"9876543210", "dcba"],
+    )
+    assert len(first) == len(again) == 1
+    with pytest.raises(ValueTooLarge, match=r"'blob'.* 11 bytes"):
+        requests.pieces(0.2, 0.1, {"blob": b"0123456789x", "label": "abcd"})
+    big = Description(
+        name="Sink",
+        channels=(Channel(name="blob", causality=Causality.INPUT, type=ValueType.BINARY),),
+    )
+    requests = wire.StepRequests(wire.Codec(big), wire.RunKey("run-1", bytes(32)))
+    value = bytes(wire.LARGE_BYTES - 1)  # set in place, not sent apart
+    messages = set()
+    for step in range(wire.HELD_BYTES // len(value) + 3):
+        requests.pieces(step * 0.1, 0.1, {"blob": value})
+        messages.add(id(requests._request))
+    assert len(messages) == 2  # made anew once past HELD_BYTES
