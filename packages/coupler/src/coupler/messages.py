@@ -31,7 +31,7 @@ from google.protobuf import json_format
 from google.protobuf.message import DecodeError, Message
 
 from coupler.errors import ChannelValueError
-from coupler.wire import _read_varint, _varint
+from coupler.wire import _fields, _varint
 
 ENTRY_POINTS = "coupler.messages"
 """The entry point group installed packages name their message types in."""
@@ -175,27 +175,13 @@ def _split(data: memoryview, field: int) -> tuple[bytes, memoryview]:
     the last value of that field (protobuf's rule for a field written twice)."""
     kept: list[memoryview] = []
     value = data[0:0]
-    start = at = 0
-    while at < len(data):
-        key, body = _read_varint(data, at)
-        kind = key & 7
-        if kind == _LEN:
-            size, body = _read_varint(data, body)
-            after = body + size
-        elif kind == 0:
-            after = _read_varint(data, body)[1]
-        elif kind in (1, 5):
-            after = body + (8 if kind == 1 else 4)
-        else:
-            raise ValueError("a group")
-        if after > len(data):
-            raise ValueError("truncated")
+    start = 0
+    for key, at, body, after in _fields(data):
         if key >> 3 == field >> 3:
             if key != field:
                 raise ValueError("the field with another wire type")
             kept.append(data[start:at])
             value = data[body:after]
             start = after
-        at = after
     kept.append(data[start:])
     return b"".join(kept), value

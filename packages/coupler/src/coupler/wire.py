@@ -10,7 +10,7 @@ speaks Python values.
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, NoReturn, TypeAlias, TypeVar
 
@@ -924,7 +924,23 @@ def _cut(data: memoryview, field: int) -> tuple[bytes, list[tuple[str, bytes]]]:
     those values."""
     kept: list[memoryview] = []
     large: list[tuple[str, bytes]] = []
-    start = at = 0
+    start = 0
+    for key, at, body, after in _fields(data):
+        if key == field and after - body >= LARGE_BYTES:
+            binding = _binary_binding(data[body:after])
+            if binding is not None:
+                kept.append(data[start:at])
+                large.append(binding)
+                start = after
+    kept.append(data[start:])
+    return b"".join(kept), large
+
+
+def _fields(data: memoryview) -> Iterator[tuple[int, int, int, int]]:
+    """The top-level fields of a serialized message, in order: each one's key, where it
+    starts, where its value starts (a length-delimited one's after its length) and where it
+    ends. ValueError for a group or a truncated message."""
+    at = 0
     while at < len(data):
         key, body = _read_varint(data, at)
         kind = key & 7
@@ -939,15 +955,8 @@ def _cut(data: memoryview, field: int) -> tuple[bytes, list[tuple[str, bytes]]]:
             raise ValueError("a group")
         if after > len(data):
             raise ValueError("truncated")
-        if key == field and after - body >= LARGE_BYTES:
-            binding = _binary_binding(data[body:after])
-            if binding is not None:
-                kept.append(data[start:at])
-                large.append(binding)
-                start = after
+        yield key, at, body, after
         at = after
-    kept.append(data[start:])
-    return b"".join(kept), large
 
 
 def _binary_binding(data: memoryview) -> tuple[str, bytes] | None:
