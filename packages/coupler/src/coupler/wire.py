@@ -464,6 +464,7 @@ def description_to_pb(description: Description) -> pb.DescribeResponse:
             streaming=caps.streaming,
             variable_step_size=caps.variable_step_size,
             fixed_step_size=caps.fixed_step_size,
+            step_socket=caps.step_socket,
         ),
         channels=[
             pb.ChannelDescription(
@@ -512,6 +513,7 @@ def description_from_pb(response: pb.DescribeResponse) -> Description:
             streaming=caps.streaming,
             variable_step_size=caps.variable_step_size,
             fixed_step_size=caps.fixed_step_size,
+            step_socket=caps.step_socket,
         ),
     )
 
@@ -980,6 +982,12 @@ def _binary_binding(data: memoryview) -> tuple[str, bytes] | None:
     except UnicodeDecodeError:
         return None
     return name, bytes(fields[_BINARY_KEY])
+
+
+def step_socket_end(code: int, message: str) -> bytes:
+    """The serialized StepSocketEnd a participant's step socket ends with (``code``: a gRPC
+    status code number)."""
+    return pb.StepSocketEnd(code=code, message=message).SerializeToString()
 
 
 # --- Terminate -------------------------------------------------------------------------------
