@@ -241,7 +241,7 @@ class _Servicer(pb_grpc.GRPCComponentServiceServicer):
         ``_guard`` per stage: one ``try`` around each stage that can fail, ``_refuse`` maps
         what it raises (the per-step cost is docs/performance.md's profile). ``received`` is
         the request and its long Binary inputs, cut out of its bytes (``wire.step_request``);
-        the answer may be bytes already (``wire.step_response``)."""
+        the answer may be serialized already, in pieces (``wire.step_response``)."""
         request, large = received
         codec = self._codec
         if codec is None:
@@ -395,7 +395,7 @@ _BACKGROUND: set[asyncio.Task[None]] = set()
 def _add_service(servicer: _Servicer, server: grpc.aio.Server) -> None:
     """The component service as protobuf's generated code adds it, but a step's request is
     parsed by ``wire.step_request`` (its long Binary inputs cut out of its bytes with one copy
-    each) and its answer sent by ``wire.serialized`` (a message, or bytes with long Binary
+    each) and its answer sent by ``wire.serialized`` (a message, or its bytes with long Binary
     outputs joined after it): protobuf would copy such values twice each way."""
     unary, stream = grpc.unary_unary_rpc_method_handler, grpc.stream_stream_rpc_method_handler
     handlers = {
@@ -624,9 +624,11 @@ class _StepConnection(asyncio.Protocol):
                         grpc.StatusCode.INVALID_ARGUMENT,
                         f"a kind {_STEP} frame on the step socket is not a DoStepRequest ({exc})",
                     ) from None
-                answer = wire.serialized(await servicer.stream_step(stream, received, context))
+                answer = await servicer.stream_step(stream, received, context)
+                pieces = wire.answer_pieces(answer)  # long Binary values as they are
+                size = sum(map(len, pieces)) if len(pieces) > 1 else len(pieces[0])
                 assert self._transport is not None
-                self._transport.writelines((_HEADER.pack(len(answer), _STEP), answer))
+                self._transport.writelines((_HEADER.pack(size, _STEP), *pieces))
         except _Aborted as exc:
             code, message = exc.code, exc.message
         except Exception as exc:  # the runtime's own failure: the loop ends, the server serves on
