@@ -360,12 +360,17 @@ class _Clock:
         return (self.points - 1) / (self.last - self.first)
 
 
-async def coupler_run(ssd: Path, steps: int, out: Path) -> _Clock:
+async def coupler_run(ssd: Path, steps: int, out: Path, *, step_socket: bool = True) -> _Clock:
     from coupler_orchestrator.options import RunOptions
     from coupler_orchestrator.runner import run_scenario
 
     clock = _Clock(time.perf_counter())
-    options = RunOptions(stop_time=steps * STEP, step_size=STEP, run_id=f"bench-{time.time_ns()}")
+    options = RunOptions(
+        stop_time=steps * STEP,
+        step_size=STEP,
+        run_id=f"bench-{time.time_ns()}",
+        step_socket=step_socket,
+    )
     outcome = await run_scenario(  # runs repeat into one folder: each replaces the last
         ssd, options, out_dir=out, replace=True, observers=[clock.observer]
     )
@@ -1173,8 +1178,13 @@ async def sockets(
     sizes: Sizes, log: Callable[[str], None], work: Path, rows: list[Row], extra: dict[str, Any]
 ) -> None:
     """remote x1 with the gain participant on a unix socket (as ``coupler fleet`` serves local
-    participants) against the same on TCP, and against a bare grpc.aio stream over a socket."""
-    log("remote x1 over a unix socket, over TCP, and a raw grpc.aio stream over a unix socket")
+    participants; stepped over its step socket) against the same on TCP, against the same over
+    its StepStream on the socket (``--no-step-socket``), and against a bare grpc.aio stream over
+    a socket."""
+    log(
+        "remote x1 over a unix socket (its step socket, and its StepStream), over TCP, and a raw "
+        "grpc.aio stream over a unix socket"
+    )
     folder = Path(tempfile.mkdtemp(prefix="cb-", dir="/tmp"))  # a socket path has 107 bytes
     gain_socket, raw_socket = folder / "gain.sock", folder / "raw.sock"
     [port] = free_ports(1)
@@ -1189,15 +1199,22 @@ async def sockets(
         async def over_unix() -> float:
             return (await coupler_run(unix_ssd, steps, work / "out")).rate
 
+        async def over_unix_stream() -> float:
+            clock = await coupler_run(unix_ssd, steps, work / "out", step_socket=False)
+            return clock.rate
+
         async def over_tcp() -> float:
             return (await coupler_run(tcp_ssd, steps, work / "out")).rate
 
         async def stream() -> float:
             return await raw_floor([f"unix:{raw_socket}"], steps, stream=True)
 
-        unix, tcp, floor = await interleaved(sizes.repeats, over_unix, over_tcp, stream)
-    assert unix is not None and tcp is not None and floor is not None
+        unix, unix_stream, tcp, floor = await interleaved(
+            sizes.repeats, over_unix, over_unix_stream, over_tcp, stream
+        )
+    assert unix is not None and unix_stream is not None and tcp is not None and floor is not None
     rows.append(Row("remote x1 over UDS", unix, "remote x1 over TCP", tcp, 1.2))
+    rows.append(Row("remote x1 over UDS, gRPC stream", unix_stream, "remote x1 over TCP", tcp))
     rows.append(Row("remote x1 over UDS", unix, "raw grpc.aio stream x1 UDS", floor, 0.8))
     await asyncio.to_thread(shutil.rmtree, folder, True)  # the raw server leaves its socket
 

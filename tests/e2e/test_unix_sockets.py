@@ -6,6 +6,9 @@
         -> results.csv, the same bytes as over TCP
     a second server on a live socket: refused, naming the process that holds it
     a socket left by a killed server: replaced
+    a participant's step socket (PATH.steps): results.csv the same bytes as over its StepStream
+        (--no-step-socket, COUPLER_STEP_SOCKET=0), summary.json naming the transport; a step
+        socket that does not open: the StepStream, with a warning
     coupler fleet scenarios/railway/fleet.toml (unix sockets by default) and --tcp
         -> the same results.csv
 
@@ -14,6 +17,7 @@ Each service runs as a subprocess, ``coupler`` as the user's command.
 
 from __future__ import annotations
 
+import json
 import os
 import re
 import signal
@@ -119,6 +123,52 @@ def test_coupler_run_reaches_a_participant_on_its_unix_socket(folder: Path, tmp_
     assert (tmp_path / "unix" / "results.csv").read_bytes() == tcp
     assert (tmp_path / "moved" / "results.csv").read_bytes() == tcp
     assert not socket.exists()  # the server removed its socket on the way out
+
+
+def test_coupler_run_steps_a_participant_over_its_step_socket(folder: Path, tmp_path: Path) -> None:
+    """Ramp FMU -> Gain on a unix socket: stepped over its step socket by default, over its
+    StepStream when told; the same bytes either way. A step socket that does not open (its
+    file gone) leaves the member on its StepStream, said on stderr and in summary.json."""
+    pytest.importorskip("coupler_native._step_streams", reason="the native step channel")
+    socket = folder / "gain.sock"
+    steps = folder / "gain.sock.steps"
+    gain = started([PY, "-m", "coupler.examples", "gain", "--socket", str(socket)])
+    outputs = {}
+    try:
+        assert steps.exists() and (steps.stat().st_mode & 0o777) == 0o600
+        address = ["--address", f"Gain=unix://{socket}"]
+        runs = {
+            "socket": ([], {}),
+            "stream": (["--no-step-socket"], {}),
+            "environment": ([], {"COUPLER_STEP_SOCKET": "0"}),
+        }
+        for name, (flags, env) in runs.items():
+            coupler("run", RAMP_GAIN, "--out", tmp_path / name, *address, *flags, env=env)
+        steps.unlink()  # the participant offers it, but it cannot be opened
+        outputs["gone"] = subprocess.run(
+            [COUPLER, "run", RAMP_GAIN, "--out", tmp_path / "gone", *address],
+            capture_output=True, text=True, timeout=240, cwd=ROOT,
+        )  # fmt: skip
+    finally:
+        ended(gain)
+    assert outputs["gone"].returncode == 0, outputs["gone"].stderr
+    assert "step_socket_unavailable" in outputs["gone"].stderr
+    assert str(steps) in outputs["gone"].stderr
+    results = (tmp_path / "socket" / "results.csv").read_bytes()
+    assert len(results.splitlines()) > 10
+    paths = {}
+    for name in ("socket", "stream", "environment", "gone"):
+        assert (tmp_path / name / "results.csv").read_bytes() == results, name
+        summary = json.loads((tmp_path / name / "summary.json").read_text())
+        paths[name] = summary["participants"]["Gain"]["step_path"]
+    assert paths["socket"] == {
+        "path": "native step socket",
+        "reason": f"its step socket {steps}, without gRPC",
+    }
+    stream = {"path": "native step channel", "reason": "its StepStream over C++ gRPC"}
+    assert paths["stream"] == paths["environment"] == stream
+    assert paths["gone"]["path"] == "native step channel"
+    assert "did not open (cannot connect to the step socket" in paths["gone"]["reason"]
 
 
 @pytest.fixture(scope="module")

@@ -6,14 +6,22 @@
  * writes a request and asks for the answer; cs_receive() waits for it (or for the stream's
  * end, or for the step's deadline, which cancels the stream). Every call returns at once or by
  * its deadline; none of them throws.
+ *
+ * The same interface drives a participant's step socket (docs/protocol.md "Step socket"): the
+ * target `steps:/abs/path` opens a plain unix socket to it instead of a StepStream (`tls` and
+ * `metadata` are not used: no token travels there), on which a request is a frame (a uint32
+ * little-endian payload length, a uint8 kind 0, the serialized DoStepRequest) written with one
+ * sendmsg from the caller's pieces, and an answer one read back into a buffer the stream keeps;
+ * the participant's end frame (kind 1, a StepSocketEnd) is CS_FAILED with its code, and a frame
+ * over `max_receive` ends the stream with RESOURCE_EXHAUSTED (8) naming both sizes.
  */
 
 typedef struct cs_stream cs_stream;
 
 enum { CS_OK = 0, CS_FAILED = 1, CS_TIMEOUT = 2 };
 
-/* Opens the step stream to `target` (host:port or unix:PATH); with `tls`, PEM texts (each may
- * be empty) for the roots, the client's key and its chain. `metadata` holds `count` pairs
+/* Opens the step stream to `target` (host:port or unix:PATH; steps:PATH: a step socket); with
+ * `tls`, PEM texts (each may be empty) for the roots, the client's key and its chain. `metadata` holds `count` pairs
  * (key, value). Answers of up to `max_receive` bytes and requests of up to `max_send` travel
  * (gRPC's channel arguments); a larger answer ends the stream with RESOURCE_EXHAUSTED. Never NULL: cs_error()
  * is empty when the stream is open, else says why (the stream must still be closed). */

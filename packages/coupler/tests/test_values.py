@@ -448,14 +448,20 @@ def test_a_long_value_cut_out_of_an_answer_is_checked() -> None:
         wire.step_answer(truncated)
 
 
+def frame_of(pieces: list[bytes]) -> bytes | None:
+    """The piece that is FRAME itself (the same object), if any."""
+    return next((piece for piece in pieces if piece is FRAME), None)
+
+
 def test_an_answer_writes_long_values_apart_and_protobuf_reads_it() -> None:
     """``step_response`` and ``StepAnswers`` write long Binary outputs after the message
     (bytes, not a message); protobuf parses those bytes into the same outputs as protobuf's
     own writing, ``step_answer`` cuts the long ones out again, and the end of a run survives."""
     codec = wire.Codec(FRAMES)
     outputs = {"speed": 3.0, "frame": FRAME, "depth": FRAME[::-1], "label": "ä"}
-    answer = wire.step_response(outputs, codec, terminate_reason="done")
-    assert type(answer) is bytes
+    pieces = wire.step_response(outputs, codec, terminate_reason="done")
+    assert type(pieces) is wire.Pieces and frame_of(pieces) is not None  # not copied
+    answer = wire.serialized(pieces)
     parsed = wire.DoStepResponse.FromString(answer)
     assert codec.decode(parsed.outputs) == outputs
     assert wire.termination_requested(parsed) == "done"

@@ -8,6 +8,9 @@ test_secure_run.py mutual TLS with a token.
 
 from __future__ import annotations
 
+import asyncio
+import shutil
+import tempfile
 from collections.abc import Iterator, Mapping
 from pathlib import Path
 
@@ -15,6 +18,7 @@ import pytest
 
 from coupler.channels import RunSetup
 from coupler.client import RemoteParticipant
+from coupler.errors import ParticipantError, ParticipantTimeout
 from coupler.examples.gain import GainParticipant
 from coupler.participant import EndRun, Values
 from coupler_orchestrator import ssp
@@ -23,7 +27,7 @@ from coupler_orchestrator.native import MISSING
 from coupler_orchestrator.options import RunOptions
 from coupler_orchestrator.pipeline import participants
 
-from .conftest import Coupler, Outcome, require_native, serving
+from .conftest import Coupler, FailingGain, Outcome, require_native, serving
 from .test_faults import SSD, gain
 
 pytestmark = pytest.mark.usefixtures("fmus")
@@ -184,3 +188,74 @@ async def test_a_step_in_two_halves() -> None:
             await p.terminate("done")
             await p.close()
         assert transport.split() is None
+
+
+class Sleepy(GainParticipant):
+    """Takes 3 s over the step that starts at t >= 0.2 s."""
+
+    async def do_step(self, time_s: float, step: float, inputs: Mapping[str, object]) -> Values:
+        if time_s >= 0.2 - 1e-9:
+            await asyncio.sleep(3.0)
+        return await super().do_step(time_s, step, inputs)  # type: ignore[arg-type]
+
+
+@pytest.mark.usefixtures("native")
+async def test_a_step_in_two_halves_over_the_step_socket(tmp_path: Path) -> None:
+    """A participant on a unix socket offers its step socket; NativeSteps takes it (the same
+    cs_* calls, target steps:PATH): what do_step over grpc.aio gives, frames sent from pieces;
+    the participant's refusal (INTERNAL) and a step past the deadline end it as they end a
+    StepStream."""
+    folder = Path(tempfile.mkdtemp(prefix="ns-", dir="/tmp"))  # a socket's path: 107 bytes
+    sockets = [folder / f"{name}.sock" for name in ("one", "other", "failing", "sleepy")]
+    with (
+        serving(GainParticipant("Gain"), unix_socket=sockets[0]) as one,
+        serving(GainParticipant("Gain"), unix_socket=sockets[1]) as other,
+        serving(FailingGain("Gain", fail_at=0.2), unix_socket=sockets[2]) as failing,
+        serving(Sleepy("Gain"), unix_socket=sockets[3]) as sleepy,
+    ):
+        assert one.step_socket == folder / "one.sock.steps"
+        transport = steps.NativeSteps()
+        native = RemoteParticipant(one.address, steps=transport)
+        aio = RemoteParticipant(other.address, streaming=False)
+        for p in (native, aio):
+            await p.open()
+            await p.initialize(RunSetup(run_id=f"socket-{id(p)}", start_time=0.0, step_size=0.1))
+        assert transport.described == (
+            "native step socket",
+            f"its step socket {one.step_socket}, without gRPC",
+        )
+        halves = transport.split()
+        assert halves is transport
+        for k in range(6):
+            frame = bytes(range(256)) * (300 * k) + bytes([k])  # long ones in pieces
+            inputs = {"u": float(k), "blob": frame, "label": f"step {k}"}
+            halves.send(k * 0.1, 0.1, inputs)
+            outputs = halves.receive()
+            assert outputs["blob_out"] == frame[::-1]
+            assert outputs == await aio.do_step(k * 0.1, 0.1, inputs)
+        for p in (native, aio):
+            await p.terminate("done")
+            await p.close()
+        assert transport.split() is None
+
+        for server, error, status in (
+            (failing, ParticipantError, "INTERNAL"),
+            (sleepy, ParticipantTimeout, "DEADLINE_EXCEEDED"),
+        ):
+            transport = steps.NativeSteps()
+            remote = RemoteParticipant(server.address, steps=transport, call_timeout=1.0)
+            await remote.open()
+            await remote.initialize(RunSetup(run_id="ends", start_time=0.0, step_size=0.1))
+            assert transport.described[0] == "native step socket"
+            for k in range(2):
+                transport.send(k * 0.1, 0.1, {"u": 1.0})
+                transport.receive()
+            transport.send(0.2, 0.1, {"u": 1.0})
+            with pytest.raises(error) as ended:
+                transport.receive()
+            assert ended.value.status == status, ended.value
+            if status == "INTERNAL":
+                assert "gain overheated at t=0.2" in str(ended.value)
+                await remote.terminate("failed")
+            await remote.close()  # the sleepy one's run ends with its connection
+    shutil.rmtree(folder, ignore_errors=True)

@@ -73,6 +73,9 @@ class Capabilities:
     """Accepts any step size."""
     fixed_step_size: float = 0.0
     """When non-zero, every step size is a whole multiple of this [s] (``fits_fixed_step``)."""
+    step_socket: str = ""
+    """The unix socket path where the participant also serves its step loop without gRPC
+    (docs/protocol.md "Step socket"); set by the runtime when it serves one, empty: none."""
 
 
 @dataclass(frozen=True, kw_only=True)

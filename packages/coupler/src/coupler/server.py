@@ -30,18 +30,23 @@ Rules every participant gets for free (docs/protocol.md has the table):
 from __future__ import annotations
 
 import asyncio
+import collections
+import contextlib
 import hmac
 import math
 import os
 import signal
+import socket
+import struct
 import time
 from collections.abc import AsyncIterator, Awaitable, Callable, Coroutine
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any, NoReturn, TypeVar
+from typing import Any, NoReturn, TypeAlias, TypeVar, cast
 
 import grpc
 import structlog
+from google.protobuf.message import DecodeError
 from grpc_health.v1 import health, health_pb2, health_pb2_grpc
 from grpc_reflection.v1alpha import reflection
 
@@ -82,6 +87,16 @@ class _Run:
     last_call: float = field(default_factory=time.monotonic)
     busy: int = 0
     """Steps in progress: a run inside a step is not silent."""
+
+
+@dataclass(eq=False)
+class _Stream:
+    """One step loop: a StepStream, or a connection to the step socket."""
+
+    carried: _Run | None = None
+    """The run this loop carries: its owner's requests came on it."""
+    answers: wire.StepAnswers | None = None
+    """This loop's prepared answer."""
 
 
 class _Servicer(pb_grpc.GRPCComponentServiceServicer):
@@ -182,33 +197,43 @@ class _Servicer(pb_grpc.GRPCComponentServiceServicer):
         request_iterator: AsyncIterator[wire.StepRequest],
         context: grpc.aio.ServicerContext,
     ) -> AsyncIterator[wire.Answer]:
-        carried: _Run | None = None
-        answers: wire.StepAnswers | None = None  # this stream's prepared answer
+        stream = _Stream()
         try:
             async for received in request_iterator:
-                async with self._lock:
-                    run = self.run
-                    request = received[0]
-                    if (
-                        carried is not run
-                        and run is not None
-                        and request.run_id == run.id
-                        and hmac.compare_digest(request.run_secret, run.secret)
-                    ):
-                        carried = run  # this stream belongs to the run's owner
-                    if answers is None and self._codec is not None:
-                        answers = wire.StepAnswers(self._codec)
-                    response = await self._step(received, context, answers)
-                yield response
+                yield await self.stream_step(stream, received, context)
         finally:
-            if carried is not None and carried is self.run:
-                # Ended, broken or cancelled before Terminate: the run goes with its stream.
-                self._end_later(carried, "its step stream ended without Terminate")
+            self.stream_ended(stream, "its step stream ended without Terminate")
+
+    async def stream_step(
+        self, stream: _Stream, received: wire.StepRequest, context: _Context
+    ) -> wire.Answer:
+        """One request of a step loop -- a StepStream's or a step socket connection's: the
+        loop that carries the run's owner's requests carries the run."""
+        async with self._lock:
+            run = self.run
+            request = received[0]
+            if (
+                stream.carried is not run
+                and run is not None
+                and request.run_id == run.id
+                and hmac.compare_digest(request.run_secret, run.secret)
+            ):
+                stream.carried = run  # this loop belongs to the run's owner
+            if stream.answers is None and self._codec is not None:
+                stream.answers = wire.StepAnswers(self._codec)
+            return await self._step(received, context, stream.answers)
+
+    def stream_ended(self, stream: _Stream, why: str) -> None:
+        """A step loop ended (finished, broken or cancelled): before Terminate, the run goes
+        with it."""
+        carried = stream.carried
+        if carried is not None and carried is self.run:
+            self._end_later(carried, why)
 
     async def _step(
         self,
         received: wire.StepRequest,
-        context: grpc.aio.ServicerContext,
+        context: _Context,
         answers: wire.StepAnswers | None = None,
     ) -> wire.Answer:
         """One step: the protocol's checks, the inputs decoded, the participant's step, its
@@ -216,7 +241,7 @@ class _Servicer(pb_grpc.GRPCComponentServiceServicer):
         ``_guard`` per stage: one ``try`` around each stage that can fail, ``_refuse`` maps
         what it raises (the per-step cost is docs/performance.md's profile). ``received`` is
         the request and its long Binary inputs, cut out of its bytes (``wire.step_request``);
-        the answer may be bytes already (``wire.step_response``)."""
+        the answer may be serialized already, in pieces (``wire.step_response``)."""
         request, large = received
         codec = self._codec
         if codec is None:
@@ -296,9 +321,7 @@ class _Servicer(pb_grpc.GRPCComponentServiceServicer):
                 await _abort(context, grpc.StatusCode.ABORTED, self._refusal(run))
         return wire.TerminateResponse()
 
-    async def _untrusted(
-        self, run: _Run, secret: bytes, call: str, context: grpc.aio.ServicerContext
-    ) -> NoReturn:
+    async def _untrusted(self, run: _Run, secret: bytes, call: str, context: _Context) -> NoReturn:
         """Refuses a call of ``run``: without the run's secret it is an intrusion
         (PERMISSION_DENIED, remembered); from the owner of a run that saw one, ABORTED."""
         if hmac.compare_digest(secret, run.secret):
@@ -372,7 +395,7 @@ _BACKGROUND: set[asyncio.Task[None]] = set()
 def _add_service(servicer: _Servicer, server: grpc.aio.Server) -> None:
     """The component service as protobuf's generated code adds it, but a step's request is
     parsed by ``wire.step_request`` (its long Binary inputs cut out of its bytes with one copy
-    each) and its answer sent by ``wire.serialized`` (a message, or bytes with long Binary
+    each) and its answer sent by ``wire.serialized`` (a message, or its bytes with long Binary
     outputs joined after it): protobuf would copy such values twice each way."""
     unary, stream = grpc.unary_unary_rpc_method_handler, grpc.stream_stream_rpc_method_handler
     handlers = {
@@ -406,11 +429,225 @@ def _add_service(servicer: _Servicer, server: grpc.aio.Server) -> None:
     server.add_registered_method_handlers(SERVICE_NAME, handlers)
 
 
+# --- The step socket (docs/protocol.md "Step socket") ----------------------------------------
+
+STEP_SOCKET_SUFFIX = ".steps"
+"""A participant served on the unix socket PATH serves its step socket on PATH.steps."""
+_HEADER = struct.Struct("<IB")
+"""A frame's header: the payload's length (uint32, little-endian; the header not counted), then
+its kind (uint8)."""
+_STEP = 0
+"""Kind of a frame carrying a serialized DoStepRequest (in) or DoStepResponse (out)."""
+_END = 1
+"""Kind of the participant's last frame: a serialized StepSocketEnd."""
+
+
+class _Aborted(Exception):
+    """A step refused on the step socket: the end of its connection, with this status."""
+
+    def __init__(self, code: grpc.StatusCode, message: str) -> None:
+        super().__init__(message)
+        self.code, self.message = code, message
+
+
+class _SocketContext:
+    """What ``_Servicer._step`` needs of a call's context, for a step socket connection: its
+    peer, and ``abort``, which ends the connection with a status (``_Aborted``)."""
+
+    def __init__(self, peer: str) -> None:
+        self._peer = peer
+
+    def peer(self) -> str:
+        return self._peer
+
+    async def abort(self, code: grpc.StatusCode, details: str = "") -> NoReturn:
+        raise _Aborted(code, details)
+
+
+_Context: TypeAlias = grpc.aio.ServicerContext | _SocketContext
+
+
+class _StepSocket:
+    """The step socket: a plain unix socket (mode 0600) on which the participant serves its
+    step loop without gRPC, one ``_StepConnection`` per orchestrator."""
+
+    def __init__(self, servicer: _Servicer, path: Path, limit: Callable[[], int]) -> None:
+        self.servicer, self.path, self.limit = servicer, path, limit
+        """``limit()``: the largest frame taken [bytes] (the server's gRPC receive limit)."""
+        self.connections: set[_StepConnection] = set()
+        self._server: asyncio.AbstractServer | None = None
+
+    async def start(self) -> None:
+        ports.clear_socket(self.path, "the step socket")
+        sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+        try:
+            os.fchmod(sock.fileno(), 0o600)  # Linux makes the file with the socket's mode
+            sock.bind(str(self.path))
+            os.chmod(self.path, 0o600)
+        except OSError as exc:
+            sock.close()
+            raise ScenarioError(f"cannot serve the step socket on {self.path} ({exc})") from None
+        self._server = await asyncio.get_running_loop().create_unix_server(
+            lambda: _StepConnection(self), sock=sock
+        )
+
+    async def stop(self) -> None:
+        server, self._server = self._server, None
+        if server is None:
+            return
+        server.close()
+        for connection in list(self.connections):
+            connection.close()
+        await server.wait_closed()
+        with contextlib.suppress(FileNotFoundError):
+            self.path.unlink()
+
+
+class _StepConnection(asyncio.Protocol):
+    """One orchestrator's step loop on the step socket: frames in, each request stepped by
+    ``_Servicer.stream_step`` (StepStream's loop body) and answered in order; the end (the
+    orchestrator's half-close, a refused step) is a StepSocketEnd frame, then the close."""
+
+    def __init__(self, socket: _StepSocket) -> None:
+        self._socket = socket
+        self._buffer = bytearray()
+        self._frames: collections.deque[tuple[int, bytes]] = collections.deque()
+        self._oversize = 0
+        """The length of a frame over the limit, refused unread (0: none)."""
+        self._eof = False
+        self._paused = False
+        self._waiter: asyncio.Future[None] | None = None
+        self._transport: asyncio.Transport | None = None
+        self._task: asyncio.Task[None] | None = None
+
+    def connection_made(self, transport: asyncio.BaseTransport) -> None:
+        self._transport = cast(asyncio.Transport, transport)  # uvloop's is not a subclass
+        self._socket.connections.add(self)
+        peer = f"unix:{self._socket.path}"
+        raw = transport.get_extra_info("socket")
+        if raw is not None and hasattr(socket, "SO_PEERCRED"):
+            with contextlib.suppress(OSError):
+                credentials = raw.getsockopt(socket.SOL_SOCKET, socket.SO_PEERCRED, 12)
+                peer += f" (pid {struct.unpack('3i', credentials)[0]})"
+        self._task = asyncio.get_running_loop().create_task(self._serve(peer))
+        _BACKGROUND.add(self._task)
+        self._task.add_done_callback(_BACKGROUND.discard)
+
+    def data_received(self, data: bytes) -> None:
+        if self._oversize:
+            return
+        buffer = self._buffer
+        buffer += data
+        size = len(buffer)
+        at = 0
+        while size - at >= _HEADER.size:
+            length, kind = _HEADER.unpack_from(buffer, at)
+            if length > self._socket.limit():
+                self._oversize = length  # refused without reading it
+                buffer.clear()
+                self._pause()
+                break
+            end = at + _HEADER.size + length
+            if end > size:
+                break
+            self._frames.append((kind, bytes(buffer[at + _HEADER.size : end])))
+            at = end
+        if at:
+            del buffer[:at]
+        if len(self._frames) > 1:
+            self._pause()  # one request at a time: the orchestrator waits for each answer
+        if self._frames or self._oversize:
+            self._wake()
+
+    def eof_received(self) -> bool:
+        self._eof = True
+        self._wake()
+        return True  # keep writing: the answers, then the end
+
+    def connection_lost(self, exc: Exception | None) -> None:
+        self._eof = True
+        self._socket.connections.discard(self)
+        self._wake()
+
+    def close(self) -> None:
+        if self._transport is not None:
+            self._transport.close()
+
+    def _pause(self) -> None:
+        if not self._paused and self._transport is not None:
+            self._paused = True
+            self._transport.pause_reading()
+
+    def _wake(self) -> None:
+        waiter, self._waiter = self._waiter, None
+        if waiter is not None and not waiter.done():
+            waiter.set_result(None)
+
+    async def _next(self) -> tuple[int, bytes] | None:
+        """The next frame; None after the orchestrator's half-close (or a lost connection)."""
+        while True:
+            if self._frames:
+                frame = self._frames.popleft()
+                if self._paused and not self._frames and not self._oversize:
+                    self._paused = False
+                    assert self._transport is not None
+                    self._transport.resume_reading()
+                return frame
+            if self._oversize:
+                raise _Aborted(
+                    grpc.StatusCode.RESOURCE_EXHAUSTED,
+                    f"a frame of {self._oversize} bytes arrived on the step socket, over the "
+                    f"participant's receive limit of {self._socket.limit()} bytes; raise the "
+                    f'limit (docs/protocol.md "Message size") or send smaller values',
+                )
+            if self._eof:
+                return None
+            self._waiter = asyncio.get_running_loop().create_future()
+            await self._waiter
+
+    async def _serve(self, peer: str) -> None:
+        servicer, stream, context = self._socket.servicer, _Stream(), _SocketContext(peer)
+        code, message = grpc.StatusCode.OK, ""
+        try:
+            while (frame := await self._next()) is not None:
+                kind, payload = frame
+                if kind != _STEP:
+                    raise _Aborted(
+                        grpc.StatusCode.INVALID_ARGUMENT,
+                        f"a frame of kind {kind} arrived on the step socket; the orchestrator "
+                        f"sends kind {_STEP} (a DoStepRequest) only (docs/protocol.md)",
+                    )
+                try:
+                    received = wire.step_request(payload)
+                except DecodeError as exc:
+                    raise _Aborted(
+                        grpc.StatusCode.INVALID_ARGUMENT,
+                        f"a kind {_STEP} frame on the step socket is not a DoStepRequest ({exc})",
+                    ) from None
+                answer = await servicer.stream_step(stream, received, context)
+                pieces = wire.answer_pieces(answer)  # long Binary values as they are
+                size = sum(map(len, pieces)) if len(pieces) > 1 else len(pieces[0])
+                assert self._transport is not None
+                self._transport.writelines((_HEADER.pack(size, _STEP), *pieces))
+        except _Aborted as exc:
+            code, message = exc.code, exc.message
+        except Exception as exc:  # the runtime's own failure: the loop ends, the server serves on
+            log.exception("step_socket_failed", exc_info=exc)
+            code, message = grpc.StatusCode.INTERNAL, f"{type(exc).__name__}: {exc}"
+        finally:
+            servicer.stream_ended(stream, "its step socket connection ended without Terminate")
+        transport = self._transport
+        if transport is not None and not transport.is_closing():
+            end = wire.step_socket_end(code.value[0], message)
+            transport.writelines((_HEADER.pack(len(end), _END), end))
+            transport.close()
+
+
 class _NotReady(Exception):
     """A call arrived before the participant was open and described."""
 
 
-async def _guard(context: grpc.aio.ServicerContext, call: Callable[[], T | Awaitable[T]]) -> T:
+async def _guard(context: _Context, call: Callable[[], T | Awaitable[T]]) -> T:
     """Runs ``call``; maps what it raises onto a status code with an actionable message."""
     try:
         result = call()
@@ -423,7 +660,7 @@ async def _guard(context: grpc.aio.ServicerContext, call: Callable[[], T | Await
         await _refuse(context, exc)
 
 
-async def _refuse(context: grpc.aio.ServicerContext, exc: Exception) -> NoReturn:
+async def _refuse(context: _Context, exc: Exception) -> NoReturn:
     """Fails the call with the status code and message for ``exc``, raised by the runtime's or
     the participant's code while serving it."""
     if isinstance(exc, _NotReady):
@@ -439,9 +676,7 @@ async def _refuse(context: grpc.aio.ServicerContext, exc: Exception) -> NoReturn
     await _abort(context, grpc.StatusCode.INTERNAL, f"{type(exc).__name__}: {exc}")
 
 
-async def _abort(
-    context: grpc.aio.ServicerContext, code: grpc.StatusCode, message: str
-) -> NoReturn:
+async def _abort(context: _Context, code: grpc.StatusCode, message: str) -> NoReturn:
     await context.abort(code, message)
     raise AssertionError("unreachable")  # context.abort raises
 
@@ -499,6 +734,13 @@ class ParticipantServer:
         self._server: grpc.aio.Server | None = None
         self._health_server: grpc.aio.Server | None = None
         self._servicer: _Servicer | None = None
+        self._step_socket: _StepSocket | None = None
+
+    @property
+    def step_socket(self) -> Path | None:
+        """Where the participant also serves its step loop without gRPC (``PATH.steps`` beside
+        its unix socket ``PATH``, when it serves on one without TLS), or None."""
+        return self._step_socket.path if self._step_socket is not None else None
 
     @property
     def address(self) -> str:
@@ -534,6 +776,10 @@ class ParticipantServer:
             server, self._server = self._server, None
             await server.stop(0)
             self._server = await self._serve(credentials, self.port)
+        if await self._serve_steps():
+            assert self._step_socket is not None
+            offered = replace(description.capabilities, step_socket=str(self._step_socket.path))
+            description = replace(description, capabilities=offered)
         self._servicer.ready(description)
         self._name = description.name
         await self.participant.watch_health(self._report_health)
@@ -562,6 +808,23 @@ class ParticipantServer:
         await server.start()
         return server
 
+    async def _serve_steps(self) -> bool:
+        """Serve the step socket beside the unix socket (not for TLS: its clients want the
+        channel's protection); whether it serves."""
+        if self.unix_socket is None or self.security.tls or self._servicer is None:
+            return False
+        path = self.unix_socket.with_name(self.unix_socket.name + STEP_SOCKET_SUFFIX)
+        if len(os.fsencode(path)) > ports.SOCKET_PATH_MAX:
+            log.warning(
+                "no_step_socket",
+                path=str(path),
+                why=f"longer than {ports.SOCKET_PATH_MAX} bytes; steps travel over StepStream",
+            )
+            return False
+        self._step_socket = _StepSocket(self._servicer, path, lambda: self.limits.transport[0])
+        await self._step_socket.start()
+        return True
+
     async def stop(self, grace: float = 2.0) -> None:
         """NOT_SERVING, end the active run, stop the server, close the participant."""
         self._stopping = True
@@ -575,6 +838,8 @@ class ParticipantServer:
                 log.exception("terminate_on_shutdown_failed")
         if self._server is not None:
             await self._server.stop(grace)
+        if self._step_socket is not None:
+            await self._step_socket.stop()
         if self._health_server is not None:
             await self._health_server.stop(0)
         await self.participant.close()

@@ -464,6 +464,7 @@ def description_to_pb(description: Description) -> pb.DescribeResponse:
             streaming=caps.streaming,
             variable_step_size=caps.variable_step_size,
             fixed_step_size=caps.fixed_step_size,
+            step_socket=caps.step_socket,
         ),
         channels=[
             pb.ChannelDescription(
@@ -512,6 +513,7 @@ def description_from_pb(response: pb.DescribeResponse) -> Description:
             streaming=caps.streaming,
             variable_step_size=caps.variable_step_size,
             fixed_step_size=caps.fixed_step_size,
+            step_socket=caps.step_socket,
         ),
     )
 
@@ -600,14 +602,34 @@ def step_from_pb(
     return Step(request.run_id, request.current_time, request.step_size, inputs)
 
 
-Answer: TypeAlias = pb.DoStepResponse | bytes
+class Pieces(list[bytes]):
+    """An answer serialized as pieces whose concatenation is the message: the message without
+    its long Binary outputs, then each one's binding head and the value itself (not copied).
+    gRPC's serializer joins them once (``serialized``); the step socket writes them as they are
+    (``answer_pieces``)."""
+
+
+Answer: TypeAlias = pb.DoStepResponse | bytes | Pieces
 """An answer to a step as the participant runtime hands it to gRPC: a message, or one already
-serialized when it carries long Binary outputs (``serialized`` sends either)."""
+serialized (in pieces) when it carries long Binary outputs (``serialized`` sends either)."""
 
 
 def serialized(answer: Answer) -> bytes:
     """The bytes gRPC sends for ``answer`` (the participant runtime's response serializer)."""
-    return answer if type(answer) is bytes else answer.SerializeToString()  # type: ignore[union-attr]
+    kind = type(answer)
+    if kind is bytes:
+        return answer  # type: ignore[return-value]
+    if kind is Pieces:
+        return b"".join(answer)  # type: ignore[arg-type]
+    return answer.SerializeToString()  # type: ignore[union-attr]
+
+
+def answer_pieces(answer: Answer) -> list[bytes]:
+    """``answer`` serialized as pieces whose concatenation is the message, its long Binary
+    values not joined (what the step socket writes)."""
+    if type(answer) is Pieces:
+        return answer
+    return [serialized(answer)]
 
 
 def step_response(
@@ -862,10 +884,11 @@ def _apart(key: int, large: Iterable[tuple[str, bytes]]) -> list[bytes]:
     return pieces
 
 
-def _joined(response: pb.DoStepResponse, large: Iterable[tuple[str, bytes]]) -> bytes:
-    """``response`` serialized with the long Binary outputs ``large`` after it, joined once:
-    one copy of each value, where protobuf takes two (into the message, out of it)."""
-    return b"".join([response.SerializeToString(), *_apart(_OUTPUTS_KEY, large)])
+def _joined(response: pb.DoStepResponse, large: Iterable[tuple[str, bytes]]) -> Pieces:
+    """``response`` serialized with the long Binary outputs ``large`` after it, in pieces
+    (joined once at most, ``serialized``): protobuf would copy each value twice (into the
+    message, out of it)."""
+    return Pieces([response.SerializeToString(), *_apart(_OUTPUTS_KEY, large)])
 
 
 def step_pieces(
@@ -980,6 +1003,12 @@ def _binary_binding(data: memoryview) -> tuple[str, bytes] | None:
     except UnicodeDecodeError:
         return None
     return name, bytes(fields[_BINARY_KEY])
+
+
+def step_socket_end(code: int, message: str) -> bytes:
+    """The serialized StepSocketEnd a participant's step socket ends with (``code``: a gRPC
+    status code number)."""
+    return pb.StepSocketEnd(code=code, message=message).SerializeToString()
 
 
 # --- Terminate -------------------------------------------------------------------------------

@@ -81,6 +81,10 @@ class RunOptions:
     master's thread, built once per machine when the tool chain is installed, ``steps``), a
     run of in-process FMUs in C (``kernel``). False, or with ``COUPLER_NATIVE_STEPS=0``:
     Python's grpc.aio and one ctypes call per FMI call, with the same results."""
+    step_socket: bool = True
+    """Step a remote participant reached over ``unix://`` that offers a step socket
+    (docs/protocol.md "Step socket") over it, natively and without gRPC. False, or with
+    ``COUPLER_STEP_SOCKET=0``: over its StepStream, with the same results."""
     on_abandoned: Callable[[RunEnd], None] | None = field(default=None, compare=False)
     """Called on the watchdog's thread when the run is abandoned because the master's thread
     is stuck in a participant (an in-process FMU hanging past its deadline, or through an

@@ -132,7 +132,7 @@ async def run_scenario(
                 "--parquet needs the pyarrow package: install it (pip install pyarrow, or "
                 "uv sync in a checkout) or leave --parquet out (results.csv is always written)"
             )
-        steps = native_step_channel.transport(options.native_steps)
+        steps = native_step_channel.transport(options.native_steps, options.step_socket)
         async with opened(scenario, options, budget, steps=steps) as roster:
             checked = check(scenario, roster, options)
             plan = build_plan(checked, wire(checked), options)

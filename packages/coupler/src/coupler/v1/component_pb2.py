@@ -24,39 +24,41 @@ _sym_db = _symbol_database.Default()
 
 
 
-DESCRIPTOR = _descriptor_pool.Default().AddSerializedFile(b'\n\x1a\x63oupler/v1/component.proto\x12\ncoupler.v1\"\x83\x01\n\x0fVariableBinding\x12\x0f\n\x07\x63hannel\x18\x01 \x01(\t\x12\x0e\n\x04real\x18\x02 \x01(\x01H\x00\x12\x11\n\x07integer\x18\x03 \x01(\x05H\x00\x12\x11\n\x07\x62oolean\x18\x04 \x01(\x08H\x00\x12\x0e\n\x04text\x18\x05 \x01(\tH\x00\x12\x10\n\x06\x62inary\x18\x06 \x01(\x0cH\x00\x42\x07\n\x05value\"\xe9\x01\n\x12\x43hannelDescription\x12\x0c\n\x04name\x18\x01 \x01(\t\x12(\n\tcausality\x18\x02 \x01(\x0e\x32\x15.coupler.v1.Causality\x12#\n\x04type\x18\x03 \x01(\x0e\x32\x15.coupler.v1.ValueType\x12\x0c\n\x04unit\x18\x04 \x01(\t\x12*\n\x05start\x18\x05 \x01(\x0b\x32\x1b.coupler.v1.VariableBinding\x12\x13\n\x0b\x64\x65scription\x18\x06 \x01(\t\x12\x14\n\x0cmessage_type\x18\x07 \x01(\t\x12\x11\n\tmax_bytes\x18\x08 \x01(\x04\"V\n\x0c\x43\x61pabilities\x12\x11\n\tstreaming\x18\x01 \x01(\x08\x12\x1a\n\x12variable_step_size\x18\x02 \x01(\x08\x12\x17\n\x0f\x66ixed_step_size\x18\x03 \x01(\x01\"\x11\n\x0f\x44\x65scribeRequest\"\x9a\x01\n\x10\x44\x65scribeResponse\x12\x0c\n\x04name\x18\x01 \x01(\t\x12\x30\n\x08\x63hannels\x18\x02 \x03(\x0b\x32\x1e.coupler.v1.ChannelDescription\x12.\n\x0c\x63\x61pabilities\x18\x03 \x01(\x0b\x32\x18.coupler.v1.Capabilities\x12\x16\n\x0eimplementation\x18\x04 \x01(\t\"\xf9\x01\n\x11InitializeRequest\x12\x0e\n\x06run_id\x18\x01 \x01(\t\x12\x12\n\nrun_secret\x18\x08 \x01(\x0c\x12\x12\n\nstart_time\x18\x02 \x01(\x01\x12\x11\n\tstep_size\x18\x03 \x01(\x01\x12\x16\n\tstop_time\x18\x04 \x01(\x01H\x00\x88\x01\x01\x12/\n\nparameters\x18\x05 \x03(\x0b\x32\x1b.coupler.v1.VariableBinding\x12+\n\x06inputs\x18\x06 \x03(\x0b\x32\x1b.coupler.v1.VariableBinding\x12\x15\n\rlease_seconds\x18\x07 \x01(\x01\x42\x0c\n\n_stop_time\"B\n\x12InitializeResponse\x12,\n\x07outputs\x18\x01 \x03(\x0b\x32\x1b.coupler.v1.VariableBinding\"\x89\x01\n\rDoStepRequest\x12\x14\n\x0c\x63urrent_time\x18\x01 \x01(\x01\x12\x11\n\tstep_size\x18\x02 \x01(\x01\x12+\n\x06inputs\x18\x03 \x03(\x0b\x32\x1b.coupler.v1.VariableBinding\x12\x0e\n\x06run_id\x18\x04 \x01(\t\x12\x12\n\nrun_secret\x18\x05 \x01(\x0c\"k\n\x0e\x44oStepResponse\x12,\n\x07outputs\x18\x01 \x03(\x0b\x32\x1b.coupler.v1.VariableBinding\x12\x11\n\tterminate\x18\x02 \x01(\x08\x12\x18\n\x10terminate_reason\x18\x03 \x01(\t\"F\n\x10TerminateRequest\x12\x0e\n\x06reason\x18\x01 \x01(\t\x12\x0e\n\x06run_id\x18\x02 \x01(\t\x12\x12\n\nrun_secret\x18\x03 \x01(\x0c\"\x13\n\x11TerminateResponse*j\n\tCausality\x12\x19\n\x15\x43\x41USALITY_UNSPECIFIED\x10\x00\x12\x13\n\x0f\x43\x41USALITY_INPUT\x10\x01\x12\x14\n\x10\x43\x41USALITY_OUTPUT\x10\x02\x12\x17\n\x13\x43\x41USALITY_PARAMETER\x10\x03*\xb6\x01\n\tValueType\x12\x1a\n\x16VALUE_TYPE_UNSPECIFIED\x10\x00\x12\x13\n\x0fVALUE_TYPE_REAL\x10\x01\x12\x16\n\x12VALUE_TYPE_INTEGER\x10\x02\x12\x16\n\x12VALUE_TYPE_BOOLEAN\x10\x03\x12\x15\n\x11VALUE_TYPE_STRING\x10\x04\x12\x15\n\x11VALUE_TYPE_BINARY\x10\x05\x12\x1a\n\x16VALUE_TYPE_ENUMERATION\x10\x06\x32\xfe\x02\n\x14GRPCComponentService\x12\x45\n\x08\x44\x65scribe\x12\x1b.coupler.v1.DescribeRequest\x1a\x1c.coupler.v1.DescribeResponse\x12K\n\nInitialize\x12\x1d.coupler.v1.InitializeRequest\x1a\x1e.coupler.v1.InitializeResponse\x12?\n\x06\x44oStep\x12\x19.coupler.v1.DoStepRequest\x1a\x1a.coupler.v1.DoStepResponse\x12G\n\nStepStream\x12\x19.coupler.v1.DoStepRequest\x1a\x1a.coupler.v1.DoStepResponse(\x01\x30\x01\x12H\n\tTerminate\x12\x1c.coupler.v1.TerminateRequest\x1a\x1d.coupler.v1.TerminateResponseb\x06proto3')
+DESCRIPTOR = _descriptor_pool.Default().AddSerializedFile(b'\n\x1a\x63oupler/v1/component.proto\x12\ncoupler.v1\"\x83\x01\n\x0fVariableBinding\x12\x0f\n\x07\x63hannel\x18\x01 \x01(\t\x12\x0e\n\x04real\x18\x02 \x01(\x01H\x00\x12\x11\n\x07integer\x18\x03 \x01(\x05H\x00\x12\x11\n\x07\x62oolean\x18\x04 \x01(\x08H\x00\x12\x0e\n\x04text\x18\x05 \x01(\tH\x00\x12\x10\n\x06\x62inary\x18\x06 \x01(\x0cH\x00\x42\x07\n\x05value\"\xe9\x01\n\x12\x43hannelDescription\x12\x0c\n\x04name\x18\x01 \x01(\t\x12(\n\tcausality\x18\x02 \x01(\x0e\x32\x15.coupler.v1.Causality\x12#\n\x04type\x18\x03 \x01(\x0e\x32\x15.coupler.v1.ValueType\x12\x0c\n\x04unit\x18\x04 \x01(\t\x12*\n\x05start\x18\x05 \x01(\x0b\x32\x1b.coupler.v1.VariableBinding\x12\x13\n\x0b\x64\x65scription\x18\x06 \x01(\t\x12\x14\n\x0cmessage_type\x18\x07 \x01(\t\x12\x11\n\tmax_bytes\x18\x08 \x01(\x04\"k\n\x0c\x43\x61pabilities\x12\x11\n\tstreaming\x18\x01 \x01(\x08\x12\x1a\n\x12variable_step_size\x18\x02 \x01(\x08\x12\x17\n\x0f\x66ixed_step_size\x18\x03 \x01(\x01\x12\x13\n\x0bstep_socket\x18\x04 \x01(\t\"\x11\n\x0f\x44\x65scribeRequest\"\x9a\x01\n\x10\x44\x65scribeResponse\x12\x0c\n\x04name\x18\x01 \x01(\t\x12\x30\n\x08\x63hannels\x18\x02 \x03(\x0b\x32\x1e.coupler.v1.ChannelDescription\x12.\n\x0c\x63\x61pabilities\x18\x03 \x01(\x0b\x32\x18.coupler.v1.Capabilities\x12\x16\n\x0eimplementation\x18\x04 \x01(\t\"\xf9\x01\n\x11InitializeRequest\x12\x0e\n\x06run_id\x18\x01 \x01(\t\x12\x12\n\nrun_secret\x18\x08 \x01(\x0c\x12\x12\n\nstart_time\x18\x02 \x01(\x01\x12\x11\n\tstep_size\x18\x03 \x01(\x01\x12\x16\n\tstop_time\x18\x04 \x01(\x01H\x00\x88\x01\x01\x12/\n\nparameters\x18\x05 \x03(\x0b\x32\x1b.coupler.v1.VariableBinding\x12+\n\x06inputs\x18\x06 \x03(\x0b\x32\x1b.coupler.v1.VariableBinding\x12\x15\n\rlease_seconds\x18\x07 \x01(\x01\x42\x0c\n\n_stop_time\"B\n\x12InitializeResponse\x12,\n\x07outputs\x18\x01 \x03(\x0b\x32\x1b.coupler.v1.VariableBinding\"\x89\x01\n\rDoStepRequest\x12\x14\n\x0c\x63urrent_time\x18\x01 \x01(\x01\x12\x11\n\tstep_size\x18\x02 \x01(\x01\x12+\n\x06inputs\x18\x03 \x03(\x0b\x32\x1b.coupler.v1.VariableBinding\x12\x0e\n\x06run_id\x18\x04 \x01(\t\x12\x12\n\nrun_secret\x18\x05 \x01(\x0c\"k\n\x0e\x44oStepResponse\x12,\n\x07outputs\x18\x01 \x03(\x0b\x32\x1b.coupler.v1.VariableBinding\x12\x11\n\tterminate\x18\x02 \x01(\x08\x12\x18\n\x10terminate_reason\x18\x03 \x01(\t\".\n\rStepSocketEnd\x12\x0c\n\x04\x63ode\x18\x01 \x01(\x05\x12\x0f\n\x07message\x18\x02 \x01(\t\"F\n\x10TerminateRequest\x12\x0e\n\x06reason\x18\x01 \x01(\t\x12\x0e\n\x06run_id\x18\x02 \x01(\t\x12\x12\n\nrun_secret\x18\x03 \x01(\x0c\"\x13\n\x11TerminateResponse*j\n\tCausality\x12\x19\n\x15\x43\x41USALITY_UNSPECIFIED\x10\x00\x12\x13\n\x0f\x43\x41USALITY_INPUT\x10\x01\x12\x14\n\x10\x43\x41USALITY_OUTPUT\x10\x02\x12\x17\n\x13\x43\x41USALITY_PARAMETER\x10\x03*\xb6\x01\n\tValueType\x12\x1a\n\x16VALUE_TYPE_UNSPECIFIED\x10\x00\x12\x13\n\x0fVALUE_TYPE_REAL\x10\x01\x12\x16\n\x12VALUE_TYPE_INTEGER\x10\x02\x12\x16\n\x12VALUE_TYPE_BOOLEAN\x10\x03\x12\x15\n\x11VALUE_TYPE_STRING\x10\x04\x12\x15\n\x11VALUE_TYPE_BINARY\x10\x05\x12\x1a\n\x16VALUE_TYPE_ENUMERATION\x10\x06\x32\xfe\x02\n\x14GRPCComponentService\x12\x45\n\x08\x44\x65scribe\x12\x1b.coupler.v1.DescribeRequest\x1a\x1c.coupler.v1.DescribeResponse\x12K\n\nInitialize\x12\x1d.coupler.v1.InitializeRequest\x1a\x1e.coupler.v1.InitializeResponse\x12?\n\x06\x44oStep\x12\x19.coupler.v1.DoStepRequest\x1a\x1a.coupler.v1.DoStepResponse\x12G\n\nStepStream\x12\x19.coupler.v1.DoStepRequest\x1a\x1a.coupler.v1.DoStepResponse(\x01\x30\x01\x12H\n\tTerminate\x12\x1c.coupler.v1.TerminateRequest\x1a\x1d.coupler.v1.TerminateResponseb\x06proto3')
 
 _globals = globals()
 _builder.BuildMessageAndEnumDescriptors(DESCRIPTOR, _globals)
 _builder.BuildTopDescriptorsAndMessages(DESCRIPTOR, 'coupler.v1.component_pb2', _globals)
 if not _descriptor._USE_C_DESCRIPTORS:
   DESCRIPTOR._loaded_options = None
-  _globals['_CAUSALITY']._serialized_start=1338
-  _globals['_CAUSALITY']._serialized_end=1444
-  _globals['_VALUETYPE']._serialized_start=1447
-  _globals['_VALUETYPE']._serialized_end=1629
+  _globals['_CAUSALITY']._serialized_start=1407
+  _globals['_CAUSALITY']._serialized_end=1513
+  _globals['_VALUETYPE']._serialized_start=1516
+  _globals['_VALUETYPE']._serialized_end=1698
   _globals['_VARIABLEBINDING']._serialized_start=43
   _globals['_VARIABLEBINDING']._serialized_end=174
   _globals['_CHANNELDESCRIPTION']._serialized_start=177
   _globals['_CHANNELDESCRIPTION']._serialized_end=410
   _globals['_CAPABILITIES']._serialized_start=412
-  _globals['_CAPABILITIES']._serialized_end=498
-  _globals['_DESCRIBEREQUEST']._serialized_start=500
-  _globals['_DESCRIBEREQUEST']._serialized_end=517
-  _globals['_DESCRIBERESPONSE']._serialized_start=520
-  _globals['_DESCRIBERESPONSE']._serialized_end=674
-  _globals['_INITIALIZEREQUEST']._serialized_start=677
-  _globals['_INITIALIZEREQUEST']._serialized_end=926
-  _globals['_INITIALIZERESPONSE']._serialized_start=928
-  _globals['_INITIALIZERESPONSE']._serialized_end=994
-  _globals['_DOSTEPREQUEST']._serialized_start=997
-  _globals['_DOSTEPREQUEST']._serialized_end=1134
-  _globals['_DOSTEPRESPONSE']._serialized_start=1136
-  _globals['_DOSTEPRESPONSE']._serialized_end=1243
-  _globals['_TERMINATEREQUEST']._serialized_start=1245
-  _globals['_TERMINATEREQUEST']._serialized_end=1315
-  _globals['_TERMINATERESPONSE']._serialized_start=1317
-  _globals['_TERMINATERESPONSE']._serialized_end=1336
-  _globals['_GRPCCOMPONENTSERVICE']._serialized_start=1632
-  _globals['_GRPCCOMPONENTSERVICE']._serialized_end=2014
+  _globals['_CAPABILITIES']._serialized_end=519
+  _globals['_DESCRIBEREQUEST']._serialized_start=521
+  _globals['_DESCRIBEREQUEST']._serialized_end=538
+  _globals['_DESCRIBERESPONSE']._serialized_start=541
+  _globals['_DESCRIBERESPONSE']._serialized_end=695
+  _globals['_INITIALIZEREQUEST']._serialized_start=698
+  _globals['_INITIALIZEREQUEST']._serialized_end=947
+  _globals['_INITIALIZERESPONSE']._serialized_start=949
+  _globals['_INITIALIZERESPONSE']._serialized_end=1015
+  _globals['_DOSTEPREQUEST']._serialized_start=1018
+  _globals['_DOSTEPREQUEST']._serialized_end=1155
+  _globals['_DOSTEPRESPONSE']._serialized_start=1157
+  _globals['_DOSTEPRESPONSE']._serialized_end=1264
+  _globals['_STEPSOCKETEND']._serialized_start=1266
+  _globals['_STEPSOCKETEND']._serialized_end=1312
+  _globals['_TERMINATEREQUEST']._serialized_start=1314
+  _globals['_TERMINATEREQUEST']._serialized_end=1384
+  _globals['_TERMINATERESPONSE']._serialized_start=1386
+  _globals['_TERMINATERESPONSE']._serialized_end=1405
+  _globals['_GRPCCOMPONENTSERVICE']._serialized_start=1701
+  _globals['_GRPCCOMPONENTSERVICE']._serialized_end=2083
 # @@protoc_insertion_point(module_scope)

@@ -201,6 +201,7 @@ class Capabilities(_message.Message):
     STREAMING_FIELD_NUMBER: _builtins.int
     VARIABLE_STEP_SIZE_FIELD_NUMBER: _builtins.int
     FIXED_STEP_SIZE_FIELD_NUMBER: _builtins.int
+    STEP_SOCKET_FIELD_NUMBER: _builtins.int
     streaming: _builtins.bool
     """The participant accepts StepStream."""
     variable_step_size: _builtins.bool
@@ -210,16 +211,31 @@ class Capabilities(_message.Message):
     (n * fixed_step_size with n >= 1, to a relative tolerance of 1e-9). A participant that
     advances its simulator in fixed ticks (e.g. OpenRails' lockstep step) declares its tick here.
     """
+    step_socket: _builtins.str
+    """Non-empty: an absolute unix socket path on the participant's host where the participant ALSO
+    serves its step loop without gRPC (the step socket, docs/protocol.md "Step socket"): the
+    requests and answers of StepStream, each framed as a little-endian uint32 length of the
+    payload, a uint8 kind and the payload; the orchestrator -> participant frames are kind 0, one
+    serialized DoStepRequest each, and a half-close ends them; the participant answers each with
+    a kind 0 frame (one serialized DoStepResponse, in order) and ends with one kind 1 frame
+    (StepSocketEnd), then closes. StepStream's rules hold unchanged (run id and secret in every
+    request, the run ends with the connection when Terminate has not come first). Offered only
+    by a participant served on a unix socket without TLS; the socket file is mode 0600 and no
+    bearer token travels on it: the run secret, which only the token-checked Initialize hands
+    out, protects a run. Empty (what a participant that predates the field sends): none, and
+    the orchestrator steps over StepStream.
+    """
     def __init__(
         self,
         *,
         streaming: _builtins.bool = ...,
         variable_step_size: _builtins.bool = ...,
         fixed_step_size: _builtins.float = ...,
+        step_socket: _builtins.str = ...,
     ) -> None: ...
     _HasFieldArgType: _TypeAlias = _Never  # noqa: Y015
     def HasField(self, field_name: _HasFieldArgType) -> _builtins.bool: ...
-    _ClearFieldArgType: _TypeAlias = _typing.Literal["fixed_step_size", b"fixed_step_size", "streaming", b"streaming", "variable_step_size", b"variable_step_size"]  # noqa: Y015
+    _ClearFieldArgType: _TypeAlias = _typing.Literal["fixed_step_size", b"fixed_step_size", "step_socket", b"step_socket", "streaming", b"streaming", "variable_step_size", b"variable_step_size"]  # noqa: Y015
     def ClearField(self, field_name: _ClearFieldArgType) -> None: ...
     def WhichOneof(self, oneof_group: _Never) -> None: ...
 
@@ -427,6 +443,36 @@ class DoStepResponse(_message.Message):
     def WhichOneof(self, oneof_group: _Never) -> None: ...
 
 Global___DoStepResponse: _TypeAlias = DoStepResponse  # noqa: Y015
+
+@_typing.final
+class StepSocketEnd(_message.Message):
+    """The last frame (kind 1) a participant writes on its step socket (Capabilities.step_socket):
+    how the step loop ended, as a gRPC status -- 0 (OK) after the orchestrator's half-close, else
+    the code StepStream would have ended with (e.g. 7 PERMISSION_DENIED, 8 RESOURCE_EXHAUSTED for
+    a frame over the participant's receive limit, named with its size and the limit).
+    """
+
+    DESCRIPTOR: _descriptor.Descriptor
+
+    CODE_FIELD_NUMBER: _builtins.int
+    MESSAGE_FIELD_NUMBER: _builtins.int
+    code: _builtins.int
+    """A gRPC status code number (google.rpc.Code)."""
+    message: _builtins.str
+    """What went wrong, for people; empty when code is 0."""
+    def __init__(
+        self,
+        *,
+        code: _builtins.int = ...,
+        message: _builtins.str = ...,
+    ) -> None: ...
+    _HasFieldArgType: _TypeAlias = _Never  # noqa: Y015
+    def HasField(self, field_name: _HasFieldArgType) -> _builtins.bool: ...
+    _ClearFieldArgType: _TypeAlias = _typing.Literal["code", b"code", "message", b"message"]  # noqa: Y015
+    def ClearField(self, field_name: _ClearFieldArgType) -> None: ...
+    def WhichOneof(self, oneof_group: _Never) -> None: ...
+
+Global___StepSocketEnd: _TypeAlias = StepSocketEnd  # noqa: Y015
 
 @_typing.final
 class TerminateRequest(_message.Message):

@@ -81,6 +81,11 @@ def format_description(description: Description) -> str:
             f", fixed_step_size={description.capabilities.fixed_step_size:g}"
             if description.capabilities.fixed_step_size
             else ""
+        )
+        + (
+            f", step_socket={description.capabilities.step_socket}"
+            if description.capabilities.step_socket
+            else ""
         ),
         "",
     ]

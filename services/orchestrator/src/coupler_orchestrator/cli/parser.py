@@ -190,6 +190,14 @@ def run_options(command: argparse.ArgumentParser) -> None:
         "the native FMU step (C), both from the coupler-native package; the same results "
         "either way (also COUPLER_NATIVE_STEPS=0)",
     )
+    command.add_argument(
+        "--no-step-socket",
+        dest="step_socket",
+        action="store_false",
+        help="step participants on unix sockets over their StepStream (gRPC) even where they "
+        "offer a step socket (docs/protocol.md); the same results either way (also "
+        "COUPLER_STEP_SOCKET=0)",
+    )
     security_options(command)
 
 
@@ -281,6 +289,7 @@ def options_of(args: argparse.Namespace) -> RunOptions:
         call_timeout=args.call_timeout,
         isolate_fmus=args.isolate_fmus,
         native_steps=args.native_steps,
+        step_socket=args.step_socket,
         unpack_limit=args.unpack_limit * 1024 * 1024,
         max_message_bytes=round(args.max_message_size * 2**20),
         lease=args.lease,

@@ -347,13 +347,13 @@ class Master:
 
     def _step_paths(self, kernel_reason: str) -> dict[str, StepPath]:
         """How each member steps: all in C (the native FMU step), over the native step
-        channel, or in Python; and why."""
+        channel (its StepStream or its step socket), or in Python; and why."""
         if self._kernel is not None:
             return {m.name: StepPath("native FMU step", kernel_reason) for m in self.plan.order}
         paths = {}
         for m in self.plan.order:
             if m.name in self._split:
-                paths[m.name] = StepPath("native step channel", "its StepStream over C++ gRPC")
+                paths[m.name] = StepPath(*self._split[m.name].described)
             elif m.name in self._local:
                 paths[m.name] = StepPath("Python", f"in-process; not in C: {kernel_reason}")
             else:

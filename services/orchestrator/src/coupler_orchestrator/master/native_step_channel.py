@@ -16,14 +16,24 @@ It is compiled, with C++ gRPC bundled, when the coupler-native wheel is built (i
 declared once, by ``csrc/step_streams.h``, which its cffi binding reads); without
 coupler-native installed, or with ``--no-native-steps`` / ``COUPLER_NATIVE_STEPS=0``, remote
 steps go through ``grpc.aio`` with the same meaning, the same errors and the same results.
+
+A member reached over ``unix://`` whose Describe offers a step socket
+(``Capabilities.step_socket``, docs/protocol.md "Step socket") is stepped over that socket
+instead, by the same native calls (the target ``steps:PATH``): the same requests and answers,
+framed on a plain unix socket without gRPC's per-message work. ``--no-step-socket`` /
+``COUPLER_STEP_SOCKET=0`` keep its StepStream; a step socket that cannot be opened leaves the
+member on its StepStream too (equivalent), with a warning in the run's log naming the member,
+the path and why, which summary.json's step path repeats.
 """
 
 from __future__ import annotations
 
+import os
 from collections.abc import Callable, Mapping
 from typing import Any
 
 import grpc
+import structlog
 
 from coupler import wire
 from coupler.channels import Value
@@ -36,6 +46,12 @@ from coupler_orchestrator.native import ENVIRONMENT as ENVIRONMENT
 from coupler_orchestrator.native import NativeModule, wanted
 
 _CODES = {code.value[0]: code for code in grpc.StatusCode}
+log = structlog.get_logger("coupler.master")
+
+STEP_SOCKET_ENVIRONMENT = "COUPLER_STEP_SOCKET"
+"""``0`` keeps every member on its StepStream even where it offers a step socket."""
+STREAM = ("native step channel", "its StepStream over C++ gRPC")
+"""How summary.json names a member stepped over its StepStream, and why."""
 
 library = NativeModule("_step_streams", "the native step channel")
 """``library()``: the native step channel (``ffi``, ``lib``), or None (why is said once)."""
@@ -48,6 +64,13 @@ def enabled(asked: bool = True) -> bool:
     """Whether runs step remote members natively: asked for, not turned off by the
     environment, and the library at hand."""
     return wanted(asked) and library() is not None
+
+
+def socket_wanted(asked: bool = True) -> bool:
+    """Whether members that offer a step socket are stepped over it: asked for and not turned
+    off by ``COUPLER_STEP_SOCKET``."""
+    off = os.environ.get(STEP_SOCKET_ENVIRONMENT, "1").strip().lower() in ("0", "no", "false")
+    return asked and not off
 
 
 def why_python(participant: object, asked: bool) -> str:
@@ -64,9 +87,14 @@ def why_python(participant: object, asked: bool) -> str:
 class NativeSteps(StepTransport):
     """A remote participant's steps over the native step channel, given to it as its
     ``StepTransport`` (``transport``); ``split`` gives the master the two halves of a step.
-    Taken when the participant offers a StepStream; without one its steps stay DoStep calls."""
+    Taken when the participant offers a StepStream; without one its steps stay DoStep calls.
+    With ``step_socket`` (and ``socket_wanted``), over the participant's step socket where it
+    offers one and is reached over a unix socket."""
 
-    def __init__(self) -> None:
+    def __init__(self, step_socket: bool = True) -> None:
+        self._step_socket = step_socket
+        self.described = STREAM
+        """How summary.json names the way this member steps, and why (``steppers.Split``)."""
         native = library()
         assert native is not None, "NativeSteps without the native step channel"
         self._ffi, self._lib = native.ffi, native.lib
@@ -85,7 +113,8 @@ class NativeSteps(StepTransport):
         """Reads an answer's outputs in C when it is in its plain form (``_answers``)."""
 
     def start(self, participant: RemoteParticipant) -> bool:
-        if not participant.codec.description.capabilities.streaming:
+        capabilities = participant.codec.description.capabilities
+        if not capabilities.streaming and not capabilities.step_socket:
             return False
         self._remote = participant
         self._native = self._open(participant)
@@ -96,6 +125,12 @@ class NativeSteps(StepTransport):
         return True
 
     def _open(self, remote: RemoteParticipant) -> Any:
+        offered = remote.codec.description.capabilities.step_socket
+        self.described = STREAM
+        if offered and remote.address.startswith("unix://") and socket_wanted(self._step_socket):
+            stream = self._open_socket(remote, offered)
+            if stream is not None:
+                return stream
         security, tls = remote.security, uses_tls(remote.address)
         pems = [
             read_secret(path, what) if tls and path else b""
@@ -125,6 +160,35 @@ class NativeSteps(StepTransport):
                 f"{error} ({remote.address})", participant=remote.name, call="StepStream"
             )
         return stream
+
+    def _open_socket(self, remote: RemoteParticipant, path: str) -> Any:
+        """The participant's step socket opened, or None (said in the run's log): its
+        StepStream does the same."""
+        stream = self._lib.cs_open(
+            f"steps:{path}".encode(),
+            0,
+            b"",
+            b"",
+            b"",
+            self._ffi.new("char *[]", 1),
+            0,
+            remote.call_timeout,
+            *remote.limits.transport,
+        )
+        error = self._ffi.string(self._lib.cs_error(stream)).decode(errors="replace")
+        if not error:
+            self.described = ("native step socket", f"its step socket {path}, without gRPC")
+            return stream
+        self._lib.cs_close(stream, 0.0)
+        self.described = (STREAM[0], f"{STREAM[1]}: its step socket did not open ({error})")
+        log.warning(
+            "step_socket_unavailable",
+            participant=remote.name,
+            path=path,
+            error=error,
+            instead="its StepStream",
+        )
+        return None
 
     def split(self) -> NativeSteps | None:
         """The two halves of a step (``steppers.Split``) while this transport carries a run."""
@@ -205,7 +269,10 @@ class NativeSteps(StepTransport):
         self._sent = []
 
 
-def transport(asked: bool = True) -> Callable[[], StepTransport | None]:
+def transport(asked: bool = True, step_socket: bool = True) -> Callable[[], StepTransport | None]:
     """What gives each remote participant of a run its step transport: the native step
-    channel where it is wanted and at hand, else nothing (``grpc.aio``)."""
-    return NativeSteps if enabled(asked) else lambda: None
+    channel where it is wanted and at hand (over the step socket where one is offered and
+    ``step_socket``), else nothing (``grpc.aio``)."""
+    if not enabled(asked):
+        return lambda: None
+    return lambda: NativeSteps(step_socket)

@@ -33,6 +33,9 @@ class Split(Protocol):
     """A step taken in two halves on the caller's thread: ``send`` the request, ``receive`` the
     answer (blocking until it is there or the call deadline has passed)."""
 
+    described: tuple[str, str]
+    """How summary.json names this way of stepping (``StepPath``), and why."""
+
     def send(self, time: float, step: float, inputs: Mapping[str, Value]) -> None: ...
 
     def receive(self) -> Values: ...
