@@ -550,7 +550,8 @@ class _StepConnection(asyncio.Protocol):
             end = at + _HEADER.size + length
             if end > size:
                 break
-            self._frames.append((kind, bytes(buffer[at + _HEADER.size : end])))
+            with memoryview(buffer) as view:  # one copy (a bytearray slice would be a second)
+                self._frames.append((kind, bytes(view[at + _HEADER.size : end])))
             at = end
         if at:
             del buffer[:at]
