@@ -17,6 +17,7 @@ Each service runs as a subprocess, ``coupler`` as the user's command.
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import os
 import re
@@ -266,4 +267,12 @@ def test_the_railway_fleet_records_the_same_bytes_on_unix_sockets_and_on_tcp(
     assert f"listening at grpc://127.0.0.1:{ports['BRIDGE_PORT']}" in bridge["tcp"]
     unix = (tmp_path / "unix" / "results.csv").read_bytes()
     assert len(unix.splitlines()) == 122  # the header, t = 0 .. 120
+    if importlib.util.find_spec("coupler_native._step_streams") is not None:
+        paths = {
+            way: json.loads((tmp_path / way / "summary.json").read_text())["participants"]
+            for way in said
+        }  # the bridge and the map are stepped over their step sockets on unix sockets only
+        for name in ("OpenRails", "Map"):
+            assert paths["unix"][name]["step_path"]["path"] == "native step socket", name
+            assert paths["tcp"][name]["step_path"]["path"] == "native step channel", name
     assert unix == (tmp_path / "tcp" / "results.csv").read_bytes()
