@@ -348,7 +348,9 @@ async def get_camerasensor(request: web.Request) -> web.Response:
             f"OPENRAILS_MOCK_SENSORS / --sensors)",
         )
     distance = server.simulation.front_distance_m
-    data = await asyncio.to_thread(cameras.frame, name, distance)
+    data = cameras.cached(name, distance)  # a standing train's frame: no thread hop
+    if data is None:
+        data = await asyncio.to_thread(cameras.frame, name, distance)
     return web.Response(body=data, content_type="application/octet-stream")
 
 
