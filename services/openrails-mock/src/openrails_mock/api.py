@@ -334,7 +334,7 @@ async def get_objects(request: web.Request) -> web.Response:
     return web.json_response(world.objects.listing() if world is not None else [])
 
 
-async def get_camerasensor(request: web.Request) -> web.Response:
+async def get_camerasensor(request: web.Request) -> web.StreamResponse:
     """The current frame of a sensor, raw: RGB bytes, or (class/id, distance, intensity) as
     little-endian uint16 per pixel; rows top to bottom."""
     server = request.app[SERVER]
