@@ -45,7 +45,10 @@ Cases (steps/s, median of the repetitions; Coupler and its reference interleaved
 - camera frames x1: an 800 x 600 RGB frame (1.44 MB) per 0.2 s step from the OpenRails mock
   (a standing train) through the bridge (HTTP GET, its sensor channel) and the orchestrator
   into the map server, `coupler run` at 5 Hz simulated, unpaced; against two bare grpc.aio
-  bidi streams moving the same bytes per step (one frame out of a server, one into another);
+  bidi streams moving the same bytes per step (one frame out of a server, one into another).
+  The bridge and the map serve gRPC on unix sockets, as `coupler fleet` serves local
+  participants, and so do the two raw servers (the mock stays on HTTP over TCP, as
+  OpenRails);
 - render: the OpenRails mock's camera frames on the Annaberg-Schwarzenberg line, an 800 x 600
   RGB and a 200 x 150 depth frame per position (one core, in this process), against the 200 ms
   of one OpenRails lockstep step.
@@ -727,17 +730,17 @@ SENSORS = [{"sensorName": "front", "sensorType": "rgb", "trainName": "PLAYER",
             "width": 800, "height": 600, "fov": 45.0}]  # fmt: skip
 
 
-async def raw_frames(out_port: int, in_port: int, steps: int) -> float:
+async def raw_frames(sender: str, receiver: str, steps: int) -> float:
     """Steps/s of bare grpc.aio bidi streams moving a frame per step as the frames case does:
-    one from a sender (its response), one to a receiver (its request), both each step."""
+    one from a sender (its response), one to a receiver (its request), both each step; each
+    server at a grpc target (``unix:PATH``)."""
     import grpc
 
     from coupler.v1 import component_pb2_grpc as rpc
 
-    pairs = [(out_port, _frame_messages("out")[0]), (in_port, _frame_messages("in")[0])]
+    pairs = [(sender, _frame_messages("out")[0]), (receiver, _frame_messages("in")[0])]
     channels = [
-        grpc.aio.insecure_channel(f"127.0.0.1:{port}", options=FRAME_GRPC_OPTIONS)
-        for port, _ in pairs
+        grpc.aio.insecure_channel(target, options=FRAME_GRPC_OPTIONS) for target, _ in pairs
     ]
     try:
         for channel in channels:
@@ -766,19 +769,20 @@ async def raw_frames(out_port: int, in_port: int, steps: int) -> float:
             await channel.close()
 
 
-def frames_ssd(folder: Path, bridge: int, sink: int) -> Path:
-    """The OpenRails bridge's camera ``front`` into the map server's ``camera``."""
+def frames_ssd(folder: Path, bridge: int | str, sink: int | str) -> Path:
+    """The OpenRails bridge's camera ``front`` into the map server's ``camera`` (each a port
+    on loopback or an address, ``address_of``)."""
     image = '<ssc:Binary mime-type="application/x-protobuf; messageType=coupler.v1.Image"/>'
     return _ssd(
         folder / "frames.ssd",
         [
             f'<ssd:Component name="OpenRails" type="application/x-coupler-grpc" '
-            f'source="grpc://127.0.0.1:{bridge}"><ssd:Connectors>'
+            f'source="{address_of(bridge)}"><ssd:Connectors>'
             f'<ssd:Connector name="distance" kind="output"><ssc:Real/></ssd:Connector>'
             f'<ssd:Connector name="front" kind="output">{image}</ssd:Connector>'
             f"</ssd:Connectors></ssd:Component>",
             f'<ssd:Component name="Map" type="application/x-coupler-grpc" '
-            f'source="grpc://127.0.0.1:{sink}"><ssd:Connectors>'
+            f'source="{address_of(sink)}"><ssd:Connectors>'
             f'<ssd:Connector name="camera" kind="input">{image}</ssd:Connector>'
             f"</ssd:Connectors></ssd:Component>",
         ],
@@ -809,17 +813,18 @@ async def coupler_frames(ssd: Path, steps: int, out: Path) -> float:
     return clock.rate
 
 
-def frame_services(work: Path, mock: int, bridge: int, sink: int) -> list[list[str]]:
+def frame_services(work: Path, mock: int, bridge: Path, sink: Path) -> list[list[str]]:
     """The mock with one 800 x 600 camera (a standing train: the frame is rendered once and
-    served from its cache, so the figure is the frames' transport), the bridge, the map."""
+    served from its cache, so the figure is the frames' transport) on a port, the bridge and
+    the map on unix sockets (``--socket``, as ``coupler fleet`` serves them)."""
     sensors = work / "sensors.json"
     sensors.write_text(json.dumps(SENSORS))
     return [
         [sys.executable, "-m", "openrails_mock", "--port", str(mock), "--sensors", str(sensors),
          "--loading-delay-s", "0"],
-        [sys.executable, "-m", "openrails_bridge", "--port", str(bridge), "--openrails-url",
+        [sys.executable, "-m", "openrails_bridge", "--socket", str(bridge), "--openrails-url",
          f"http://127.0.0.1:{mock}", "--sensors", str(sensors)],
-        [sys.executable, "-m", "mapserver", "--grpc-port", str(sink), "--http-port", "0"],
+        [sys.executable, "-m", "mapserver", "--socket", str(sink), "--http-port", "0"],
     ]  # fmt: skip
 
 
@@ -1290,15 +1295,18 @@ async def scale(
 async def frames(
     sizes: Sizes, log: Callable[[str], None], work: Path, rows: list[Row], extra: dict[str, Any]
 ) -> None:
-    log("camera frames through the bridge at 5 Hz simulated vs raw grpc.aio streams")
-    mock, bridge, sink, raw_out, raw_in = free_ports(5)
-    raw = [[sys.executable, __file__, "--raw-server", str(raw_out), "--frames", "out"],
-           [sys.executable, __file__, "--raw-server", str(raw_in), "--frames", "in"]]  # fmt: skip
+    log("camera frames through the bridge at 5 Hz simulated vs raw grpc.aio streams (UDS)")
+    [mock] = free_ports(1)
+    folder = Path(tempfile.mkdtemp(prefix="cb-", dir="/tmp"))  # a socket path has 107 bytes
+    bridge, sink = folder / "bridge.sock", folder / "map.sock"
+    raw_out, raw_in = f"unix:{folder / 'raw-out.sock'}", f"unix:{folder / 'raw-in.sock'}"
+    raw = [[sys.executable, __file__, "--raw-server", raw_out, "--frames", "out"],
+           [sys.executable, __file__, "--raw-server", raw_in, "--frames", "in"]]  # fmt: skip
     names = ("OpenRails mock", "bridge", "map server", "orchestrator")
     cpu = dict.fromkeys(names, 0.0)  # CPU seconds of each process during the Coupler runs
     with processes(frame_services(work, mock, bridge, sink) + raw) as started:
-        await serving([bridge, sink])
-        ssd = frames_ssd(work, bridge, sink)
+        await serving([f"unix://{bridge}", f"unix://{sink}"])
+        ssd = frames_ssd(work, f"unix://{bridge}", f"unix://{sink}")
 
         def spent() -> list[float]:
             return [*(cpu_s(p.pid) for p in started[:3]), time.process_time()]
@@ -1314,6 +1322,7 @@ async def frames(
             return await raw_frames(raw_out, raw_in, sizes.frame_steps)
 
         coupler_fps, floor_fps = await interleaved(sizes.repeats, through_bridge, frames_floor)
+    await asyncio.to_thread(shutil.rmtree, folder, True)  # the raw servers leave their sockets
     assert coupler_fps is not None and floor_fps is not None
     megabytes = 2 * FRAME_BYTES / 1e6  # into the orchestrator and out again, each step
     extra["frames_mb_per_s"] = {
@@ -1324,10 +1333,10 @@ async def frames(
     extra["frames_cpu_ms_per_step"] = per_step
     log("  CPU per step [ms]: " + ", ".join(f"{n} {ms:.2f}" for n, ms in per_step.items()))
     rows.append(
-        Row("camera frames x1 (1.44 MB, 5 Hz)", coupler_fps, "raw grpc.aio streams, same bytes",
+        Row("camera frames x1 (1.44 MB, 5 Hz)", coupler_fps, "raw grpc.aio streams (UDS)",
             floor_fps, 0.8,
-            note=f"{coupler_fps * megabytes:.0f} vs {floor_fps * megabytes:.0f} MB/s; the "
-                 f"coupler figure includes the bridge's HTTP hops to OpenRails")
+            note=f"{coupler_fps * megabytes:.0f} vs {floor_fps * megabytes:.0f} MB/s, the same "
+                 f"bytes; the coupler figure includes the bridge's HTTP hops to OpenRails")
     )  # fmt: skip
 
     log("render: the mock's 800 x 600 RGB + 200 x 150 depth frames vs the 200 ms step")

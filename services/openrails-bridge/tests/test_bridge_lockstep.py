@@ -8,17 +8,22 @@ Each test starts its own mock and bridge on free ports.
 from __future__ import annotations
 
 import time
+from collections.abc import Mapping
 from typing import Any
 
+import aiohttp
 import pytest
+from aiohttp import web
 
 from coupler.channels import Causality, RunSetup
 from coupler.client import RemoteParticipant
 from coupler.errors import ParticipantError
 from coupler.messages import decode_message
 from coupler_railway.messages import TRAIN_STATE
+from openrails_mock.api import SERVER, create_app
+from openrails_mock.config import MockConfig
 
-from .conftest import Bridge, Mock
+from .conftest import Bridge, Mock, serve_app
 
 
 async def test_describe_lists_channels_and_fixed_step(mock: Mock, bridge: Bridge) -> None:
@@ -188,3 +193,48 @@ async def test_without_reset_a_restarted_openrails_runs_again(
     finally:
         await cm.__aexit__(None, None, None)
     assert again == first
+
+
+async def test_map_is_read_only_when_the_train_moved_and_outputs_stay_exact(
+    bridge: Bridge,
+) -> None:
+    """A train that runs, brakes and stands: every step's latitude, longitude and heading are
+    what GET /API/MAP answers at that step, while the bridge reads MAP only after steps in
+    which the train moved (and once at Initialize)."""
+    app = create_app(MockConfig(port=0, loading_delay_s=0.0))
+    maps_read = []
+
+    @web.middleware
+    async def count(request: web.Request, handler: Any) -> web.StreamResponse:
+        if request.path == "/API/MAP":
+            maps_read.append(request.app[SERVER].simulation.snapshot().state.odometer_m)
+        response: web.StreamResponse = await handler(request)
+        return response
+
+    app.middlewares.append(count)
+    async with serve_app(app) as url, bridge(url) as remote, aiohttp.ClientSession() as http:
+
+        async def openrails_map() -> tuple[float, float, float]:
+            async with http.get(f"{url}/API/MAP") as answer:
+                where = await answer.json()
+            maps_read.pop()  # the test's own request
+            return where["LatLon"]["Lat"], where["LatLon"]["Lon"], where["DirectionDeg"]
+
+        def seen(outputs: Mapping[str, Any]) -> tuple[float, float, float]:
+            return outputs["latitude"], outputs["longitude"], outputs["heading"]
+
+        outputs = await remote.initialize(
+            RunSetup(run_id="t", start_time=0.0, step_size=1.0, inputs={"throttle": 1.0})
+        )
+        assert seen(outputs) == await openrails_map()
+        moved = []
+        for k in range(40):
+            controls = {"throttle": 1.0} if k < 10 else {"throttle": 0.0, "brake": 1.0}
+            before = outputs["distance"]
+            outputs = await remote.do_step(float(k), 1.0, controls)
+            assert seen(outputs) == await openrails_map(), f"step {k}"
+            moved.append(outputs["distance"] != before)
+        await remote.terminate()
+
+    assert outputs["speed"] == 0.0 and moved[0] and not moved[-1]  # it ran, then stood
+    assert len(maps_read) == 1 + sum(moved)

@@ -68,7 +68,11 @@ def config(tmp_path: Path, **changes: Any) -> MockConfig:
 async def frame(session: aiohttp.ClientSession, name: str) -> bytes:
     async with session.get(f"/API/CAMERASENSOR/{name}") as resp:
         assert resp.status == 200, await resp.text()
-        return await resp.read()
+        data = await resp.read()
+        assert resp.content_type == "application/octet-stream"
+        assert resp.content_length == len(data)  # a plain body, not chunked
+        assert "Transfer-Encoding" not in resp.headers
+        return data
 
 
 async def lockstep(session: aiohttp.ClientSession, **controls: float) -> dict[str, Any]:

@@ -6,7 +6,10 @@ Two modes (``BridgeSettings.mode``):
   ``h / sim_step_s`` times, each applying every control and advancing one fixed step, and
   keeps the train record of the last reply. The reply has no lat/lon, so GET /API/MAP is read
   ONCE per step, after the last post: outputs exist only at communication points, and the
-  intermediate positions would cost a request each for nothing.
+  intermediate positions would cost a request each for nothing. And only when the train has
+  moved: MAP answers where the player locomotive stands and heads, so while the reply's pose
+  (``location``, ``rotation``, ``trackLocation``, odometer) is the one MAP was last read at,
+  the answer is that one (a standing train at a signal or in a station costs no request).
 - stock (upstream OpenRails): the simulation runs on the wall clock. A step posts the
   controls once, sleeps until the wall clock reaches the step's end (``step / speedup``,
   scheduled from Initialize so it never drifts), then polls GET /API/MAP and
@@ -124,6 +127,7 @@ class OpenRailsAdapter(Adapter):
         self._controls: dict[str, float] = {}
         self._train: Train | None = None
         self._map: LatLonDirection | None = None
+        self._map_pose: Pose | None = None  # the train's pose when _map was read (lockstep)
         self._reverser: int = 1
         self._time = 0.0
         self._stale = True
@@ -178,8 +182,9 @@ class OpenRailsAdapter(Adapter):
         if self.settings.mode == "lockstep":
             for _ in range(self._steps(step)):
                 self._train = await self._post_lockstep()
+            assert self._train is not None  # a step is one post or more
             self._map, self._frames = await _together(
-                self._get_map(), self._fetch_frames(time + step)
+                self._map_of(self._train), self._fetch_frames(time + step)
             )
             self._stale = False
         else:
@@ -318,8 +323,9 @@ class OpenRailsAdapter(Adapter):
             reply = self.client.parse(answer, "/API/RESET", StepReply, call="initialize")
             self._train = self._train_of(reply, "/API/RESET")
             self._described = reply.CameraSensors
+            self._map_pose = None  # a reset may put back any train: read MAP afresh
             self._map, self._frames = await _together(
-                self._get_map(), self._fetch_frames(self._time, call="initialize")
+                self._map_of(self._train), self._fetch_frames(self._time, call="initialize")
             )
             self._stale = False
 
@@ -432,13 +438,23 @@ class OpenRailsAdapter(Adapter):
     async def _get_map(self) -> LatLonDirection:
         return await self.client.fetch("GET", "/API/MAP", LatLonDirection)
 
+    async def _map_of(self, train: Train) -> LatLonDirection:
+        """GET /API/MAP for ``train`` as a step reply left it; the last answer again while the
+        train stands where that answer was read (see the module docstring)."""
+        pose = _pose(train)
+        if self._map is not None and pose == self._map_pose:
+            return self._map
+        where = await self._get_map()
+        self._map_pose = pose
+        return where
+
     async def _poll(self) -> None:
         """State from the GET endpoints: stock mode, and lockstep before the first step."""
         where, rows = await asyncio.gather(
             self._get_map(),
             self.client.fetch("GET", "/API/TRAINDRIVINGDISPLAY?normalText=true", DISPLAY),
         )
-        self._map = where
+        self._map, self._map_pose = where, None
         speed, reverser = _read_display(rows)
         if reverser is not None:
             self._reverser = reverser
@@ -510,6 +526,14 @@ class OpenRailsAdapter(Adapter):
         for item in listed:
             ranges.setdefault(item.TypeName, item)
         return ranges
+
+
+Pose = tuple[WorldPosition, float, TrackLocation, float]
+"""Where a step reply puts a train: location, rotation, front track location, odometer."""
+
+
+def _pose(train: Train) -> Pose:
+    return (train.location, train.rotation, train.trackLocation, train.locomotiveState.distance)
 
 
 async def _together(*calls: Awaitable[Any]) -> list[Any]:

@@ -17,6 +17,7 @@ from pydantic import ValidationError
 
 from coupler.errors import CouplerError
 from coupler.ports import host_port, listening
+from coupler.server import run
 
 from .api import SERVER, create_app
 from .config import MockConfig
@@ -109,7 +110,7 @@ def main(argv: list[str] | None = None) -> None:
         sys.exit(1)
     try:
         with contextlib.suppress(KeyboardInterrupt):
-            asyncio.run(_serve(config))
+            run(_serve(config))  # on uvloop, as the participants
     except CouplerError as exc:  # a route, path or railML file the mock cannot use; a taken port
         print(f"openrails-mock: error: {exc}", file=sys.stderr)
         sys.exit(1)

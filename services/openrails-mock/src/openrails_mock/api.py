@@ -334,7 +334,7 @@ async def get_objects(request: web.Request) -> web.Response:
     return web.json_response(world.objects.listing() if world is not None else [])
 
 
-async def get_camerasensor(request: web.Request) -> web.Response:
+async def get_camerasensor(request: web.Request) -> web.StreamResponse:
     """The current frame of a sensor, raw: RGB bytes, or (class/id, distance, intensity) as
     little-endian uint16 per pixel; rows top to bottom."""
     server = request.app[SERVER]
@@ -348,8 +348,24 @@ async def get_camerasensor(request: web.Request) -> web.Response:
             f"OPENRAILS_MOCK_SENSORS / --sensors)",
         )
     distance = server.simulation.front_distance_m
-    data = await asyncio.to_thread(cameras.frame, name, distance)
-    return web.Response(body=data, content_type="application/octet-stream")
+    data = cameras.cached(name, distance)  # a standing train's frame: no thread hop
+    if data is None:
+        data = await asyncio.to_thread(cameras.frame, name, distance)
+    return await _send_frame(request, data)
+
+
+async def _send_frame(request: web.Request, data: bytes) -> web.StreamResponse:
+    """``data`` as the body of a 200 ``application/octet-stream`` answer, the same bytes on
+    the wire as ``web.Response(body=data)`` sends; but the headers go first, on their own, so
+    that the frame is handed to the socket as it is: aiohttp (on Python before 3.12.9) joins
+    headers and body into one new bytes object, a copy of the whole frame per request."""
+    response = web.StreamResponse(headers={"Content-Type": "application/octet-stream"})
+    response.content_length = len(data)
+    await response.prepare(request)
+    await response.write(b"")  # the headers alone
+    await response.write(data)
+    await response.write_eof()
+    return response
 
 
 async def get_traininfo(request: web.Request) -> web.Response:

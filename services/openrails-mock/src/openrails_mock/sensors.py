@@ -228,13 +228,19 @@ class Cameras:
         """``CameraSensors`` of a lockstep reply."""
         return {name: spec.description() for name, spec in self.specs.items()}
 
+    def cached(self, name: str, distance_m: float) -> bytes | None:
+        """The frame ``frame`` would return if it is already rendered, else None: the
+        server answers it without handing the request to a thread."""
+        cached = self._cache.get(name)
+        return cached[1] if cached is not None and cached[0] == distance_m else None
+
     def frame(self, name: str, distance_m: float) -> bytes:
         """The raw frame of sensor ``name`` with the train's front ``distance_m`` along the
         line (KeyError for an unknown name): RGB bytes, or little-endian uint16 triples."""
         spec = self.specs[name]
-        cached = self._cache.get(name)
-        if cached is not None and cached[0] == distance_m:
-            return cached[1]
+        cached = self.cached(name, distance_m)
+        if cached is not None:
+            return cached
         camera = CameraModel(width=spec.width, height=spec.height, fov_deg=spec.fov_deg)
         if spec.type == "rgb":
             data = self.renderer.rgb(camera, distance_m).tobytes()

@@ -25,6 +25,7 @@ import numpy as np
 from coupler.channels import Capabilities, Causality, Channel, Description, RunSetup, Value
 from coupler.channels import ValueType as T
 from coupler.errors import ChannelValueError
+from coupler.messages import without_bytes
 from coupler.participant import Participant, Values
 from coupler.v1.railway_pb2 import BaliseDetection, BaliseDetections, PixelBox, TrainState
 from coupler.v1.sensors_pb2 import Image
@@ -109,8 +110,7 @@ class PerceptionParticipant(Participant):
         frame = inputs.get("image", b"")
         if not isinstance(frame, bytes) or not frame:
             return _result(BaliseDetections())
-        image = Image()
-        image.ParseFromString(frame)
+        image, data = without_bytes(Image, frame, "data")  # the pixels a view, not copies
         if image.encoding != RGB8:
             raise ChannelValueError(
                 f"channel 'image' carries a '{image.encoding}' frame of sensor "
@@ -120,10 +120,10 @@ class PerceptionParticipant(Participant):
                 expected=RGB8,
             )
         size = image.width * image.height * 3
-        if len(image.data) != size:
+        if len(data) != size:
             raise ChannelValueError(
                 f"channel 'image': sensor '{image.sensor}' declares {image.width} x "
-                f"{image.height} rgb8 ({size} bytes) but its data has {len(image.data)} bytes",
+                f"{image.height} rgb8 ({size} bytes) but its data has {len(data)} bytes",
                 channel="image",
                 expected=f"{size} bytes",
             )
@@ -132,7 +132,7 @@ class PerceptionParticipant(Participant):
         if isinstance(raw_state, bytes):
             state.ParseFromString(raw_state)
         p = self._parameters
-        pixels = np.frombuffer(image.data, dtype=np.uint8).reshape(image.height, image.width, 3)
+        pixels = np.frombuffer(data, dtype=np.uint8).reshape(image.height, image.width, 3)
         k = image.intrinsics
         found = detect(
             pixels,
