@@ -7,6 +7,7 @@
         a stranger's request without the secret -> the end with PERMISSION_DENIED,
             the owner's next request -> ABORTED naming it
         a frame over the receive limit -> RESOURCE_EXHAUSTED, unread
+        frames in uneven pieces (a split header, a long frame in parts) -> whole frames' answers
         the connection closed before Terminate -> the run ends, the next Initialize is served
 
 The client below is a raw unix socket and the generated messages, nothing of the runtime.
@@ -177,6 +178,36 @@ def test_the_step_socket_answers_as_step_stream_does(gain: Gain) -> None:
     steps.close()
     assert answers == streamed
     assert len(answers[1].outputs[-1].binary) == 200_000  # a long Binary value, as sent
+
+
+def test_frames_in_uneven_pieces_are_answered_as_whole_ones(gain: Gain) -> None:
+    """A frame's header split, a long frame (over the participant's buffer of short frames)
+    whose header arrives with its first bytes and the rest in pieces: the answers are those
+    of whole frames (the participant reads long frames into a buffer of their own)."""
+    secret = secrets.token_bytes(32)
+    gain.initialize("whole", secret)
+    whole = StepSocket(f"{gain.path}.steps")
+    expected = [whole.step(request) for request in requests("whole", secret, 4)]
+    gain.terminate("whole", secret)
+    whole.close()
+
+    gain.initialize("pieces", secret)
+    steps = StepSocket(f"{gain.path}.steps")
+    answers = []
+    for request in requests("pieces", secret, 4):
+        payload = request.SerializeToString()
+        frame = HEADER.pack(len(payload), STEP) + payload
+        cuts = sorted({c for c in (1, 3, 9, 70_000, len(frame) - 1) if c < len(frame)})
+        for start, end in zip([0, *cuts], [*cuts, len(frame)], strict=True):
+            steps.sock.sendall(frame[start:end])
+            time.sleep(0.01)  # each piece read on its own
+        kind, answer = steps.receive()
+        assert kind == STEP, pb.StepSocketEnd.FromString(answer)
+        answers.append(pb.DoStepResponse.FromString(answer))
+    gain.terminate("pieces", secret)
+    steps.close()
+    assert [a.outputs for a in answers] == [e.outputs for e in expected]
+    assert len(answers[1].outputs[-1].binary) == 200_000
 
 
 def test_a_request_without_the_secret_is_refused_and_the_owner_told(gain: Gain) -> None:

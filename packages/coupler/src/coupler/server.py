@@ -440,6 +440,9 @@ _STEP = 0
 """Kind of a frame carrying a serialized DoStepRequest (in) or DoStepResponse (out)."""
 _END = 1
 """Kind of the participant's last frame: a serialized StepSocketEnd."""
+_SMALL_FRAMES = 64 * 1024
+"""A step socket connection's buffer of short frames [bytes]; a longer frame is read into a
+buffer of its own size."""
 
 
 class _Aborted(Exception):
@@ -503,15 +506,28 @@ class _StepSocket:
             self.path.unlink()
 
 
-class _StepConnection(asyncio.Protocol):
+class _StepConnection(asyncio.BufferedProtocol):
     """One orchestrator's step loop on the step socket: frames in, each request stepped by
     ``_Servicer.stream_step`` (StepStream's loop body) and answered in order; the end (the
-    orchestrator's half-close, a refused step) is a StepSocketEnd frame, then the close."""
+    orchestrator's half-close, a refused step) is a StepSocketEnd frame, then the close.
+
+    Frames are read by the event loop straight into buffers (``asyncio.BufferedProtocol``):
+    short ones into a small buffer kept for the connection, from which each is copied once;
+    a frame longer than that buffer into a buffer of its own size, which becomes the frame
+    (a 1.44 MB camera frame: no copy in user space before ``wire.step_request`` cuts it out).
+    """
 
     def __init__(self, socket: _StepSocket) -> None:
         self._socket = socket
-        self._buffer = bytearray()
-        self._frames: collections.deque[tuple[int, bytes]] = collections.deque()
+        self._small = bytearray(_SMALL_FRAMES)
+        self._filled = 0
+        """Bytes received into ``_small`` and not yet taken."""
+        self._long: bytearray | None = None
+        """The frame being read into a buffer of its own (None: none), its kind and how many
+        of its bytes have arrived."""
+        self._long_kind = 0
+        self._long_got = 0
+        self._frames: collections.deque[tuple[int, bytes | bytearray]] = collections.deque()
         self._oversize = 0
         """The length of a frame over the limit, refused unread (0: none)."""
         self._eof = False
@@ -533,32 +549,56 @@ class _StepConnection(asyncio.Protocol):
         _BACKGROUND.add(self._task)
         self._task.add_done_callback(_BACKGROUND.discard)
 
-    def data_received(self, data: bytes) -> None:
+    def get_buffer(self, sizehint: int) -> memoryview:
+        if self._long is not None:
+            return memoryview(self._long)[self._long_got :]
+        if self._oversize:  # refused: what still arrives is dropped
+            return memoryview(self._small)
+        return memoryview(self._small)[self._filled :]
+
+    def buffer_updated(self, nbytes: int) -> None:
         if self._oversize:
             return
-        buffer = self._buffer
-        buffer += data
-        size = len(buffer)
-        at = 0
-        while size - at >= _HEADER.size:
-            length, kind = _HEADER.unpack_from(buffer, at)
-            if length > self._socket.limit():
-                self._oversize = length  # refused without reading it
-                buffer.clear()
-                self._pause()
-                break
-            end = at + _HEADER.size + length
-            if end > size:
-                break
-            with memoryview(buffer) as view:  # one copy (a bytearray slice would be a second)
-                self._frames.append((kind, bytes(view[at + _HEADER.size : end])))
-            at = end
-        if at:
-            del buffer[:at]
+        if self._long is not None:
+            self._long_got += nbytes
+            if self._long_got == len(self._long):
+                self._frames.append((self._long_kind, self._long))
+                self._long = None
+        else:
+            self._filled += nbytes
+            self._split()
         if len(self._frames) > 1:
             self._pause()  # one request at a time: the orchestrator waits for each answer
         if self._frames or self._oversize:
             self._wake()
+
+    def _split(self) -> None:
+        """The whole frames in ``_small`` taken (one copy each); the rest moved to its start,
+        or into a buffer of its own for a frame longer than ``_small``."""
+        buffer, size, at = self._small, self._filled, 0
+        while size - at >= _HEADER.size:
+            length, kind = _HEADER.unpack_from(buffer, at)
+            if length > self._socket.limit():
+                self._oversize = length  # refused without reading it
+                self._filled = 0
+                self._pause()
+                return
+            start, end = at + _HEADER.size, at + _HEADER.size + length
+            if end <= size:
+                with memoryview(buffer) as view:
+                    self._frames.append((kind, bytes(view[start:end])))
+                at = end
+                continue
+            if _HEADER.size + length > len(buffer):  # the rest into a buffer of its own
+                self._long, self._long_kind = bytearray(length), kind
+                self._long_got = size - start
+                self._long[: self._long_got] = buffer[start:size]
+                at = size
+            break
+        if at:
+            rest = size - at
+            buffer[:rest] = buffer[at:size]
+            self._filled = rest
 
     def eof_received(self) -> bool:
         self._eof = True
@@ -584,7 +624,7 @@ class _StepConnection(asyncio.Protocol):
         if waiter is not None and not waiter.done():
             waiter.set_result(None)
 
-    async def _next(self) -> tuple[int, bytes] | None:
+    async def _next(self) -> tuple[int, bytes | bytearray] | None:
         """The next frame; None after the orchestrator's half-close (or a lost connection)."""
         while True:
             if self._frames:

@@ -909,7 +909,7 @@ StepRequest: TypeAlias = tuple[pb.DoStepRequest, list[tuple[str, bytes]]]
 without its long Binary inputs, and those by channel."""
 
 
-def step_request(data: bytes) -> StepRequest:
+def step_request(data: bytes | bytearray | memoryview) -> StepRequest:
     """A serialized DoStepRequest parsed, its long Binary inputs cut out with one copy each (by
     channel; ``step_from_pb`` takes them): the participant runtime's request deserializer.
     Protobuf would copy them into the message and again out of it."""
@@ -927,7 +927,7 @@ _M = TypeVar("_M", pb.DoStepRequest, pb.DoStepResponse)
 
 
 def _parsed(
-    message: type[_M], key: int, data: bytes | memoryview
+    message: type[_M], key: int, data: bytes | bytearray | memoryview
 ) -> tuple[_M, list[tuple[str, bytes]]]:
     """``data`` parsed as ``message``, the long Binary values of its bindings in the field of
     key ``key`` cut out. A message that is not as expected is left whole to protobuf, which

@@ -50,9 +50,8 @@ import structlog
 from coupler.adapter import Adapter
 from coupler.channels import RunSetup, Value
 from coupler.errors import ChannelValueError, ParticipantUnavailable, ScenarioError
-from coupler.messages import encode_message
 from coupler.participant import HealthReport
-from coupler_railway.messages import TRAIN_STATE
+from coupler.v1.railway_pb2 import GeoPoint, TrainState
 
 from .client import OpenRailsClient
 from .config import BridgeSettings
@@ -205,20 +204,17 @@ class OpenRailsAdapter(Adapter):
         latitude, longitude = where.LatLon.Lat, where.LatLon.Lon
         heading = where.DirectionDeg
         loco, track = train.locomotiveState, train.trackLocation
-        train_state = encode_message(
-            TRAIN_STATE,
-            {
-                "time_s": self._time,
-                "position": {"latitude_deg": latitude, "longitude_deg": longitude},
-                "heading_deg": heading,
-                "distance_m": loco.distance,
-                "speed_mps": loco.v,
-                "acceleration_mps2": loco.a,
-                "track_node": track.trackNodeIndex,
-                "track_offset_m": track.trackNodeOffset,
-                "direction": self._reverser,
-            },
-        )
+        train_state = TrainState(  # built directly: json_format.ParseDict took 4x as long
+            time_s=self._time,
+            position=GeoPoint(latitude_deg=latitude, longitude_deg=longitude),
+            heading_deg=heading,
+            distance_m=loco.distance,
+            speed_mps=loco.v,
+            acceleration_mps2=loco.a,
+            track_node=track.trackNodeIndex,
+            track_offset_m=track.trackNodeOffset,
+            direction=self._reverser,
+        ).SerializeToString(deterministic=True)
         return {
             **train.model_dump(),
             "MAP": where.model_dump(),
