@@ -378,3 +378,28 @@ def test_declarations_over_the_runs_limit_are_warned_about_and_capped(
         "run's message limit of 1048576 bytes (1 MiB): a step carrying more fails the run; "
         "raise --max-message-size to 2"
     ) in " ".join(summary["warnings"])
+
+
+def test_an_in_process_fmus_binary_input_over_its_max_size_fails_naming_it(
+    tmp_path: Path, fmus: dict[str, Path]
+) -> None:
+    """An in-process FMU is promised at most ``maxSize`` bytes for a Binary input: a longer
+    value fails the run naming the input, its size and its maximum, before the FMU sees it."""
+    sized = tmp_path / "Feedthrough3.fmu"
+    with zipfile.ZipFile(fmus["Feedthrough3"]) as source, zipfile.ZipFile(sized, "w") as copy:
+        for item in source.infolist():
+            data = source.read(item)
+            if item.filename == "modelDescription.xml":
+                data = data.replace(
+                    b'<Binary name="binary_in"', b'<Binary maxSize="4" name="binary_in"'
+                )
+            copy.writestr(item, data)
+    channel = asyncio.run(described(FmuParticipant(sized))).channel("binary_in")
+    assert channel is not None and channel.max_bytes == 4
+    run = ["run", sized, "--stop-time", "0.2", "--step", "0.1"]
+    fits = Coupler.process(*run, "--param", "binary_in=01020304", "--out", tmp_path / "fits")
+    assert fits.code == 0, fits.err
+    over = Coupler.process(*run, "--param", "binary_in=0102030405", "--out", tmp_path / "over")
+    assert over.code == 1, over.err
+    assert "input Feedthrough.binary_in carries 5 bytes, over its declared maximum of 4" in over.err
+    assert "Traceback" not in over.err

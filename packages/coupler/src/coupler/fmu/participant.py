@@ -30,7 +30,7 @@ from fmpy.model_description import ModelDescription, ScalarVariable
 
 from coupler.archives import Budget, extract, remove_scratch, scratch_folder
 from coupler.channels import Capabilities, Description, RunSetup, Value
-from coupler.errors import ParticipantError, ScenarioError
+from coupler.errors import ParticipantError, ScenarioError, ValueTooLarge
 from coupler.fmu.calls import CallFailed, Calls, Group, prepare, status_name
 from coupler.fmu.channels import (
     VALUE_TYPES,
@@ -123,6 +123,8 @@ class FmuParticipant(Participant):
         self._elements: dict[str, int] = {}
         self._arrays: ArrayInputs | None = None
         self._outputs: list[_Group] = []
+        self._maxima: dict[str, int] = {}
+        """The Binary inputs and parameters that declare a ``maxSize``, and it (FMI 3)."""
         self._group_cache: dict[tuple[str, ...], list[_Group]] = {}
 
     @property
@@ -154,6 +156,12 @@ class FmuParticipant(Participant):
             self._unzipdir = str(self._given)
         self._md = md
         self._variables = self._layout.variables()
+        self._maxima = {
+            name: e.max_bytes
+            for e in self._layout.exposed
+            if e.max_bytes > 0 and e.variable.causality != "output"
+            for name in e.names
+        }
         self._elements = self._layout.element_index()
         settable = self._layout.arrays("input", "parameter", "structuralParameter")
         self._arrays = ArrayInputs(settable) if settable else None
@@ -390,6 +398,8 @@ class FmuParticipant(Participant):
             raise ScenarioError(
                 f"FMU '{self.name}' has no input or parameter {', '.join(map(repr, unknown))}"
             )
+        if self._maxima:
+            self._check_sizes(values)
         if self._arrays is not None:
             values = self._arrays.complete(values)
         version = self.model_description.fmiVersion
@@ -400,6 +410,22 @@ class FmuParticipant(Participant):
             self._fmi(
                 f"{_prefix(version)}Set{accessor}", partial(setter, list(group.refs), converted)
             )
+
+    def _check_sizes(self, values: Mapping[str, Value]) -> None:
+        """RESOURCE_EXHAUSTED naming the channel when a Binary value is over its ``maxSize``:
+        the FMU was promised at most that many bytes. (Served, the participant runtime checks
+        inputs as they arrive; in the orchestrator's process nothing else does.)"""
+        for name, maximum in self._maxima.items():
+            value = values.get(name)
+            if isinstance(value, bytes | bytearray) and len(value) > maximum:
+                kind = "parameter" if self._variables[name].causality == "parameter" else "input"
+                exc = ValueTooLarge(channel=name, kind=kind, size=len(value), maximum=maximum)
+                raise ParticipantError(
+                    exc.naming(self.name),
+                    participant=self.name,
+                    call="fmi3SetBinary",
+                    status="RESOURCE_EXHAUSTED",
+                )
 
     def _get_outputs(self) -> Values:
         version = self.model_description.fmiVersion
