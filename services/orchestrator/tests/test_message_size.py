@@ -312,20 +312,27 @@ def test_a_frame_over_its_declared_maximum_fails_the_run_keeping_the_rows(
     assert [row["time"] for row in rows] == ["0.0", "0.1", "0.2"]
 
 
+def feedthrough3_sized(fmus: dict[str, Path], folder: Path, variable: str, size: int) -> Path:
+    """The Feedthrough3 FMU with ``maxSize`` given to its Binary ``variable`` (written into
+    ``folder``)."""
+    sized = folder / "Feedthrough3.fmu"
+    with zipfile.ZipFile(fmus["Feedthrough3"]) as source, zipfile.ZipFile(sized, "w") as copy:
+        for item in source.infolist():
+            data = source.read(item)
+            if item.filename == "modelDescription.xml":
+                name = f'<Binary name="{variable}"'.encode()
+                assert name in data, f"Feedthrough3 has no Binary {variable}"
+                data = data.replace(name, f'<Binary maxSize="{size}" name="{variable}"'.encode())
+            copy.writestr(item, data)
+    return sized
+
+
 def test_an_fmus_binary_max_size_is_declared_and_kept(
     tmp_path: Path, fmus: dict[str, Path]
 ) -> None:
     """FMI 3's ``maxSize`` of a Binary variable is the channel's declared maximum: an
     in-process FMU whose output is over it fails the run naming it."""
-    sized = tmp_path / "Feedthrough3.fmu"
-    with zipfile.ZipFile(fmus["Feedthrough3"]) as source, zipfile.ZipFile(sized, "w") as copy:
-        for item in source.infolist():
-            data = source.read(item)
-            if item.filename == "modelDescription.xml":
-                data = data.replace(
-                    b'<Binary name="binary_out"', b'<Binary maxSize="4" name="binary_out"'
-                )
-            copy.writestr(item, data)
+    sized = feedthrough3_sized(fmus, tmp_path, "binary_out", 4)
     channel = asyncio.run(described(FmuParticipant(sized))).channel("binary_out")
     assert channel is not None and channel.max_bytes == 4
     fits = Coupler.process(
@@ -385,15 +392,7 @@ def test_an_in_process_fmus_binary_input_over_its_max_size_fails_naming_it(
 ) -> None:
     """An in-process FMU is promised at most ``maxSize`` bytes for a Binary input: a longer
     value fails the run naming the input, its size and its maximum, before the FMU sees it."""
-    sized = tmp_path / "Feedthrough3.fmu"
-    with zipfile.ZipFile(fmus["Feedthrough3"]) as source, zipfile.ZipFile(sized, "w") as copy:
-        for item in source.infolist():
-            data = source.read(item)
-            if item.filename == "modelDescription.xml":
-                data = data.replace(
-                    b'<Binary name="binary_in"', b'<Binary maxSize="4" name="binary_in"'
-                )
-            copy.writestr(item, data)
+    sized = feedthrough3_sized(fmus, tmp_path, "binary_in", 4)
     channel = asyncio.run(described(FmuParticipant(sized))).channel("binary_in")
     assert channel is not None and channel.max_bytes == 4
     run = ["run", sized, "--stop-time", "0.2", "--step", "0.1"]
