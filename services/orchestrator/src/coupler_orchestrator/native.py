@@ -23,9 +23,14 @@ ENVIRONMENT = "COUPLER_NATIVE_STEPS"
 of the process."""
 
 
+def switched_on(asked: bool, variable: str) -> bool:
+    """Whether ``asked`` and not turned off by the environment ``variable`` (0, no or false)."""
+    return asked and os.environ.get(variable, "1").strip().lower() not in ("0", "no", "false")
+
+
 def wanted(asked: bool = True) -> bool:
     """Whether native stepping is asked for and not turned off by ``COUPLER_NATIVE_STEPS``."""
-    return asked and os.environ.get(ENVIRONMENT, "1").strip().lower() not in ("0", "no", "false")
+    return switched_on(asked, ENVIRONMENT)
 
 
 MISSING = (

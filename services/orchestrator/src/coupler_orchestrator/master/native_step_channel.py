@@ -28,7 +28,6 @@ the path and why, which summary.json's step path repeats.
 
 from __future__ import annotations
 
-import os
 from collections.abc import Callable, Mapping
 from typing import Any
 
@@ -43,7 +42,7 @@ from coupler.participant import Values
 from coupler.security import read_secret
 from coupler.v1 import component_pb2 as pb
 from coupler_orchestrator.native import ENVIRONMENT as ENVIRONMENT
-from coupler_orchestrator.native import NativeModule, wanted
+from coupler_orchestrator.native import NativeModule, switched_on, wanted
 
 _CODES = {code.value[0]: code for code in grpc.StatusCode}
 log = structlog.get_logger("coupler.master")
@@ -69,8 +68,7 @@ def enabled(asked: bool = True) -> bool:
 def socket_wanted(asked: bool = True) -> bool:
     """Whether members that offer a step socket are stepped over it: asked for and not turned
     off by ``COUPLER_STEP_SOCKET``."""
-    off = os.environ.get(STEP_SOCKET_ENVIRONMENT, "1").strip().lower() in ("0", "no", "false")
-    return asked and not off
+    return switched_on(asked, STEP_SOCKET_ENVIRONMENT)
 
 
 def why_python(participant: object, asked: bool) -> str:
