@@ -307,17 +307,30 @@ def test_a_changed_participant_is_refused_at_instantiation(
             if c.name != "x"
         ),
     )
-    assert fingerprint(then) != fingerprint(gain_description)
-    fmu = write_fmu(
-        then, address=address(gain), out=tmp_path / "Old.fmu", binaries=proxy_binaries
-    ).path
-    answer, printed = drive(tmp_path, [gain_run(fmu)])
-    assert "instantiate" in answer.get("error", ""), printed
+    printed = refused_at_instantiation(then, gain_description, gain, proxy_binaries, tmp_path)
     who = f"participant 'Gain' at {address(gain)}"
     assert f"{who} is not the one this FMU was exported from" in printed
     assert "'y' changed unit 'km/h' -> 'm/s'" in printed
     assert "'x' is new" in printed
     assert "export the FMU again" in printed
+
+
+def refused_at_instantiation(
+    then: Description,
+    now: Description,
+    gain: ParticipantServer,
+    proxy_binaries: Path,
+    tmp_path: Path,
+) -> str:
+    """An FMU exported from ``then`` (a description of the gain participant that is not its
+    description ``now``) driven against it: refused at instantiation; what the driver printed."""
+    assert fingerprint(then) != fingerprint(now)
+    fmu = write_fmu(
+        then, address=address(gain), out=tmp_path / "Old.fmu", binaries=proxy_binaries
+    ).path
+    answer, printed = drive(tmp_path, [gain_run(fmu)])
+    assert "instantiate" in answer.get("error", ""), printed
+    return printed
 
 
 def test_a_changed_maximum_is_refused_at_instantiation(
@@ -335,12 +348,7 @@ def test_a_changed_maximum_is_refused_at_instantiation(
             replace(c, max_bytes=1000) if c.name == "blob" else c for c in gain_description.channels
         ),
     )
-    assert fingerprint(then) != fingerprint(gain_description)
-    fmu = write_fmu(
-        then, address=address(gain), out=tmp_path / "Old.fmu", binaries=proxy_binaries
-    ).path
-    answer, printed = drive(tmp_path, [gain_run(fmu)])
-    assert "instantiate" in answer.get("error", ""), printed
+    printed = refused_at_instantiation(then, gain_description, gain, proxy_binaries, tmp_path)
     assert "is not the one this FMU was exported from" in printed
     assert "'blob' changed its largest value 1000 -> 0 bytes (max_bytes)" in printed
 
