@@ -11,10 +11,15 @@ summed time where Coupler's is exact: docs/openmcx.md).
 from __future__ import annotations
 
 import math
+import signal
+import subprocess
+import sys
+import time
 from pathlib import Path
 
 import pytest
 
+from coupler.testing import process_group
 from coupler_tools.fmubuild import build_all
 
 from .conftest import DATA, REPO, Coupler
@@ -478,3 +483,167 @@ def test_slow_readers_run_ahead_and_past_the_stop_time(coupler: Coupler, tmp_pat
     _, _, rows = table(tmp_path / "Step_res.csv")
     assert [round(float(r[0]), 12) for r in rows] == [0.0, 0.05, 0.1, 0.15, 0.2]
     assert column(tmp_path, "time")[-1] == 0.16  # results.csv ends at the stop time
+
+
+# -- sizes written in the SSD, bounded before anything is built (issue 37) ----------------------
+
+COUPLER_SCRIPT = Path(sys.executable).with_name("coupler")
+MB = 1024 * 1024
+
+
+PEAK_OF = (
+    "import os, sys; pid = os.spawnv(os.P_NOWAIT, sys.argv[1], sys.argv[1:]); "
+    "_, status, usage = os.wait4(pid, 0); print(usage.ru_maxrss); "
+    "sys.exit(os.waitstatus_to_exitcode(status))"
+)
+"""Runs a command and prints its peak RSS [KiB]: forked from this small process, not from
+pytest's (a child's peak counts what it had between fork and exec)."""
+
+
+def refused_small(path: Path, *fragments: str) -> int:
+    """``coupler validate`` as a process of its own refuses ``path`` (exit 1, one error naming
+    its line, no traceback): its peak memory [bytes], read from the kernel at its end."""
+    done = subprocess.run(
+        [sys.executable, "-c", PEAK_OF, str(COUPLER_SCRIPT), "validate", str(path)],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    err = done.stderr
+    assert done.returncode == 1, err
+    assert err.startswith("error: ") and "Traceback" not in err, err
+    for fragment in fragments:
+        assert fragment in err, (fragment, err)
+    return int(done.stdout.split()[-1]) * 1024
+
+
+INTEGRATOR = (
+    '      <Component name="I" source="" type="application/avl-mcx-integrator"><Connectors>'
+    '<Connector name="u" kind="input"><ssc:Real/></Connector>'
+    '<Connector name="y" kind="output"><ssc:Real/></Connector></Connectors><Annotations>'
+    '<ssc:Annotation type="com.avl.model.connect.ssp.component.integrator" '
+    'xmlns:mc="com.avl.model.connect.ssp.component.integrator">'
+    "<mc:SpecificData {data}/></ssc:Annotation></Annotations></Component>"
+)
+
+
+@pytest.mark.parametrize(
+    ("elements", "connection", "at", "says"),
+    [
+        pytest.param(
+            CONSTANT.replace('endIndex="3"', 'endIndex="1000000000"'),
+            "",
+            'endIndex="1000000000"',
+            "vector connector 'C.v' has 1000000000 elements",
+            id="a vector port",
+        ),
+        pytest.param(
+            CONSTANT + "\n" + SUM,
+            sliced('<mc:Start startIndex="1" endIndex="999999999"/>'),
+            'endIndex="999999999"',
+            "names 999999999 elements; a vector connector has at most 100000",
+            id="a slice",
+        ),
+        pytest.param(
+            CONSTANT.replace('endIndex="3"', 'endIndex="2000000"').replace(
+                'value="1 2 3"', 'value="' + " ".join(["7"] * 2_000_000) + '"'
+            ),
+            "",
+            'endIndex="2000000"',
+            "has 2000000 elements",
+            id="a constant vector",
+        ),
+        pytest.param(
+            INTEGRATOR.format(data='numSubSteps="1000000000"'),
+            "",
+            "numSubSteps",
+            'numSubSteps="1000000000" must be between 1 and 1000000',
+            id="an integrator's sub-steps",
+        ),
+        pytest.param(
+            INTEGRATOR.format(data='gain="nan"'),
+            "",
+            'gain="nan"',
+            'gain="nan"> is not a finite number',
+            id="a gain of NaN",
+        ),
+        pytest.param(
+            CONSTANT.replace('value="1 2 3"', 'value="1 inf 3"'),
+            "",
+            'value="1 inf 3"',
+            "is not a finite Real value",
+            id="a constant of inf",
+        ),
+    ],
+)
+def test_sizes_and_numbers_written_in_the_ssd_are_bounded_before_anything_is_built(
+    tmp_path: Path, elements: str, connection: str, at: str, says: str
+) -> None:
+    """A count in the SSD is checked against Coupler's ceiling (and the component's own range)
+    before it is expanded: refused with its line, in a process that stays small (measured:
+    about 0.8 s and 75 MB each; expanded, the vector port grew past 7 GB)."""
+    path = bad(tmp_path, connection, elements)
+    peak = refused_small(path, line(path, at), says)
+    assert peak < 200 * MB, f"validate peaked at {peak / MB:.0f} MB"
+
+
+def test_a_built_in_is_held_to_the_call_deadline(coupler: Coupler, tmp_path: Path) -> None:
+    """
+        Constant --c--> I (Integrator, 1,000,000 sub-steps a step)     --call-timeout 0.5
+
+    One step of I is a million calls of the built-in, each quick: the deadline holds for the
+    whole step, so the run fails naming it instead of computing on for seconds a step.
+    """
+    constant = (
+        '      <Component name="C" source="" type="application/avl-mcx-constant"><Connectors>'
+        '<Connector name="c" kind="output"><ssc:Real/></Connector></Connectors><Annotations>'
+        '<ssc:Annotation type="com.avl.model.connect.ssp.component.constant" '
+        'xmlns:mc="com.avl.model.connect.ssp.component.constant"><mc:SpecificData>'
+        '<mc:Real value="1"/></mc:SpecificData></ssc:Annotation></Annotations></Component>'
+    )
+    elements = constant + "\n" + INTEGRATOR.format(data='numSubSteps="1000000"')
+    connection = (
+        '      <Connection startElement="C" startConnector="c" endElement="I" endConnector="u"/>'
+    )
+    path = bad(tmp_path, connection, elements)
+    out = tmp_path / "out"
+    outcome = coupler.process("run", path, "--out", out, "--call-timeout", "0.5")
+    assert outcome.code == 1, outcome
+    assert "I.DoStep [DEADLINE_EXCEEDED]: no answer within 0.5 s" in outcome.err, outcome.err
+    assert coupler.summary(out)["status"] == "failed"
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+def test_an_interrupt_ends_a_long_set_up_at_once(tmp_path: Path, sig: signal.Signals) -> None:
+    """An SSD at the ceilings (three vectors of 66,000 elements, a connection of each element)
+    takes seconds to read and check; Ctrl-C or SIGTERM in the middle ends the command within
+    about a second (measured 0.2-1.3 s), exit 130, one sentence, nothing left running."""
+    n = 66_000
+    port = f'<mc:RealVector startIndex="1" endIndex="{n}"/>'
+    constant = CONSTANT.replace('endIndex="3"', f'endIndex="{n}"').replace(
+        'value="1 2 3"', 'value="' + " ".join(["1"] * n) + '"'
+    )
+    integrator = (
+        '      <Component name="I" source="" type="application/avl-mcx-vector-integrator">'
+        f"<Connectors>{vector('u', 'input', port)}{vector('y', 'output', port)}</Connectors>"
+        "</Component>"
+    )
+    connection = sliced(
+        f'<mc:Start startIndex="1" endIndex="{n}"/>', f'<mc:End startIndex="1" endIndex="{n}"/>'
+    ).replace('endElement="Sum" endConnector="a"', 'endElement="I" endConnector="u"')
+    path = bad(tmp_path, connection, constant + "\n" + integrator)
+    with process_group(
+        [str(COUPLER_SCRIPT), "run", str(path), "--out", str(tmp_path / "out")],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+    ) as process:
+        time.sleep(1.5)  # imported and reading (the whole set-up takes 4-6 s here)
+        assert process.poll() is None, "the set-up ended before the interrupt"
+        process.send_signal(sig)
+        sent = time.monotonic()
+        _, err = process.communicate(timeout=30)
+        took = time.monotonic() - sent
+    assert process.returncode == 130, err
+    assert "interrupted before the run started; nothing was recorded" in err.decode(), err
+    assert took < 3, f"the set-up went on for {took:.1f} s after the interrupt"

@@ -8,6 +8,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from enum import StrEnum
+from functools import cached_property
 
 #: A value on a channel, as Python sees it. Enumerations travel as ``int``.
 Value = float | int | bool | str | bytes
@@ -93,7 +94,15 @@ class Description:
 
     def channel(self, name: str) -> Channel | None:
         """The channel called ``name``, or None."""
-        return next((c for c in self.channels if c.name == name), None)
+        return self._by_name.get(name)
+
+    @cached_property
+    def _by_name(self) -> dict[str, Channel]:
+        """Channels by name (the first of a name), looked up once per name, not per search."""
+        by_name: dict[str, Channel] = {}
+        for c in self.channels:
+            by_name.setdefault(c.name, c)
+        return by_name
 
     def of(self, causality: Causality) -> tuple[Channel, ...]:
         """Channels of one causality, in order."""

@@ -82,8 +82,10 @@ async def loaded(path: Path, budget: Budget | None = None) -> AsyncIterator[ssp.
         try:
             scenario = await asyncio.shield(reading)
         except asyncio.CancelledError:
-            stop.set()  # the extraction stops at its next chunk; wait for it, then remove
-            await asyncio.wait([reading], timeout=10)
+            stop.set()  # the load stops at its next chunk or element; wait, then remove
+            done, _ = await asyncio.wait([reading], timeout=10)
+            for future in done:
+                future.exception()  # LoadCancelled, or whatever ended it: the command ends
             raise
         for warning in scenario.warnings:
             log.warning("scenario_warning", detail=warning)

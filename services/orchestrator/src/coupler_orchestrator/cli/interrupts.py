@@ -5,14 +5,13 @@ stuck in C code (``end_abandoned``)."""
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import os
 import signal
 import sys
 import threading
 import time
 from collections.abc import Callable, Coroutine
-from typing import Any
+from typing import Any, NoReturn
 
 from coupler_orchestrator.cli.exits import EXIT_ERROR, EXIT_INTERRUPTED
 from coupler_orchestrator.master.watchdog import active as active_watchdog
@@ -83,14 +82,45 @@ class Signals:
                     break
             except OSError:
                 break
-            with contextlib.suppress(RuntimeError):  # the loop has closed: nothing to tell
-                self.loop.call_soon_threadsafe(self.interrupt)
-            watchdog = active_watchdog()
-            if watchdog is not None:
-                time.sleep(0.5)  # a loop that is not blocked has begun ending the run by now
-                if watchdog.blocked_for() > 0.5:
-                    watchdog.end("aborted", "interrupted by the user")
+            heard = threading.Event()
+
+            def interrupt(heard: threading.Event = heard) -> None:
+                heard.set()
+                self.interrupt()
+
+            try:
+                self.loop.call_soon_threadsafe(interrupt)
+            except RuntimeError:  # the loop has closed: nothing to tell
+                continue
+            self._unless_heard(heard)
         os.close(self._read)
+
+    @staticmethod
+    def _unless_heard(heard: threading.Event) -> None:
+        """When the loop's thread does not take the interrupt (``heard``): end the run from
+        here once a call blocks it for 0.5 s (the watchdog), or anything else for 1 s."""
+        given_up = time.monotonic() + 1.0
+        while not heard.wait(0.1):
+            watchdog = active_watchdog()
+            if watchdog is not None and watchdog.blocked_for() > 0.5:
+                watchdog.end("aborted", "interrupted by the user")
+                return
+            if time.monotonic() > given_up:
+                if watchdog is None:
+                    end_busy()  # set-up (reading, checking) holds the thread: nothing ran
+                watchdog.end("aborted", "interrupted by the user")
+                return
+
+
+def end_busy() -> NoReturn:
+    """End the process when an interrupt finds the event loop's thread busy outside a run (the
+    scenario being read, checked or built: nothing recorded yet) for 1 s; a run's own
+    blocked calls are the watchdog's."""
+    from coupler.archives import remove_all_scratch
+
+    print("interrupted before the run started; nothing was recorded", file=sys.stderr, flush=True)
+    remove_all_scratch()
+    os._exit(EXIT_INTERRUPTED)
 
 
 def end_abandoned(end: RunEnd) -> None:

@@ -154,6 +154,8 @@ class Master:
         """Who asked to end the run, and the reason given."""
         self._local: dict[str, StepNow] = {}
         """Members stepping on this thread (after Initialize), by name."""
+        self._overrun: dict[str, str] = {}
+        """What a step of a member in ``_local`` past its deadline means."""
         self._split: dict[str, Split] = {}
         """Members stepping in two halves on this thread (after Initialize), by name."""
         self._sent: dict[str, float] = {}
@@ -332,6 +334,7 @@ class Master:
             stepper = stepper_of(m.participant)
             if stepper.now is not None:
                 self._local[m.name] = stepper.now
+                self._overrun[m.name] = stepper.overrun
             elif stepper.split is not None:
                 self._split[m.name] = stepper.split
         if self._local or self._split:
@@ -426,7 +429,7 @@ class Master:
         watchdog = self._watchdog
         assert watchdog is not None
         started = wallclock.perf_counter()
-        watchdog.arm(self._do_step[m.name], time, m.deadline)
+        watchdog.arm(self._do_step[m.name], time, m.deadline, self._overrun[m.name])
         try:
             outputs = stepper(time, m.step, inputs)
         except EndRun as end:

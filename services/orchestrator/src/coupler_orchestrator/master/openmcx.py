@@ -166,6 +166,9 @@ class OpenMcxMaster(Master):
         parts = self.spec.sub_steps.get(m.name, 1)
         step = m.step / parts
         exact = grid.time(start)
+        watchdog = self._watchdog if m.name in self._local else None
+        if watchdog is not None:  # one deadline for the member's step, all its sub-steps
+            watchdog.arm(self._do_step[m.name], exact, m.deadline, self._overrun[m.name])
         try:
             outputs = await self._call(m, exact, step, inputs)
             at = begin
@@ -175,6 +178,9 @@ class OpenMcxMaster(Master):
         except EndRun as stop:
             self.finished.add(m.name)
             outputs = stop.outputs
+        finally:
+            if watchdog is not None:
+                watchdog.disarm()
         self.reached[m.name] = start + m.multiple
         self.clock[m.name] = end
         self._reached(m, outputs, "DoStep", end)
@@ -211,17 +217,11 @@ class OpenMcxMaster(Master):
         return values
 
     async def _call(self, m: Member, time: float, step: float, inputs: Values) -> Values:
-        """One call of ``m``'s step, on this thread (watched) or awaited."""
+        """One call of ``m``'s step, on this thread (watched by ``_step_member``) or awaited."""
         started = wallclock.perf_counter()
         stepper = self._local.get(m.name)
         if stepper is not None:
-            watchdog = self._watchdog
-            assert watchdog is not None
-            watchdog.arm(self._do_step[m.name], time, m.deadline)
-            try:
-                outputs = stepper(time, step, inputs)
-            finally:
-                watchdog.disarm()
+            outputs = stepper(time, step, inputs)
             if self._abandoned:
                 raise asyncio.CancelledError
         elif m.name in self._split:

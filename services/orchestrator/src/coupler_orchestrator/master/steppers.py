@@ -2,8 +2,8 @@
 never asks a participant what it is again.
 
 - On the master's thread, without awaiting (``Stepper.now``): an in-process FMU
-  (``FmuParticipant.step_now``) computes here, where a hop to another thread would cost more
-  than its step; the watchdog watches it against its deadline.
+  (``FmuParticipant.step_now``) or an OpenMCx built-in computes here, where a hop to another
+  thread would cost more than its step; the watchdog watches it against its deadline.
 - In two halves on the master's thread (``Stepper.split``): a remote participant on the
   native step channel (``native_step_channel``) is sent its request first and answered last,
   so many requests are on their way while the master computes what it computes itself.
@@ -17,13 +17,13 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
-from typing import Protocol
+from typing import Protocol, runtime_checkable
 
 from coupler.channels import Value
 from coupler.client import RemoteParticipant
-from coupler.fmu import FmuParticipant
 from coupler.participant import Participant, Values
 from coupler_orchestrator.master.native_step_channel import NativeSteps
+from coupler_orchestrator.master.watchdog import IN_PROCESS
 
 StepNow = Callable[[float, float, Mapping[str, Value]], Values]
 """A step taken on the caller's thread: (time, step, inputs) -> outputs."""
@@ -41,18 +41,30 @@ class Split(Protocol):
     def receive(self) -> Values: ...
 
 
+@runtime_checkable
+class StepsHere(Protocol):
+    """A participant that computes in the orchestrator's process (an in-process FMU, an
+    OpenMCx built-in) and can step on the caller's thread, never waiting on anything."""
+
+    def step_now(self, time: float, step: float, inputs: Mapping[str, Value]) -> Values: ...
+
+
 @dataclass(frozen=True)
 class Stepper:
     """How one member steps; neither ``now`` nor ``split``: awaited."""
 
     now: StepNow | None = None
     split: Split | None = None
+    overrun: str = IN_PROCESS
+    """What a ``now`` step past its deadline means (the participant's ``overrun``, if any)."""
 
 
 def stepper_of(participant: Participant) -> Stepper:
     """The way ``participant`` steps in this run (after its Initialize)."""
-    if isinstance(participant, FmuParticipant):
-        return Stepper(now=participant.step_now)
+    if isinstance(participant, StepsHere):
+        return Stepper(
+            now=participant.step_now, overrun=getattr(participant, "overrun", IN_PROCESS)
+        )
     if (
         isinstance(participant, RemoteParticipant)
         and isinstance(participant.steps, NativeSteps)

@@ -33,6 +33,12 @@ def builtin_of(component: ssp.Component) -> Participant | None:
 class Builtin(Participant):
     """One OpenMCx built-in component of the scenario."""
 
+    overrun = (
+        "the OpenMCx built-in computes longer than the call deadline (the run had reached "
+        "t={time:g} s; give it fewer numSubSteps or a longer --call-timeout)"
+    )
+    """What its step past the call deadline means (the master's watchdog says it)."""
+
     def __init__(self, component: ssp.Component) -> None:
         assert component.builtin is not None
         self.component = component

@@ -220,17 +220,14 @@ class _Checker:
         component = candidate.component
         for connector in component.connectors:
             self.connector(candidate, connector, description)
-        driven = {
+        given = {
             channel_of(component, c.end_connector)
             for c in self.scenario.connections
             if c.end_element == component.name
-        }
-        defaulted = {
-            c.channel for c in component.connectors if c.port and c.port.default is not None
-        }
+        } | {c.channel for c in component.connectors if c.port and c.port.default is not None}
         for channel in description.of(Causality.INPUT):
             if (
-                channel.name not in driven | defaulted
+                channel.name not in given
                 and channel.start is None
                 and channel.name not in component.parameters
             ):

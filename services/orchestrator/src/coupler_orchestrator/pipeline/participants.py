@@ -9,6 +9,7 @@ together with everything else.
 from __future__ import annotations
 
 import asyncio
+import functools
 from collections.abc import AsyncIterator, Callable
 from contextlib import asynccontextmanager, suppress
 from functools import partial
@@ -31,8 +32,12 @@ from coupler_orchestrator.pipeline.replay import ReplayParticipant, parse_source
 
 def where(item: ssp.Component | ssp.Connection | ssp.Connector, file: str = "") -> str:
     """``file line N`` of an SSD item, for messages."""
-    name = Path(getattr(item, "file", "") or file).name or "scenario"
-    return f"{name} line {item.line}"
+    return f"{_file_name(getattr(item, 'file', '') or file)} line {item.line}"
+
+
+@functools.lru_cache(maxsize=64)
+def _file_name(path: str) -> str:
+    return Path(path).name or "scenario"
 
 
 StepTransports = Callable[[], StepTransport | None]

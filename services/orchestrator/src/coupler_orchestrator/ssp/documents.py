@@ -9,7 +9,9 @@ from __future__ import annotations
 import functools
 import importlib.util
 import re
+import threading
 from collections.abc import Iterator
+from contextvars import ContextVar
 from copy import deepcopy
 from pathlib import Path
 
@@ -168,6 +170,22 @@ def _without_variables(root: Element) -> Element:
     return copy
 
 
+cancelled: ContextVar[threading.Event | None] = ContextVar("coupler_ssp_cancelled", default=None)
+"""Set while a load runs on its thread: the caller sets the event to stop it (Ctrl-C)."""
+
+
+class LoadCancelled(Exception):
+    """The load was stopped through ``cancelled``; its caller is ending the command."""
+
+
+def checkpoint() -> None:
+    """Stop here when the load was cancelled: called per element read and every few thousand
+    connectors made, so Ctrl-C ends the load of a large SSD within a fraction of a second."""
+    event = cancelled.get()
+    if event is not None and event.is_set():
+        raise LoadCancelled
+
+
 def local(element: Element) -> str:
     """The element's tag without its namespace."""
     return etree.QName(element).localname
@@ -177,6 +195,7 @@ def children(element: Element, name: str) -> Iterator[Element]:
     """Child elements with local name ``name`` (comments skipped)."""
     for child in element:
         if isinstance(child.tag, str) and local(child) == name:
+            checkpoint()
             yield child
 
 
@@ -189,6 +208,7 @@ def elements(element: Element) -> Iterator[Element]:
     """All child elements (comments and processing instructions skipped)."""
     for item in element:
         if isinstance(item.tag, str):
+            checkpoint()
             yield item
 
 

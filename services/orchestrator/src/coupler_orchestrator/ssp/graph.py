@@ -13,6 +13,7 @@ from __future__ import annotations
 from collections import defaultdict
 from dataclasses import dataclass, field
 
+from .documents import checkpoint
 from .model import Component, Connection, InterExtrapolation, Transformation
 
 
@@ -76,6 +77,7 @@ class Graph:
         for start in list(self.out):
             if start[0] != "comp":
                 continue
+            checkpoint()
             for end, legs in self._walk(start, [], set(), warnings):
                 reached.update(k for k in (start, end))
                 connection = self._connection(start, end, legs, problems)

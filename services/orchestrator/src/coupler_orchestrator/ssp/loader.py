@@ -20,7 +20,7 @@ from pathlib import Path
 from coupler.archives import Budget
 from coupler.errors import ScenarioError, ValidationError
 
-from . import archive, openmcx
+from . import archive, documents, openmcx
 from . import tool_annotations as notes
 from .documents import child, local, number, parse, required, validate
 from .files import Documents
@@ -45,8 +45,24 @@ def load_ssp(
     ``expansion`` allows). Archives are extracted into ``workdir``, which the caller owns and
     removes (``runner`` does, on every path); without one, loading an archive is an error.
     ``budget`` (default: ``max_archive_bytes``) is what the archive may unpack to; the runner
-    shares it with the FMUs. ``cancelled`` stops an extraction in progress.
+    shares it with the FMUs. ``cancelled`` stops the load where it is (an extraction between
+    chunks, the reading between elements): ``LoadCancelled``.
     """
+    token = documents.cancelled.set(cancelled)
+    try:
+        return _load_ssp(path, env, workdir, max_archive_bytes, budget, cancelled)
+    finally:
+        documents.cancelled.reset(token)
+
+
+def _load_ssp(
+    path: str | Path,
+    env: Mapping[str, str] | None,
+    workdir: Path | None,
+    max_archive_bytes: int,
+    budget: Budget | None,
+    cancelled: threading.Event | None,
+) -> Scenario:
     given = Path(path)
     source = given.resolve()
     if source.is_dir():

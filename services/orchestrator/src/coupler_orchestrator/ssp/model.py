@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from functools import cached_property
 from pathlib import Path
 from types import MappingProxyType
 from typing import TypeVar
@@ -243,7 +244,14 @@ class Component:
 
     def connector(self, name: str) -> Connector | None:
         """The connector called ``name``, or None."""
-        return next((c for c in self.connectors if c.name == name), None)
+        return self._by_name.get(name)
+
+    @cached_property
+    def _by_name(self) -> dict[str, Connector]:
+        by_name: dict[str, Connector] = {}
+        for c in self.connectors:
+            by_name.setdefault(c.name, c)
+        return by_name
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -29,13 +29,14 @@ value that does not fit is an error naming the file and line.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Iterator
 from dataclasses import replace
 
 from coupler.channels import Value, ValueType
 from coupler.errors import ScenarioError
 
-from .documents import Element, boolean, elements, integer, local, number, where
+from .documents import Element, boolean, checkpoint, elements, integer, local, number, where
 from .model import (
     CONSTANT_TYPE,
     INTEGRATOR_TYPE,
@@ -71,6 +72,17 @@ REFUSED = {
     "ssv:Parameter",
 }
 """OpenMCx annotations Coupler cannot apply and that would change values: refused."""
+
+MAX_VECTOR_ELEMENTS = 100_000
+"""Elements one vector connector (or one slice of it) may have: an FMU's vector is as long as
+the scalar variables it declares, and no FMU is bounded by a number written in the SSD; the
+ceiling keeps a mistyped ``endIndex="1000000000"`` from being expanded into a billion
+connectors before any FMU is asked."""
+MAX_ELEMENTS = 200_000
+"""Vector elements all the vector connectors of one SSD may have together (each becomes a
+connector of its own, a few hundred bytes: about 100 MB at the ceiling)."""
+MAX_SUB_STEPS = 1_000_000
+"""An Integrator's ``numSubSteps`` at the most (each a call of the built-in per step)."""
 
 _ORDERS = {"zero": 0, "first": 1}
 _INTERVALS = ("coupling", "synchronization")
@@ -212,6 +224,13 @@ def _vector(
             f'startIndex="{start}" after endIndex="{end}"; give startIndex <= endIndex'
         )
     count = end - start + 1
+    if count > MAX_VECTOR_ELEMENTS:
+        raise ScenarioError(
+            f"{where(display, typed)}: vector connector '{owner}.{connector.name}' has {count} "
+            f'elements (startIndex="{start}" .. endIndex="{end}"); Coupler takes at most '
+            f"{MAX_VECTOR_ELEMENTS} per vector, and an FMU's vector has no more elements than "
+            "the variables it declares: give the FMU's own range"
+        )
     assert connector.type is not None
     lists = {
         name: _list(typed, name, count, lambda text: _parse(connector.type, text), display)
@@ -220,6 +239,8 @@ def _vector(
     writes = _list(typed, "writeResults", count, _boolean, display)
     result = []
     for i in range(count):
+        if i % 4096 == 4095:
+            checkpoint()
         values = {name: (found[i] if found else None) for name, found in lists.items()}
         result.append(
             replace(
@@ -400,6 +421,12 @@ def read_slices(
                 f'endIndex="{last}">: the end comes before the start; give startIndex <= '
                 "endIndex"
             )
+        if last - first + 1 > MAX_VECTOR_ELEMENTS:
+            raise ScenarioError(
+                f'{where(display, side)}: <mc:{local(side)} startIndex="{first}" '
+                f'endIndex="{last}"> names {last - first + 1} elements; a vector connector has '
+                f"at most {MAX_VECTOR_ELEMENTS}: give a range inside the connector's"
+            )
         sides[local(side)] = (first, last)
     return sides.get("Start"), sides.get("End")
 
@@ -484,13 +511,14 @@ def read_builtin(
         attributes(data, ("gain", "numSubSteps", "initialState"), display)
         sub_steps = integer(data, "numSubSteps", display, 1)
         assert sub_steps is not None
-        if sub_steps < 1:
+        if not 1 <= sub_steps <= MAX_SUB_STEPS:
             raise ScenarioError(
-                f'{where(display, data)}: numSubSteps="{sub_steps}" must be at least 1'
+                f'{where(display, data)}: numSubSteps="{sub_steps}" must be between 1 and '
+                f"{MAX_SUB_STEPS}"
             )
         return Integrator(
-            gain=number(data, "gain", display, 1.0) or 0.0,
-            initial_state=number(data, "initialState", display, 0.0) or 0.0,
+            gain=_finite(data, "gain", display, 1.0),
+            initial_state=_finite(data, "initialState", display, 0.0),
             sub_steps=sub_steps,
         )
     if len(inputs) != len(outputs):
@@ -501,7 +529,19 @@ def read_builtin(
     if data is None:
         return VectorIntegrator()
     attributes(data, ("initialState",), display)
-    return VectorIntegrator(initial_state=number(data, "initialState", display, 0.0) or 0.0)
+    return VectorIntegrator(initial_state=_finite(data, "initialState", display, 0.0))
+
+
+def _finite(element: Element, name: str, display: str, default: float) -> float:
+    """A built-in's number: a NaN or infinite one would be written into every result row."""
+    value = number(element, name, display, default)
+    assert value is not None
+    if not math.isfinite(value):
+        raise ScenarioError(
+            f'{where(display, element)}: <mc:{local(element)} {name}="{element.get(name)}"> is '
+            "not a finite number; give a decimal number"
+        )
+    return value
 
 
 def _constant(
@@ -555,9 +595,13 @@ def _constant(
                 f"output '{name}.{label}' of {len(group)} elements; give one per element"
             )
         try:
-            values.extend(_parse(type_, t) for t in texts)
+            parsed = [_parse(type_, t) for t in texts]
+            if any(isinstance(v, float) and not math.isfinite(v) for v in parsed):
+                raise ValueError("not finite")
+            values.extend(parsed)
         except ValueError as exc:
             raise ScenarioError(
-                f'{where(display, item)}: <mc:{tag} value="{text}"> is not a {type_} value'
+                f'{where(display, item)}: <mc:{tag} value="{text}"> is not a '
+                f"{'finite ' if type_ is ValueType.REAL else ''}{type_} value"
             ) from exc
     return Constant(values=tuple(values))

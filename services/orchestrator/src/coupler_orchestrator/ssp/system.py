@@ -5,6 +5,7 @@ resolution (``parameters``)."""
 from __future__ import annotations
 
 import difflib
+from collections import Counter
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -15,7 +16,18 @@ from coupler.errors import ScenarioError, ValidationError
 
 from . import openmcx
 from . import tool_annotations as notes
-from .documents import Element, boolean, child, children, elements, line_of, local, required, where
+from .documents import (
+    Element,
+    boolean,
+    checkpoint,
+    child,
+    children,
+    elements,
+    line_of,
+    local,
+    required,
+    where,
+)
 from .expansion import expand, variables_in
 from .files import Documents
 from .graph import Edge, Graph, Node
@@ -113,6 +125,10 @@ class SystemReader:
         self.warnings = warnings
         self.problems = problems
         self.tree = Tree()
+        self.elements = 0
+        """Vector elements read so far (``openmcx.MAX_ELEMENTS`` at the most)."""
+        self._vectors: dict[tuple[str, ...], dict[str, list[str]]] = {}
+        """Each component's vector connectors: their elements' names, in order."""
 
     def walk(self, system: Element, path: tuple[str, ...]) -> None:
         """Collect components, connectors, dictionaries, bindings and raw connections."""
@@ -310,8 +326,14 @@ class SystemReader:
                 line=line_of(c),
             )
             result.extend(openmcx.read_ports(c, connector, owner, self.display))
-        names = [c.name for c in result]
-        twice = sorted({n for n in names if names.count(n) > 1})
+        self.elements += sum(1 for c in result if c.vector is not None)
+        if self.elements > openmcx.MAX_ELEMENTS:
+            raise ScenarioError(
+                f"{where(self.display, element)}: component '{owner}' brings the SSD's vector "
+                f"connectors to {self.elements} elements; Coupler takes at most "
+                f"{openmcx.MAX_ELEMENTS} in one SSD (each is a connector of its own)"
+            )
+        twice = sorted(n for n, count in Counter(c.name for c in result).items() if count > 1)
         if twice:
             raise ScenarioError(
                 f"{where(self.display, element)}: component '{owner}' declares connector "
@@ -404,7 +426,9 @@ class SystemReader:
             line=line_of(element),
             label=label,
         )
-        for a_name, b_name in zip(starts, ends, strict=True):
+        for i, (a_name, b_name) in enumerate(zip(starts, ends, strict=True)):
+            if i % 4096 == 4095:
+                checkpoint()
             a = self.endpoint(what, path, start_el, a_name, kinds, refs, start=True)
             b = self.endpoint(what, path, end_el, b_name, kinds, refs, start=False)
             self.tree.graph.add(a, b, edge)
@@ -430,7 +454,14 @@ class SystemReader:
                     "component's vector connector"
                 )
             return [connector]
-        vector = [c.name for c in component.connectors if c.vector == connector]
+        key = (*path, element)
+        if key not in self._vectors:
+            vectors: dict[str, list[str]] = {}
+            for c in component.connectors:
+                if c.vector is not None:
+                    vectors.setdefault(c.vector, []).append(c.name)
+            self._vectors[key] = vectors
+        vector = self._vectors[key].get(connector, [])
         if span is None:
             if vector:
                 raise ScenarioError(
@@ -446,13 +477,13 @@ class SystemReader:
                 f"<mc:{side}>"
             )
         first, last = span
-        names = [f"{connector}[{i}]" for i in range(first, last + 1)]
-        if names[0] not in vector or names[-1] not in vector:
+        lowest, highest = (int(name[len(connector) + 1 : -1]) for name in (vector[0], vector[-1]))
+        if first < lowest or last > highest:
             raise ScenarioError(
                 f"{what}: the slice {element}.{connector}[{first}..{last}] is out of range: "
                 f"'{element}.{connector}' has the elements {vector[0]} .. {vector[-1]}"
             )
-        return names
+        return [f"{connector}[{i}]" for i in range(first, last + 1)]
 
     def endpoint(
         self,
