@@ -127,7 +127,7 @@ class SystemReader:
         self.tree = Tree()
         self.elements = 0
         """Vector elements read so far (``openmcx.MAX_ELEMENTS`` at the most)."""
-        self._vectors: dict[tuple[str, ...], dict[str, list[str]]] = {}
+        self._vectors: dict[tuple[str | None, ...], dict[str, list[str]]] = {}
         """Each component's vector connectors: their elements' names, in order."""
 
     def walk(self, system: Element, path: tuple[str, ...]) -> None:
