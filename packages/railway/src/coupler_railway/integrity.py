@@ -380,6 +380,39 @@ def write_report(report: Report, rows: Sequence[Row], folder: Path) -> tuple[Pat
     return as_json, as_csv
 
 
+CAMPAIGN_COLUMNS = (
+    "integrity",
+    "violations",
+    "worst_violation_m",
+    "error_abs_mean_m",
+    "error_p95_m",
+    "error_max_m",
+    "width_mean_m",
+    "width_max_m",
+    "max_distance_since_group_m",
+    "groups_not_read",
+    "linking_errors",
+    "detected",
+    "missed",
+    "false_alarms",
+)
+"""The report's figures a campaign's table gets (``campaign_columns``)."""
+
+
+def campaign_columns(run: Any) -> dict[str, float | int | bool | str]:
+    """A campaign's ``[[derive]]`` function: the integrity figures of a finished run, from its
+    summary.json ``reports.localisation`` (what ``coupler run`` wrote when the run ended), each
+    column prefixed ``loc_``; an empty mapping when the run has no such report."""
+    try:
+        summary = json.loads((Path(run.directory) / "summary.json").read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return {}
+    report = summary.get("reports", {}).get("localisation")
+    if not isinstance(report, dict) or "error" in report:
+        return {}
+    return {f"loc_{k}": report[k] for k in CAMPAIGN_COLUMNS if k in report}
+
+
 def _r(x: float) -> float:
     return round(x, 3)
 
