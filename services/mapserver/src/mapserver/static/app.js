@@ -244,7 +244,7 @@
         intervalLine = L.polyline(loc.interval, {
           color: colour, weight: 12, opacity: 0.55, lineCap: "butt", interactive: false,
         }).addTo(map);
-        intervalLine.getElement().id = "interval";
+        intervalLine.getElement().id = "interval-line";
       }
     }
     if (!loc.estimate) return;
@@ -255,7 +255,7 @@
         icon: L.divIcon({ className: "estimate-marker", html: "<i></i>", iconSize: [14, 14] }),
         title: "Estimated front end",
         keyboard: false,
-        zIndexOffset: 900,
+        zIndexOffset: 1100,
       }).addTo(map);
       estimateMarker.getElement().id = "estimate-marker";
     }
