@@ -152,7 +152,7 @@ def test_nominal_odometry_keeps_the_truth_inside_over_the_whole_line(tmp_path: P
     if seen is not None:  # the map showed the estimate and its interval beside the train
         assert seen["panel"] and seen["inside"] == "yes"
         loc = seen["loc"]
-        assert seen["interval"].startswith(f"{loc['min_m']:.1f} – {loc['max_m']:.1f} m")
+        assert seen["interval"].startswith(f"{loc['min_m']:.1f} \u2013 {loc['max_m']:.1f} m")
         assert loc["min_m"] <= loc["estimate_m"] <= loc["max_m"]
         assert loc["min_m"] <= loc["true_m"] <= loc["max_m"]
 

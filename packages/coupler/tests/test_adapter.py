@@ -142,10 +142,12 @@ async def test_binary_start_written_as_text_is_its_bytes(tmp_path: Path) -> None
         await apply_inputs(inputs)
 
     adapter.apply_inputs = record  # type: ignore[method-assign]
-    async with served(AdapterParticipant(adapter, AdapterConfig.load(path))) as server:
-        async with RemoteParticipant(server.address) as remote:
-            description = await remote.describe()
-            assert description.channel("frame").start == b""
-            await remote.initialize(RunSetup(run_id="a", start_time=0, step_size=1))
-            await remote.terminate()
+    async with (
+        served(AdapterParticipant(adapter, AdapterConfig.load(path))) as server,
+        RemoteParticipant(server.address) as remote,
+    ):
+        description = await remote.describe()
+        assert description.channel("frame").start == b""
+        await remote.initialize(RunSetup(run_id="a", start_time=0, step_size=1))
+        await remote.terminate()
     assert seen[0]["frame"] == b""

@@ -148,7 +148,7 @@ def test_campaign_columns_read_the_runs_report(tmp_path: Path) -> None:
 
 def test_missing_column_is_named_with_the_fix(tmp_path: Path) -> None:
     (tmp_path / "results.csv").write_text("time,OpenRails.distance\n0,0\n")
-    with pytest.raises(IntegrityError, match="no column 'Localisation.estimated_front'.*record"):
+    with pytest.raises(IntegrityError, match=r"no column 'Localisation\.estimated_front'.*record"):
         score_results(tmp_path)
     done = subprocess.run(
         [sys.executable, "-m", "coupler_railway.integrity", str(tmp_path)],

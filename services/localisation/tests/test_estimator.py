@@ -39,8 +39,7 @@ def drive(
     Jacobi delays of the scenario: the estimate at t + h from inputs at t."""
     estimator = Estimator(
         line,
-        settings
-        or EstimatorSettings(start_front_m=FRONT, antenna_to_front_m=FRONT - ANTENNA),
+        settings or EstimatorSettings(start_front_m=FRONT, antenna_to_front_m=FRONT - ANTENNA),
     )
     transmission = Transmission(faults=faults or BaliseFaults(), antenna_offset_m=ANTENNA)
     transmission.start(0.0, 0.0)
@@ -53,9 +52,7 @@ def drive(
         t = k * H
         distance = speed * t
         antenna = distance + ANTENNA
-        passed = ";".join(
-            f"{b}:{g}:{d!r}" for d, b, g in balises if antenna_before < d <= antenna
-        )
+        passed = ";".join(f"{b}:{g}:{d!r}" for d, b, g in balises if antenna_before < d <= antenna)
         antenna_before = antenna
         odometry = Odometry(distance * odometer_scale, speed * odometer_scale)
         estimate = estimator.step(t, H, odometry, parse_telegrams(telegrams))
@@ -121,7 +118,9 @@ def test_a_whole_group_lost_raises_the_linking_error_naming_it(line: Linking) ->
     assert since > line.groups[6].start_m - line.groups[4].start_m - 20
     assert violations(run) == []
     # the next group read clears the flag
-    cleared = next(k for k in range(raised, len(run.estimates)) if not run.estimates[k].linking_error)
+    cleared = next(
+        k for k in range(raised, len(run.estimates)) if not run.estimates[k].linking_error
+    )
     assert run.estimates[cleared].last_group_id == line.groups[6].group_id
 
 

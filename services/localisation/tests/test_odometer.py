@@ -22,9 +22,7 @@ def drive(errors: OdometerErrors, profile: list[tuple[float, float]]) -> list[Me
     for speed, accel in profile:
         # the simulator's inputs at t: distance and speed reached, mean acceleration of the
         # step that led there
-        out.append(
-            odometer.step(H, distance_m=distance, speed_mps=speed, acceleration_mps2=accel)
-        )
+        out.append(odometer.step(H, distance_m=distance, speed_mps=speed, acceleration_mps2=accel))
         distance += speed * H + 0.5 * accel * H * H
         speed_before = speed
     assert speed_before >= 0

@@ -87,7 +87,7 @@ async def test_localisation_adapter_over_grpc() -> None:
         assert out["last_group_id"] == 100 and out["expected_group_id"] == 101
         # the front was at 122 m at 8.03 s (odometer 80.3); at 10 s: 9.7 m + 10 m further
         assert out["estimated_front"] == pytest.approx(122.0 + 9.7 + 10.0)
-        with pytest.raises(ParticipantError, match="channel 'telegrams'.*not balise_id"):
+        with pytest.raises(ParticipantError, match=r"channel 'telegrams'.*not balise_id"):
             await loc.do_step(10.0, 1.0, {"telegrams": "garbage"})
 
 
@@ -108,4 +108,7 @@ def test_command_line_serves_each_role_and_names_a_bad_railml(tmp_path: Path) ->
         timeout=60,
     )
     assert done.returncode == 1
-    assert done.stderr.strip() == f"localisation: --railml {missing}: no such file (the line to localise on)"
+    assert (
+        done.stderr.strip()
+        == f"localisation: --railml {missing}: no such file (the line to localise on)"
+    )

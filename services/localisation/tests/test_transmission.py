@@ -36,9 +36,13 @@ def test_lost_group_gives_nothing_and_says_so() -> None:
 def test_losses_depend_on_seed_and_id_alone() -> None:
     faults = BaliseFaults(loss_probability=0.5, seed=4)
     drawn = [faults.lost(b, 1) for b in range(1000, 1100)]
-    assert drawn == [BaliseFaults(loss_probability=0.5, seed=4).lost(b, 1) for b in range(1000, 1100)]
+    assert drawn == [
+        BaliseFaults(loss_probability=0.5, seed=4).lost(b, 1) for b in range(1000, 1100)
+    ]
     assert 30 < sum(drawn) < 70
-    assert drawn != [BaliseFaults(loss_probability=0.5, seed=5).lost(b, 1) for b in range(1000, 1100)]
+    assert drawn != [
+        BaliseFaults(loss_probability=0.5, seed=5).lost(b, 1) for b in range(1000, 1100)
+    ]
     groups = BaliseFaults(group_loss_probability=1.0)
     assert all(groups.lost(b, 7) for b in (1, 2, 3))
 
@@ -67,5 +71,5 @@ def test_malformed_passes_and_probabilities_are_named() -> None:
     t = transmission()
     with pytest.raises(ValueError, match="'1000:100' is not id:group:distance"):
         t.step(1.0, "1000:100", 50.0)
-    with pytest.raises(ValueError, match="loss_probability must be within 0..1"):
+    with pytest.raises(ValueError, match=r"loss_probability must be within 0\.\.1"):
         BaliseFaults(loss_probability=1.5)

@@ -239,15 +239,14 @@ def _linking(rows: Sequence[Row]) -> tuple[list[GroupOutcome], list[dict[str, fl
     groups: dict[int, GroupOutcome] = {}
     for r in rows:
         for item in filter(None, r.passed.split(";")):
-            _, group, _ = item.split(":")
-            g = groups.setdefault(int(group), GroupOutcome(int(group), r.time, 0))
-            g.balises += 1
+            passed = int(item.split(":")[1])
+            groups.setdefault(passed, GroupOutcome(passed, r.time, 0)).balises += 1
     for r in rows:
         for item in filter(None, r.faults.split(";")):
-            kind, _, group = item.split(":")
-            g = groups.get(int(group))
-            if g is not None and kind in ("lost", "corrupt", "late"):
-                setattr(g, kind, getattr(g, kind) + 1)
+            kind, _, faulted = item.split(":")
+            hit = groups.get(int(faulted))
+            if hit is not None and kind in ("lost", "corrupt", "late"):
+                setattr(hit, kind, getattr(hit, kind) + 1)
     for g in groups.values():
         g.not_read = g.lost + g.corrupt >= g.balises
     events: list[dict[str, float | int]] = []
@@ -256,10 +255,10 @@ def _linking(rows: Sequence[Row]) -> tuple[list[GroupOutcome], list[dict[str, fl
         if r.errors is None:
             continue
         if r.errors > previous:
-            group = r.missed or 0
-            events.append({"time_s": r.time, "group_id": group, "count": r.errors - previous})
-            if group in groups and groups[group].linking_error_at_s is None:
-                groups[group].linking_error_at_s = r.time
+            missed = r.missed or 0
+            events.append({"time_s": r.time, "group_id": missed, "count": r.errors - previous})
+            if missed in groups and groups[missed].linking_error_at_s is None:
+                groups[missed].linking_error_at_s = r.time
         previous = r.errors
     return sorted(groups.values(), key=lambda g: g.passed_at_s), events
 

@@ -121,7 +121,11 @@ class Estimator:
         self._time, self._wheel, self._fused, self._speed = time_s, odometry.distance_m, 0.0, 0.0
         self._history.clear()
         self._history.append((time_s, 0.0))
-        self._ref_front, self._ref_odo, self._ref_accuracy = s.start_front_m, 0.0, s.start_accuracy_m
+        self._ref_front, self._ref_odo, self._ref_accuracy = (
+            s.start_front_m,
+            0.0,
+            s.start_accuracy_m,
+        )
         self._slip = 0.0
         self._lrbg: LinkedGroup | None = None
         self._expected = self.linking.after(None, s.start_front_m - s.antenna_to_front_m)

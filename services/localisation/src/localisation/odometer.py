@@ -107,8 +107,11 @@ class OdometerErrors:
     @property
     def pulse_m(self) -> float:
         """Distance one pulse stands for, as the odometer counts it [m]."""
-        return math.pi * self.wheel_diameter_m * (1 + self.diameter_error) / (
-            self.pulses_per_revolution
+        return (
+            math.pi
+            * self.wheel_diameter_m
+            * (1 + self.diameter_error)
+            / (self.pulses_per_revolution)
         )
 
     @property

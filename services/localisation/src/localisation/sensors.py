@@ -113,26 +113,26 @@ class OdometerParticipant(Participant):
         p = {**_defaults(ODOMETER_CHANNELS, _PAR), **setup.parameters}
         try:
             errors = OdometerErrors(
-                wheel_diameter_m=float(p["wheel_diameter"]),  # type: ignore[arg-type]
-                diameter_error=float(p["diameter_error"]),  # type: ignore[arg-type]
-                pulses_per_revolution=int(p["pulses_per_revolution"]),  # type: ignore[arg-type]
-                adhesion=float(p["adhesion"]),  # type: ignore[arg-type]
-                traction_mass_fraction=float(p["traction_mass_fraction"]),  # type: ignore[arg-type]
-                braked_mass_fraction=float(p["braked_mass_fraction"]),  # type: ignore[arg-type]
-                slip=float(p["slip"]),  # type: ignore[arg-type]
-                slide=float(p["slide"]),  # type: ignore[arg-type]
+                wheel_diameter_m=float(p["wheel_diameter"]),
+                diameter_error=float(p["diameter_error"]),
+                pulses_per_revolution=int(p["pulses_per_revolution"]),
+                adhesion=float(p["adhesion"]),
+                traction_mass_fraction=float(p["traction_mass_fraction"]),
+                braked_mass_fraction=float(p["braked_mass_fraction"]),
+                slip=float(p["slip"]),
+                slide=float(p["slide"]),
                 radar=bool(p["radar"]),
-                radar_bias=float(p["radar_bias"]),  # type: ignore[arg-type]
-                radar_noise_mps=float(p["radar_noise"]),  # type: ignore[arg-type]
-                radar_min_speed_mps=float(p["radar_min_speed"]),  # type: ignore[arg-type]
-                seed=int(p["seed"]),  # type: ignore[arg-type]
+                radar_bias=float(p["radar_bias"]),
+                radar_noise_mps=float(p["radar_noise"]),
+                radar_min_speed_mps=float(p["radar_min_speed"]),
+                seed=int(p["seed"]),
             )
         except ValueError as exc:
             raise ChannelValueError(f"Odometer parameters: {exc}", channel="parameters") from exc
-        self._front_offset = float(p["front_offset"])  # type: ignore[arg-type]
+        self._front_offset = float(p["front_offset"])
         self._inputs = {**_defaults(ODOMETER_CHANNELS, _IN), **setup.inputs}
         self._odometer = Odometer(errors)
-        return self._outputs(self._odometer.start(float(self._inputs["distance"])))  # type: ignore[arg-type]
+        return self._outputs(self._odometer.start(float(self._inputs["distance"])))
 
     async def do_step(self, time: float, step: float, inputs: Mapping[str, Value]) -> Values:
         self._inputs.update(inputs)
@@ -140,9 +140,9 @@ class OdometerParticipant(Participant):
         return self._outputs(
             self._odometer.step(
                 step,
-                distance_m=float(i["distance"]),  # type: ignore[arg-type]
-                speed_mps=float(i["speed"]),  # type: ignore[arg-type]
-                acceleration_mps2=float(i["acceleration"]),  # type: ignore[arg-type]
+                distance_m=float(i["distance"]),
+                speed_mps=float(i["speed"]),
+                acceleration_mps2=float(i["acceleration"]),
                 wheelslip=bool(i["wheelslip"]),
                 wheelskid=bool(i["wheelskid"]),
             )
@@ -177,16 +177,16 @@ class TransmissionParticipant(Participant):
         p = {**_defaults(TRANSMISSION_CHANNELS, _PAR), **setup.parameters}
         try:
             faults = BaliseFaults(
-                loss_probability=float(p["loss_probability"]),  # type: ignore[arg-type]
+                loss_probability=float(p["loss_probability"]),
                 lost_balises=_ids(p, "lost_balises"),
-                group_loss_probability=float(p["group_loss_probability"]),  # type: ignore[arg-type]
+                group_loss_probability=float(p["group_loss_probability"]),
                 lost_groups=_ids(p, "lost_groups"),
-                late_probability=float(p["late_probability"]),  # type: ignore[arg-type]
+                late_probability=float(p["late_probability"]),
                 late_groups=_ids(p, "late_groups"),
-                late_delay_s=float(p["late_delay"]),  # type: ignore[arg-type]
-                corrupt_probability=float(p["corrupt_probability"]),  # type: ignore[arg-type]
+                late_delay_s=float(p["late_delay"]),
+                corrupt_probability=float(p["corrupt_probability"]),
                 corrupt_balises=_ids(p, "corrupt_balises"),
-                seed=int(p["seed"]),  # type: ignore[arg-type]
+                seed=int(p["seed"]),
             )
         except ValueError as exc:
             raise ChannelValueError(
@@ -195,9 +195,9 @@ class TransmissionParticipant(Participant):
         self._inputs = {**_defaults(TRANSMISSION_CHANNELS, _IN), **setup.inputs}
         self._transmission = Transmission(
             faults=faults,
-            antenna_offset_m=float(p["antenna_offset"]),  # type: ignore[arg-type]
+            antenna_offset_m=float(p["antenna_offset"]),
         )
-        self._transmission.start(setup.start_time, float(self._inputs["distance"]))  # type: ignore[arg-type]
+        self._transmission.start(setup.start_time, float(self._inputs["distance"]))
         return {"telegrams": "", "faults": ""}
 
     async def do_step(self, time: float, step: float, inputs: Mapping[str, Value]) -> Values:
@@ -209,7 +209,7 @@ class TransmissionParticipant(Participant):
             telegrams, faults = self._transmission.step(
                 time,
                 passed,
-                float(self._inputs["distance"]),  # type: ignore[arg-type]
+                float(self._inputs["distance"]),
             )
         except ValueError as exc:
             raise ChannelValueError(

@@ -43,13 +43,13 @@ class LocalisationUnit(Adapter):
         """Nothing to reach: the estimator runs in this process."""
 
     async def start(self, setup: RunSetup, parameters: Mapping[str, Value]) -> None:
-        fields = {k: float(v) for k, v in parameters.items()}  # type: ignore[arg-type]
+        fields = {k: float(v) for k, v in parameters.items()}
         accuracy = fields.pop("location_accuracy_m", 1.0)
         self._estimator = Estimator(
             self._linking.with_accuracy(accuracy), EstimatorSettings(**fields)
         )
         self._inputs = {}
-        self._fresh: set[str] = set()
+        self._fresh = set()
         self._estimate = None
         self._time = setup.start_time
 
@@ -89,9 +89,9 @@ class LocalisationUnit(Adapter):
     def _odometry(self) -> Odometry:
         get = self._inputs.get
         return Odometry(
-            distance_m=float(get("odometer_distance", 0.0)),  # type: ignore[arg-type]
-            speed_mps=float(get("odometer_speed", 0.0)),  # type: ignore[arg-type]
-            radar_speed_mps=float(get("radar_speed", 0.0)),  # type: ignore[arg-type]
+            distance_m=float(get("odometer_distance", 0.0)),
+            speed_mps=float(get("odometer_speed", 0.0)),
+            radar_speed_mps=float(get("radar_speed", 0.0)),
             radar_valid=bool(get("radar_valid", False)),
         )
 
