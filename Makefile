@@ -6,7 +6,8 @@ FMU_DIR := build/fmus
 RAILML := scenarios/railway/data/annaberg-schwarzenberg.railml
 ROUTE := build/routes/annaberg-schwarzenberg
 
-.PHONY: setup sync proto proto-check lint test test-slow test-all demo demo-perception demo-example fmus \
+.PHONY: setup sync proto proto-check lint test test-slow test-all demo demo-perception demo-localisation \
+        demo-example fmus \
         faulty-fmus track-fmu route assets node-participant browser grpc-dev wheels bench \
         compose-check swarm-check k8s-check export-fmu-check native-check clean
 
@@ -130,6 +131,14 @@ demo-perception: setup
 	$(UV) run --frozen coupler fleet scenarios/railway/perception-fleet.toml $(ARGS) \
 	  || [ $$? -eq 130 ]
 	$(UV) run --frozen python -m coupler_railway.scoring results/railway-perception/latest
+
+# The railway scenario's localisation variant: odometer and balise transmission models feed the
+# localisation under test (services/localisation); the run scores itself for integrity
+# (docs/railway-localisation.md), and the make target prints the score. ARGS=--exit to not wait.
+demo-localisation: setup
+	$(UV) run --frozen coupler fleet scenarios/railway/localisation-fleet.toml $(ARGS) \
+	  || [ $$? -eq 130 ]
+	$(UV) run --frozen python -m coupler_railway.integrity results/railway-localisation/latest
 
 # The smallest scenario: two FMUs and the example gRPC participant.
 demo-example: setup

@@ -26,7 +26,7 @@ How a block runs:
   before each of its shell blocks runs;
 - with PATH as a new user has it after ``make setup``: no virtual environment, no uv on it, so
   every command must name ``.venv/bin/...`` or a make target;
-- with the well-known ports (2150, 8080, 50051, 50061, 50062, 50063, 50071, 50080, 50082,
+- with the well-known ports (2150, 8080, 50051, 50061, 50062, 50063-50066, 50071, 50080, 50082,
   50443) replaced by free ones in the block's text, the page's files and the variables the SSDs
   and fleet files read (MOCK_PORT, GAIN_PORT, ...): blocks may start servers without colliding with a demo, another test or
   another block, and the docs keep showing the ports a person uses;
@@ -72,6 +72,9 @@ PORT_VARIABLES = {
     50061: "BRIDGE_PORT",
     50062: "BALISE_PORT",
     50063: "PERCEPTION_PORT",
+    50064: "LOCALISATION_PORT",
+    50065: "ODOMETER_PORT",
+    50066: "TRANSMISSION_PORT",
     50071: "MAP_PORT",
     50443: "",
 }

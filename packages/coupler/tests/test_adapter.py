@@ -122,3 +122,32 @@ def test_bad_mapping_file_is_named(tmp_path: Path) -> None:
         ScenarioError, match=r"bad.toml: invalid channel mapping: channel.0.causality"
     ):
         AdapterConfig.load(path)
+
+
+async def test_binary_start_written_as_text_is_its_bytes(tmp_path: Path) -> None:
+    """A Binary input's start in the TOML map is text (TOML has no bytes): its UTF-8 bytes, so
+    ``start = ""`` is an empty message and the input need not be connected."""
+    path = tmp_path / "cart.toml"
+    path.write_text(
+        MAPPING
+        + '\n[[channel]]\nname = "frame"\ncausality = "input"\ntype = "Binary"\n'
+        + 'field = "frame"\nstart = ""\n'
+    )
+    adapter = CartAdapter()
+    seen: list[Mapping[str, Value]] = []
+    apply_inputs = adapter.apply_inputs
+
+    async def record(inputs: Mapping[str, Value]) -> None:
+        seen.append(dict(inputs))
+        await apply_inputs(inputs)
+
+    adapter.apply_inputs = record  # type: ignore[method-assign]
+    async with (
+        served(AdapterParticipant(adapter, AdapterConfig.load(path))) as server,
+        RemoteParticipant(server.address) as remote,
+    ):
+        description = await remote.describe()
+        assert description.channel("frame").start == b""
+        await remote.initialize(RunSetup(run_id="a", start_time=0, step_size=1))
+        await remote.terminate()
+    assert seen[0]["frame"] == b""

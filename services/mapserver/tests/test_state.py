@@ -91,3 +91,31 @@ def test_subscriber_coalesces_steps_and_resyncs_when_readings_overflow(state: Ru
     state.step(11.0, 1.0, {"passed_in_step": "4:1:4;5:1:5"})
     assert subscriber.resyncs == 1 and subscriber.pending == 0
     assert subscriber.peak <= subscriber.backlog + 1
+
+
+def test_localisation_estimate_interval_and_truth_on_the_line(
+    state: RunState, test_line: Infrastructure
+) -> None:
+    events: list[Any] = []
+    state.listeners.append(events.append)
+    assert state.snapshot().data["localisation"] is None  # nothing connected
+    state.step(0.0, 1.0, {"estimated_front": 0.0, "min_safe_front": 0.0, "max_safe_front": 0.0})
+    assert events[-1].data["localisation"] is None  # the interval not connected yet
+    state.step(
+        1.0,
+        1.0,
+        {"estimated_front": 500.0, "min_safe_front": 480.0, "max_safe_front": 520.0,
+         "true_front": 515.0, "linking_error": True},
+    )  # fmt: skip
+    shown = events[-1].data["localisation"]
+    point = test_line.model.position(500.0)
+    assert shown["estimate"] == [point.latitude_deg, point.longitude_deg]
+    assert (shown["min_m"], shown["max_m"], shown["true_m"]) == (480.0, 520.0, 515.0)
+    assert shown["inside"] is True and shown["linking_error"] is True
+    # the interval is the stretch of track between its ends, a point every 5 m
+    assert len(shown["interval"]) == 9
+    ends = test_line.model.position(480.0), test_line.model.position(520.0)
+    assert shown["interval"][0] == [ends[0].latitude_deg, ends[0].longitude_deg]
+    assert shown["interval"][-1] == [ends[1].latitude_deg, ends[1].longitude_deg]
+    state.step(2.0, 1.0, {"true_front": 530.0})
+    assert state.snapshot().data["localisation"]["inside"] is False

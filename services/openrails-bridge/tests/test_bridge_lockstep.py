@@ -39,6 +39,8 @@ async def test_describe_lists_channels_and_fixed_step(mock: Mock, bridge: Bridge
         "track_node",
         "track_offset",
         "direction_state",
+        "wheelslip",
+        "wheelskid",
         "train_state",
     ]
     assert [c.name for c in description.of(Causality.INPUT)] == [

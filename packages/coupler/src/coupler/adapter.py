@@ -104,7 +104,7 @@ class ChannelMap(BaseModel):
     unit: str = ""
     """Unit symbol."""
     start: float | int | bool | str | None = None
-    """Start value (inputs and parameters)."""
+    """Start value (inputs and parameters); a Binary channel's is text, its UTF-8 bytes."""
     scale: float = 1.0
     """Real channels: channel = scale * field + offset."""
     offset: float = 0.0
@@ -191,7 +191,7 @@ class AdapterParticipant(Participant):
                     causality=c.causality,
                     type=c.type,
                     unit=c.unit,
-                    start=coerce(c.type, c.start) if c.start is not None else None,
+                    start=_start(c),
                     description=c.description,
                     message_type=c.message_type,
                     max_bytes=c.max_bytes,
@@ -202,9 +202,9 @@ class AdapterParticipant(Participant):
 
     async def initialize(self, setup: RunSetup) -> Values:
         defaults = {
-            c.name: c.start
+            c.name: start
             for c in self.config.channel
-            if c.start is not None and c.causality is not Causality.OUTPUT
+            if (start := _start(c)) is not None and c.causality is not Causality.OUTPUT
         }
         parameters = {
             **{
@@ -256,6 +256,16 @@ class AdapterParticipant(Participant):
                 ) from exc
             outputs[c.name] = _typed(c, raw)
         return outputs
+
+
+def _start(c: ChannelMap) -> Value | None:
+    """A channel's start value as its type; a Binary one is written as text (its UTF-8 bytes:
+    ``start = ""`` is an empty message)."""
+    if c.start is None:
+        return None
+    if c.type is ValueType.BINARY and isinstance(c.start, str):
+        return c.start.encode("utf-8")
+    return coerce(c.type, c.start)
 
 
 def _typed(c: ChannelMap, raw: Any) -> Value:

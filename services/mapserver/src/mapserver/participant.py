@@ -92,6 +92,11 @@ CHANNELS = (
         "Balises a perception saw in a camera frame (empty: none connected)",
         BALISE_DETECTIONS,
     ),
+    _input("estimated_front", T.REAL, 0.0, "m", "A localisation's estimated front end"),
+    _input("min_safe_front", T.REAL, 0.0, "m", "Its confidence interval's near end"),
+    _input("max_safe_front", T.REAL, 0.0, "m", "Its confidence interval's far end (0: none)"),
+    _input("linking_error", T.BOOLEAN, False, "", "The localisation's linking error"),
+    _input("true_front", T.REAL, 0.0, "m", "The true front end (0: not connected)"),
 )
 
 

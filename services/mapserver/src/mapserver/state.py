@@ -30,6 +30,7 @@ from coupler.messages import decode_message
 from coupler_railway import TrackModel
 from coupler_railway.messages import BALISE_READING, TRAIN_STATE
 from mapserver.camera import CameraView
+from mapserver.estimate import EstimateView
 
 log = structlog.get_logger("mapserver.state")
 
@@ -234,6 +235,8 @@ class RunState:
         self._sources = BaliseSources(balise_distances or {})
         self.camera = CameraView()
         """The latest camera frame and the balises a perception saw in it."""
+        self.estimate = EstimateView(track)
+        """A localisation's estimate and confidence interval beside the truth."""
 
     # --- changes, from the participant ------------------------------------------------------
 
@@ -248,6 +251,7 @@ class RunState:
         self.readings_total = 0
         self._sources.reset()
         self.camera.reset()
+        self.estimate.reset()
         self._inputs = {**defaults, **setup.inputs}
         self._wall_start = self.clock()
         self._apply(setup.start_time)
@@ -273,6 +277,7 @@ class RunState:
 
     def _apply(self, time: float) -> None:
         self.camera.update(self._inputs)
+        self.estimate.update(self._inputs)
         self.train = self._train_of(self._inputs)
         distance = self.train.distance_m if self.train else _real(self._inputs.get("distance"))
         for at, balise_id, group_id, balise_distance in self._sources.readings(
@@ -357,6 +362,7 @@ class RunState:
             "run": self._run_json(),
             "train": self._train_json(),
             "camera": self.camera.to_json(),
+            "localisation": self.estimate.to_json(),
         }
 
     def snapshot(self) -> Event:
@@ -368,6 +374,7 @@ class RunState:
                 "run": self._run_json(),
                 "train": self._train_json(),
                 "camera": self.camera.to_json(),
+                "localisation": self.estimate.to_json(),
                 "readings": [r.to_json() for r in self.readings],
             },
         )

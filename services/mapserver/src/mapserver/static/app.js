@@ -26,6 +26,8 @@
     },
     readingIds: () => Array.from(rows.children, (tr) => Number(tr.dataset.baliseId)),
     camera: null, // the camera panel's state: frame number, size, time, detection boxes
+    localisation: null, // a localisation's estimate, interval and the truth beside them
+    estimateLatLng: () => (estimateMarker ? estimateMarker.getLatLng() : null),
     frameLoaded: 0, // number of the frame the <img> shows once loaded
   };
   window.coupler = view;
@@ -34,6 +36,8 @@
   view.map = map;
   L.control.scale({ imperial: false, maxWidth: 160 }).addTo(map);
   let trainMarker = null;
+  let estimateMarker = null;
+  let intervalLine = null;
   let source = null;
 
   // Follow the train: keep it in the middle of the map; dragging the map ends following.
@@ -118,6 +122,7 @@
       showRun(event.run);
       showTrain(event.train);
       showCamera(event.camera);
+      showLocalisation(event.localisation);
       return;
     }
     if (event.seq <= view.seq) return; // already in the snapshot
@@ -130,6 +135,7 @@
       showRun(event.run);
       showTrain(event.train);
       showCamera(event.camera);
+      showLocalisation(event.localisation);
     } else if (event.type === "run") {
       if (event.reset) setReadings([]);
       showRun(event.run);
@@ -208,6 +214,50 @@
         zIndexOffset: 1000,
       }).addTo(map);
       trainMarker.getElement().id = "train";
+    }
+  }
+
+  // A localisation under test: its confidence interval as the stretch of track it covers (red
+  // when the true front end is outside it), its estimate as a marker, the figures in the panel.
+  function showLocalisation(loc) {
+    view.localisation = loc || null;
+    if (!loc) return;
+    $("localisation-panel").hidden = false;
+    const width = loc.max_m - loc.min_m;
+    $("estimate").textContent = `${loc.estimate_m.toFixed(1)} m`;
+    $("interval").textContent =
+      `${loc.min_m.toFixed(1)} – ${loc.max_m.toFixed(1)} m (${width.toFixed(1)} m wide)`;
+    $("truth").textContent = loc.true_m == null ? "–"
+      : `${loc.true_m.toFixed(1)} m (error ${(loc.estimate_m - loc.true_m).toFixed(1)} m)`;
+    const inside = $("inside");
+    inside.textContent = loc.inside == null ? "–" : loc.inside ? "yes" : "NO: integrity lost";
+    inside.className = loc.inside === false ? "bad" : "";
+    const linking = $("linking");
+    linking.textContent = loc.linking_error ? "LINKING ERROR" : "ok";
+    linking.className = loc.linking_error ? "bad" : "";
+    const colour = loc.inside === false ? "#b3261e" : "#1f6fd1";
+    if (loc.interval.length > 1) {
+      if (intervalLine) {
+        intervalLine.setLatLngs(loc.interval);
+        intervalLine.setStyle({ color: colour });
+      } else {
+        intervalLine = L.polyline(loc.interval, {
+          color: colour, weight: 12, opacity: 0.55, lineCap: "butt", interactive: false,
+        }).addTo(map);
+        intervalLine.getElement().id = "interval-line";
+      }
+    }
+    if (!loc.estimate) return;
+    if (estimateMarker) {
+      estimateMarker.setLatLng(loc.estimate);
+    } else {
+      estimateMarker = L.marker(loc.estimate, {
+        icon: L.divIcon({ className: "estimate-marker", html: "<i></i>", iconSize: [14, 14] }),
+        title: "Estimated front end",
+        keyboard: false,
+        zIndexOffset: 1100,
+      }).addTo(map);
+      estimateMarker.getElement().id = "estimate-marker";
     }
   }
 
