@@ -149,9 +149,7 @@ async def test_bytes_that_are_no_message_are_invalid_argument_naming_the_channel
     with pytest.raises(ParticipantError) as caught:
         await perception.do_step(0.0, 0.2, inputs)
     assert caught.value.status == "INVALID_ARGUMENT"  # was INTERNAL (a DecodeError)
-    assert f"channel '{channel}' carries 100 bytes that are not a coupler.v1." in str(
-        caught.value
-    )
+    assert f"channel '{channel}' carries 100 bytes that are not a coupler.v1." in str(caught.value)
 
 
 def confetti(width: int = 3840, height: int = 2160) -> bytes:

@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -200,7 +201,7 @@ def find(
     return Found(detections=detections, omitted=len(order) - len(shown))
 
 
-def _boxes(labels: npt.NDArray[np.int32], count: int) -> tuple[npt.NDArray[np.int64], ...]:
+def _boxes(labels: npt.NDArray[np.integer[Any]], count: int) -> tuple[npt.NDArray[np.int64], ...]:
     """Top, bottom, left and right (inclusive) and the size in pixels of blobs 1..count."""
     width = labels.shape[1]
     flat = labels.ravel()
@@ -219,12 +220,12 @@ def _boxes(labels: npt.NDArray[np.int32], count: int) -> tuple[npt.NDArray[np.in
 
 
 def _ground(
-    u: npt.NDArray[np.float64],
-    v: npt.NDArray[np.float64],
+    u: npt.NDArray[np.floating[Any]],
+    v: npt.NDArray[np.floating[Any]],
     depth_m: float,
     intrinsics: Intrinsics,
     mounting: Mounting,
-) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+) -> tuple[npt.NDArray[np.floating[Any]], npt.NDArray[np.floating[Any]]]:
     """``ground_distance`` of many pixels at once; NaN where a ray is above the horizon."""
     x = (u - intrinsics.cx) / intrinsics.fx
     y = (v - intrinsics.cy) / intrinsics.fy  # down

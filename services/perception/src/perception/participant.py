@@ -20,10 +20,9 @@ nearest); ``BaliseDetections.omitted`` says how many more it had.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from typing import Any
-
-import math
 
 import numpy as np
 from google.protobuf.message import DecodeError
