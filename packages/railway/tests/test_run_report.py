@@ -234,3 +234,57 @@ def test_the_run_keeps_the_frames_around_misses_and_false_detections_and_draws_t
         assert picture.size == (80, 60)
         pixels = np.asarray(picture.convert("RGB")).reshape(-1, 3)
     assert any(tuple(p) == (40, 140, 255) for p in pixels)  # the truth's box is drawn
+
+
+@pytest.mark.slow  # about 10 s on two busy cores: a campaign of two runs
+def test_a_campaign_table_holds_each_runs_perception_report(tmp_path: Path) -> None:
+    """campaign.csv's outputs read summary.json's reports: recall, precision, an item of the
+    bins; the run's frames come back with its folder."""
+    perception = Table(
+        "Perception",
+        Channel(name="detections", causality=Causality.OUTPUT, type=ValueType.BINARY,
+                message_type=BALISE_DETECTIONS),
+        1,
+        detections(0.0),
+    )  # fmt: skip
+    balises = Table(
+        "TrackBalises",
+        Channel(name="passed_in_step", causality=Causality.OUTPUT, type=ValueType.STRING),
+        2,
+        "",
+    )
+    with (
+        served_in_thread(perception) as one,
+        served_in_thread(balises) as two,
+        served_in_thread(Camera()) as three,
+    ):
+        ssd = scored(perception=one.port, balises=two.port, camera=three.port).write(
+            tmp_path / "scored.ssd"
+        )
+        campaign = tmp_path / "campaign.toml"
+        campaign.write_text(
+            f'[scenario]\nssp = "{ssd}"\nout = "{tmp_path / "out"}"\nargs = ["--step", "1"]\n\n'
+            "[[variant]]\nstop_time = 60.0\n[[variant]]\nstop_time = 30.0\n\n"
+            '[outputs]\nrecall = "reports.perception.recall"\n'
+            'precision = "reports.perception.precision"\n'
+            'recall_20_30 = "reports.perception.by_distance.2.recall"\n'
+            'nothing = "reports.perception.no_such_figure"\n\n'
+            '[pool]\nenv = [{ ONE = "1" }]\n'
+        )
+        done = subprocess.run(
+            [str(Path(sys.executable).with_name("coupler")), "campaign", str(campaign)],
+            capture_output=True,
+            text=True,
+            timeout=300,
+            stdin=subprocess.DEVNULL,
+        )
+    assert done.returncode == 0, done.stdout + done.stderr
+    with (tmp_path / "out" / "campaign.csv").open() as handle:
+        rows = list(csv.DictReader(handle))
+    assert [(r["recall"], r["precision"], r["nothing"]) for r in rows] == [
+        ("0.6667", "0.6", ""),  # to 60 s: balise 3 missed, two false detections
+        ("1.0", "0.75", ""),  # to 30 s: balise 3 not yet passed, one false detection
+    ]
+    assert rows[0]["recall_20_30"] == "1.0"
+    run = tmp_path / "out" / rows[0]["directory"]
+    assert (run / "perception-frames" / "t0046.0.png").is_file()
