@@ -255,7 +255,7 @@ def report_value(summary: Mapping[str, Any], path: str) -> Scalar | None:
             return None
     if isinstance(value, list | dict):
         return json.dumps(value, sort_keys=True)
-    return value  # type: ignore[no-any-return]
+    return value
 
 
 def _error_of(path: Path) -> str:
