@@ -86,6 +86,8 @@ def test_a_folder_without_a_campaign_or_a_parameter_to_vary_is_refused(tmp_path:
          "--axes", "a", "b"],
         capture_output=True, text=True, timeout=120,
     )  # fmt: skip
-    assert done.returncode == 1 and done.stderr.startswith("error: ") and "Traceback" not in (
-        done.stderr
+    assert (
+        done.returncode == 1
+        and done.stderr.startswith("error: ")
+        and "Traceback" not in (done.stderr)
     )

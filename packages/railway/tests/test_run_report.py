@@ -228,7 +228,18 @@ def test_the_run_keeps_the_frames_around_misses_and_false_detections_and_draws_t
     drawn = sorted(p.name for p in (out / "perception-frames").iterdir())
     assert drawn == ["t0020.0.png", "t0045.0.png", "t0046.0.png", "t0047.0.png", "t0055.0.png"]
     assert report["frames_drawn"] == 5
-    assert not (out / "kept-frames").exists()  # the frames kept to draw them: removed
+    assert not list((out / "kept-frames").glob("*/*.png"))  # the frames kept: removed once drawn
+    # scored again: the same report, its frames linked (the kept frames' index stays)
+    again = subprocess.run(
+        [sys.executable, "-m", "coupler_railway.scoring", str(out)],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert again.returncode == 0, again.stderr
+    rescored = json.loads((out / "perception-report.json").read_text())
+    assert rescored["by_distance"] == report["by_distance"] and rescored["frames_drawn"] == 5
+    assert rescored["balises"][2]["frames"].split()[0] == "perception-frames/t0045.0.png"
     assert not (out / "frames").exists()  # and no frame recorded otherwise
     with PILImage.open(out / "perception-frames" / "t0046.0.png") as picture:
         assert picture.size == (80, 60)

@@ -12,19 +12,20 @@ before and the ``AFTER`` (2) frames after every communication point where
   before the pass show it coming).
 
 So a run records the frames its report needs and not the others: in the 30-minute
-Annaberg-Schwarzenberg run, about one frame in nine.
+Annaberg-Schwarzenberg run 631 of its 4,501 frames (211 points with detections, none
+missed), one in seven.
 
 **Drawn** (``draw``, by the scorer): for each miss the kept frames in which the balise was in
 view before its pass, for each false detection the frame it was seen in, as PNG files in
 ``perception-frames/`` with the detector's boxes (green: matched to a balise, red: false) and
 the ground truth's (blue, with the balise's id and true distance; ``camera.Camera``'s
-flat-ground projection), linked from the report's rows. The kept frames are removed once drawn.
+flat-ground projection), linked from the report's rows. The kept frames are removed once drawn
+(their ``index.json`` stays: the frames' camera, for scoring the run again).
 """
 
 from __future__ import annotations
 
 import json
-import shutil
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -95,9 +96,10 @@ class KeptFrame:
 
 
 def kept_frames(folder: Path) -> list[KeptFrame]:
-    """The frames kept in the run's ``folder`` (every frame column's), by point; their camera
-    mounted as the OpenRails mock mounts its sensors (``Camera``'s defaults): the truth, not
-    what the perception participant was told."""
+    """The frames kept in the run's ``folder`` (every frame column's), by point, with their
+    camera mounted as the OpenRails mock mounts its sensors (``Camera``'s defaults): the truth,
+    not what the perception participant was told. The index stays once the frames are drawn
+    (``remove_kept``): a frame whose file is gone is listed too."""
     frames: list[KeptFrame] = []
     for index in sorted((folder / KEPT).glob("*/index.json")):
         for entry in json.loads(index.read_text(encoding="utf-8"))["frames"]:
@@ -166,5 +168,7 @@ def draw(source: Path, target: Path, boxes: Sequence[Box], title: str) -> None:
 
 
 def remove_kept(folder: Path) -> None:
-    """The kept frames, once drawn."""
-    shutil.rmtree(folder / KEPT, ignore_errors=True)
+    """The kept frames, once drawn; their index stays (the frames' camera, for scoring the run
+    again)."""
+    for picture in (folder / KEPT).glob("*/*.png"):
+        picture.unlink(missing_ok=True)

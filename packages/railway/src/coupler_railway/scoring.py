@@ -588,9 +588,11 @@ def _draw_frames(
     folder: Path,
 ) -> int:
     """The frames around every miss (those that showed the balise within the bins' range
-    before its pass) and of every false detection, drawn once each (``frames``)."""
+    before its pass) and of every false detection, drawn once each (``frames``). A run scored
+    again keeps the frames its first scoring drew (the kept ones are gone) and links them."""
+    fresh = any(f.path.exists() for f in frames)
     target = folder / kept.DRAWN
-    if target.exists():
+    if fresh and target.exists():
         import shutil
 
         shutil.rmtree(target)
@@ -605,9 +607,13 @@ def _draw_frames(
             why.setdefault(row.time_s, []).append(f"false at {row.distance_ahead_m:.1f} m")
     names = {}
     for time, reasons in sorted(why.items()):
-        names[time] = f"{kept.DRAWN}/t{time:0{5 + grid.decimals}.{grid.decimals}f}.png"
-        title = f"t = {time} s: " + "; ".join(dict.fromkeys(reasons))
-        kept.draw(view.frames[time].path, folder / names[time], view.boxes(time), title)
+        name = f"{kept.DRAWN}/t{time:0{5 + grid.decimals}.{grid.decimals}f}.png"
+        source = view.frames[time].path
+        if source.exists():
+            title = f"t = {time} s: " + "; ".join(dict.fromkeys(reasons))
+            kept.draw(source, folder / name, view.boxes(time), title)
+        if (folder / name).exists():
+            names[time] = name
     for balise in report.balises:
         if not balise.detected:
             balise.frames = " ".join(names[t] for t in names if view.box(balise, t))

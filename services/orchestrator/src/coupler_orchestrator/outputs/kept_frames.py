@@ -39,7 +39,8 @@ ENTRY_POINTS = "coupler.frames"
 FOLDER = "kept-frames"
 """Where kept frames go in a run folder."""
 LEVEL = 1
-"""zlib level of kept frames: a quarter of the default level's time, a fifth more bytes."""
+"""zlib level of kept frames: half the default level's time (4 ms for an 800 x 600 frame of the
+mock), twice its bytes (22 kB)."""
 
 log = structlog.get_logger("coupler.frames")
 
