@@ -9,7 +9,7 @@ ROUTE := build/routes/annaberg-schwarzenberg
 .PHONY: setup sync proto proto-check lint test test-slow test-all demo demo-perception demo-localisation \
         demo-example fmus \
         faulty-fmus track-fmu route assets node-participant browser grpc-dev wheels bench \
-        compose-check swarm-check k8s-check export-fmu-check native-check clean
+        compose-check swarm-check k8s-check export-fmu-check native-check detector-cpp clean
 
 $(UV):
 	python3 -m venv .venv-uv && .venv-uv/bin/pip install --quiet uv
@@ -112,10 +112,10 @@ lint: sync
 test: setup browser grpc-dev
 	$(UV) run --frozen pytest -m "not slow" $(ARGS)
 
-test-slow: setup browser grpc-dev
+test-slow: setup browser grpc-dev detector-cpp
 	$(UV) run --frozen pytest -m slow $(ARGS)
 
-test-all: setup browser grpc-dev
+test-all: setup browser grpc-dev detector-cpp
 	$(UV) run --frozen pytest $(ARGS)
 
 # The railway scenario end to end on local processes (no Docker). ARGS=--exit to not wait.
@@ -139,6 +139,12 @@ demo-localisation: setup
 	$(UV) run --frozen coupler fleet scenarios/railway/localisation-fleet.toml $(ARGS) \
 	  || [ $$? -eq 130 ]
 	$(UV) run --frozen python -m coupler_railway.integrity results/railway-localisation/latest
+
+# The balise detector in C++ (examples/detector-cpp), from the .proto files alone, with Debian's
+# C++ gRPC: build/detector-cpp/balise-detector (scenarios/railway/perception-cpp-fleet.toml).
+detector-cpp: grpc-dev
+	cmake -S examples/detector-cpp -B build/detector-cpp -DCMAKE_BUILD_TYPE=Release > /dev/null
+	cmake --build build/detector-cpp -j 2
 
 # The smallest scenario: two FMUs and the example gRPC participant.
 demo-example: setup

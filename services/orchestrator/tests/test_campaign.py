@@ -32,6 +32,7 @@ from coupler_orchestrator.tools.campaign import (
     reduce,
     run_campaign,
 )
+from coupler_orchestrator.tools.campaign.worker import report_value
 
 REPO = Path(__file__).resolve().parents[3]
 EXAMPLE = REPO / "examples" / "ramp-gain"
@@ -241,6 +242,7 @@ def test_a_pool_of_running_participants_serves_one_run_each(
         ('[grid]\n"gain" = [1]\n', "'gain' is neither Component.parameter"),
         ('[grid]\n"Gain.gain" = 2\n', "'Gain.gain' is not a list of values"),
         ('[outputs]\ny = "median(Gain.y)"\n', "is not a channel or a reduction of one"),
+        ('[outputs]\nr = "max(reports.perception.recall)"\n', "a report's value is one value"),
         ("[checks]\nok = \"__import__('os')\"\n", "Call is not allowed"),
         ('[sample]\nn = 3\n"Gain.gain" = { normal = [1, 2] }\n', "'Gain.gain' has no law"),
         ('[table]\nfile = "missing.csv"\n', "cannot read"),
@@ -437,3 +439,13 @@ def test_reductions() -> None:
         "count_changes": 3,
     }
     assert reduce(Output(name="x", reduction="last", channel="A.b"), []) is None
+
+
+def test_report_values_are_read_off_the_summary() -> None:
+    bins = [{"recall": None}, {"recall": 1.0}]
+    summary = {"reports": {"perception": {"recall": 0.5, "by_distance": bins}}}
+    assert report_value(summary, "reports.perception.recall") == 0.5
+    assert report_value(summary, "reports.perception.by_distance.1.recall") == 1.0
+    assert report_value(summary, "reports.perception.by_distance.7.recall") is None
+    assert report_value(summary, "reports.other.recall") is None
+    assert report_value(summary, "reports.perception.by_distance.0") == '{"recall": null}'

@@ -1,10 +1,14 @@
 """``coupler-railway``: the railway library's command line.
 
     coupler-railway export-openrails FILE.railml --out ROUTES/NAME [--name NAME] [--tolerance-m M]
+    coupler-railway envelope CAMPAIGN_FOLDER [-o FILE.html] [--axes A B]
 
-Writes the OpenRails route folder of a railML file (docs/openrails-route.md) and prints what
-it wrote and how closely the written track follows the railML track. A bad input file ends
-with one line ``error: FILE:LINE: ...`` naming the place and the fix, and exit status 1.
+``export-openrails`` writes the OpenRails route folder of a railML file
+(docs/openrails-route.md) and prints what it wrote and how closely the written track follows
+the railML track. A bad input file ends with one line ``error: FILE:LINE: ...`` naming the
+place and the fix, and exit status 1.
+
+``envelope`` writes a perception campaign's operating envelope (``envelope``: HTML, PNG, CSV).
 """
 
 from __future__ import annotations
@@ -49,6 +53,22 @@ def _export_openrails(args: argparse.Namespace) -> int:
     return 0
 
 
+def _envelope(args: argparse.Namespace) -> int:
+    from coupler_railway.envelope import EnvelopeError, write_envelope
+
+    try:
+        written = write_envelope(args.campaign, args.output, args.axes or ())
+    except EnvelopeError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 1
+    except OSError as exc:
+        print(f"error: {exc.filename or args.campaign}: {exc.strerror or exc}", file=sys.stderr)
+        return 1
+    for path in written:
+        print(f"envelope: {path}")
+    return 0
+
+
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(
         prog="coupler-railway", description="Coupler's railway domain tools."
@@ -72,8 +92,26 @@ def main(argv: list[str] | None = None) -> None:
         help="largest horizontal distance of the written track from the railML track "
         "(default 0.01 m)",
     )
+    envelope = commands.add_parser(
+        "envelope",
+        help="a perception campaign's operating envelope (HTML, PNG, CSV)",
+        description="Recall and position error of every scored run of a perception campaign "
+        "against each parameter it varied, a map over two of them, the boundaries at recall "
+        "0.9 and 0.5, and the worst runs with links to their frames.",
+    )
+    envelope.add_argument("campaign", type=Path, metavar="CAMPAIGN_FOLDER", help="its out folder")
+    envelope.add_argument(
+        "-o", "--output", type=Path, help="FILE.html (default CAMPAIGN_FOLDER/envelope.html)"
+    )
+    envelope.add_argument(
+        "--axes",
+        nargs=2,
+        metavar=("X", "Y"),
+        help="the map's two parameters (default: the first two)",
+    )
     args = parser.parse_args(argv)
-    sys.exit(_export_openrails(args))
+    command = _envelope if args.command == "envelope" else _export_openrails
+    sys.exit(command(args))
 
 
 if __name__ == "__main__":

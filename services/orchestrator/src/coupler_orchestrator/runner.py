@@ -29,6 +29,7 @@ from coupler_orchestrator.observer import Observer, RunEnd
 from coupler_orchestrator.options import RunOptions
 from coupler_orchestrator.outputs.csv import CsvRecorder, Selection
 from coupler_orchestrator.outputs.files import check_writable, claim, default_base, new_run_folder
+from coupler_orchestrator.outputs.kept_frames import KeptFrames
 from coupler_orchestrator.outputs.openmcx import OpenMcxResults
 from coupler_orchestrator.outputs.parquet import ParquetRecorder, parquet_available
 from coupler_orchestrator.outputs.summary import SummaryWriter, coupler_version
@@ -153,7 +154,8 @@ async def run_scenario(
             if recordings:
                 extra["recordings"] = {r.component: f"recordings/{r.path.name}" for r in recordings}
             summary = SummaryWriter(summary_path, extra=extra)
-            recorders: list[Observer] = [results, summary]
+            # frames kept for the reports: told the end before the summary makes the reports
+            recorders: list[Observer] = [results, KeptFrames(out_dir), summary]
             if options.parquet:
                 recorders.append(ParquetRecorder(out_dir / "results.parquet", selection))
             recorders.extend(recordings)
@@ -198,4 +200,10 @@ def _extra(checked: Checked, descriptions: dict[str, Any]) -> dict[str, Any]:
         "implementations": {n: d.implementation for n, d in descriptions.items()},
         "semantics": "openmcx" if checked.openmcx else "coupler",
         "warnings": list(checked.warnings),
+        "parameters": {
+            f"{member.name}.{name}": value
+            for member in checked.members
+            for name, value in member.parameters.items()
+            if not isinstance(value, bytes)
+        },
     }

@@ -16,6 +16,12 @@ The detector is deliberately simple -- an example of a system under test, not a 
 4. **Range.** Blobs farther than ``max_range_m`` (40 m) are not reported: beyond, with an
    800 x 600 camera of 45 degrees, a pixel row spans more than a metre of track and the
    balises of a group (3 m apart) merge into one blob.
+5. **Bound.** At most ``max_detections`` (``MAX_DETECTIONS``, 64) per frame, the nearest: a
+   frame of yellow confetti (a 4K frame of 2-pixel dots has 670,009 blobs) gives 64
+   detections and says how many more it left out (``Found.omitted``), never a 35 MB answer.
+
+Every blob is measured at once, as arrays (boxes, sizes, distances), so a frame's time does not
+grow with a Python loop over its blobs.
 
 The distance ahead is along the ground from the camera, which on a curve is the chord, not
 the arc (0.1 m short at 50 m on a 185 m radius).
@@ -25,6 +31,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -109,6 +116,20 @@ def ground_distance(
     return math.hypot(x * t, ahead * t), x * t
 
 
+MAX_DETECTIONS = 64
+"""Detections reported per frame at most (the nearest); a real scene has a few balises."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class Found:
+    """What one frame showed."""
+
+    detections: list[Detection]
+    """Nearest first, at most ``max_detections``."""
+    omitted: int = 0
+    """Balise-like blobs in range left out by the bound (the farthest)."""
+
+
 def detect(
     rgb: Pixels,
     intrinsics: Intrinsics,
@@ -116,44 +137,100 @@ def detect(
     *,
     max_range_m: float = 40.0,
     min_pixels: int = 2,
+    max_detections: int = MAX_DETECTIONS,
     shape: BaliseShape = BALISE,
 ) -> list[Detection]:
-    """Every balise in the frame within ``max_range_m``, nearest first."""
+    """Every balise in the frame within ``max_range_m``, nearest first (at most
+    ``max_detections``: ``find`` says how many more there were)."""
+    return find(
+        rgb,
+        intrinsics,
+        mounting,
+        max_range_m=max_range_m,
+        min_pixels=min_pixels,
+        max_detections=max_detections,
+        shape=shape,
+    ).detections
+
+
+def find(
+    rgb: Pixels,
+    intrinsics: Intrinsics,
+    mounting: Mounting,
+    *,
+    max_range_m: float = 40.0,
+    min_pixels: int = 2,
+    max_detections: int = MAX_DETECTIONS,
+    shape: BaliseShape = BALISE,
+) -> Found:
+    """The balises in the frame within ``max_range_m``, nearest first, at most
+    ``max_detections`` of them, and how many more there were."""
     mask = yellow_mask(rgb)
     labels, count = ndimage.label(mask, structure=np.ones((3, 3), dtype=bool))
     if count == 0:
-        return []
-    sizes = np.bincount(labels.ravel(), minlength=count + 1)
-    found: list[Detection] = []
-    for index, box in enumerate(ndimage.find_objects(labels), start=1):
-        if box is None or sizes[index] < min_pixels:
-            continue
-        rows, cols = box
-        top, bottom = rows.start, rows.stop - 1
-        left, right = cols.start, cols.stop - 1
-        u = (left + right) / 2.0
-        near = ground_distance(u, bottom + 0.5, mounting.height_m + shape.bottom_m,
-                               intrinsics, mounting)  # fmt: skip
-        far = ground_distance(u, top - 0.5, mounting.height_m + shape.top_m, intrinsics, mounting)
-        if near is None or far is None:
-            continue
-        distance = (near[0] + far[0]) / 2.0
-        if distance > max_range_m:
-            continue
-        lateral = (near[1] + far[1]) / 2.0
-        # a balise of 0.52 m across at this distance is this many pixels wide
-        expected = 0.52 * intrinsics.fx / max(distance, 1.0)
-        confidence = min(1.0, (right - left + 1) / max(expected, 1.0))
-        found.append(
-            Detection(
-                left=left,
-                top=top,
-                right=right,
-                bottom=bottom,
-                distance_ahead_m=distance,
-                lateral_m=lateral,
-                confidence=round(confidence, 3),
-                pixels=int(sizes[index]),
-            )
+        return Found(detections=[])
+    top, bottom, left, right, sizes = _boxes(labels, count)
+    kept = np.flatnonzero(sizes >= min_pixels)
+    top, bottom, left, right, sizes = (a[kept] for a in (top, bottom, left, right, sizes))
+    u = (left + right) / 2.0
+    near_ahead, near_lateral = _ground(u, bottom + 0.5, mounting.height_m + shape.bottom_m,
+                                       intrinsics, mounting)  # fmt: skip
+    far_ahead, far_lateral = _ground(u, top - 0.5, mounting.height_m + shape.top_m,
+                                     intrinsics, mounting)  # fmt: skip
+    distance = (near_ahead + far_ahead) / 2.0  # NaN above the horizon
+    inside = np.flatnonzero(distance <= max_range_m)
+    order = inside[np.argsort(distance[inside], kind="stable")]
+    shown = order[: max(max_detections, 0)]
+    lateral = (near_lateral + far_lateral) / 2.0
+    # a balise of 0.52 m across at this distance is this many pixels wide
+    expected = 0.52 * intrinsics.fx / np.maximum(distance[shown], 1.0)
+    confidence = np.minimum(1.0, (right[shown] - left[shown] + 1) / np.maximum(expected, 1.0))
+    detections = [
+        Detection(
+            left=int(left[i]),
+            top=int(top[i]),
+            right=int(right[i]),
+            bottom=int(bottom[i]),
+            distance_ahead_m=float(distance[i]),
+            lateral_m=float(lateral[i]),
+            confidence=round(float(c), 3),
+            pixels=int(sizes[i]),
         )
-    return sorted(found, key=lambda d: d.distance_ahead_m)
+        for i, c in zip(shown, confidence, strict=True)
+    ]
+    return Found(detections=detections, omitted=len(order) - len(shown))
+
+
+def _boxes(labels: npt.NDArray[np.integer[Any]], count: int) -> tuple[npt.NDArray[np.int64], ...]:
+    """Top, bottom, left and right (inclusive) and the size in pixels of blobs 1..count."""
+    width = labels.shape[1]
+    flat = labels.ravel()
+    where = np.flatnonzero(flat)
+    which = flat[where] - 1
+    rows, cols = np.divmod(where, width)
+    top = np.full(count, labels.shape[0], dtype=np.int64)
+    left = np.full(count, width, dtype=np.int64)
+    bottom = np.full(count, -1, dtype=np.int64)
+    right = np.full(count, -1, dtype=np.int64)
+    np.minimum.at(top, which, rows)
+    np.maximum.at(bottom, which, rows)
+    np.minimum.at(left, which, cols)
+    np.maximum.at(right, which, cols)
+    return top, bottom, left, right, np.bincount(which, minlength=count)
+
+
+def _ground(
+    u: npt.NDArray[np.floating[Any]],
+    v: npt.NDArray[np.floating[Any]],
+    depth_m: float,
+    intrinsics: Intrinsics,
+    mounting: Mounting,
+) -> tuple[npt.NDArray[np.floating[Any]], npt.NDArray[np.floating[Any]]]:
+    """``ground_distance`` of many pixels at once; NaN where a ray is above the horizon."""
+    x = (u - intrinsics.cx) / intrinsics.fx
+    y = (v - intrinsics.cy) / intrinsics.fy  # down
+    pitch = math.radians(mounting.pitch_deg)
+    down = y * math.cos(pitch) + math.sin(pitch)
+    ahead = -y * math.sin(pitch) + math.cos(pitch)
+    t = np.where(down > 1e-9, depth_m / np.where(down > 1e-9, down, 1.0), np.nan)
+    return np.hypot(x * t, ahead * t), x * t

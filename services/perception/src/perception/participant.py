@@ -11,16 +11,21 @@ Track position of a detection = ``track_offset`` + the train's distance travelle
 of the same communication point as the frame) + the distance ahead: the camera is taken at
 ``track_offset`` along the line when the train has travelled 0 m, moving forward.
 
-A step with an empty image (no frame yet) detects nothing; an image that is not rgb8, or whose
-data does not match its width and height, is an error naming the channel.
+A step with an empty image (no frame yet) detects nothing; bytes that are not an Image, an
+image that is not rgb8, whose data does not match its width and height, or whose intrinsics
+are not a camera's (fx, fy finite and positive; cx, cy finite) are refused as
+INVALID_ARGUMENT naming the channel. A frame gives at most ``max_detections`` detections (the
+nearest); ``BaliseDetections.omitted`` says how many more it had.
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
+from google.protobuf.message import DecodeError
 
 from coupler.channels import Capabilities, Causality, Channel, Description, RunSetup, Value
 from coupler.channels import ValueType as T
@@ -39,9 +44,11 @@ from coupler_railway.messages import (
     image_bytes,
 )
 
-from .detector import Intrinsics, Mounting, detect
+from .detector import MAX_DETECTIONS, Intrinsics, Mounting, find
 
 NAME = "Perception"
+MAX_DETECTIONS_LIMIT = 10_000
+"""The largest ``max_detections`` taken: 10,000 detections are a 0.5 MB answer."""
 
 
 def _channel(
@@ -69,6 +76,9 @@ CHANNELS = (
              description="Balises farther ahead are not reported"),
     _channel("min_pixels", _PAR, T.INTEGER, 2,
              description="Smallest yellow blob taken for a balise [pixels]"),
+    _channel("max_detections", _PAR, T.INTEGER, MAX_DETECTIONS,
+             description="Detections reported per frame at most (the nearest); how many more "
+                         "there were is the message's `omitted`"),
     _channel("detections", _OUT, T.BINARY, None, message_type=BALISE_DETECTIONS,
              description="Every balise found in the last frame (coupler.v1.BaliseDetections)"),
     _channel("detection_count", _OUT, T.INTEGER, None,
@@ -94,6 +104,14 @@ class PerceptionParticipant(Participant):
 
     async def initialize(self, setup: RunSetup) -> Values:
         self._parameters = {**_starts(_PAR), **setup.parameters}
+        bound = int(self._parameters["max_detections"])
+        if not 1 <= bound <= MAX_DETECTIONS_LIMIT:
+            raise ChannelValueError(
+                f"parameter 'max_detections' is {bound}; it bounds the detections of one "
+                f"frame: give 1 to {MAX_DETECTIONS_LIMIT}",
+                channel="max_detections",
+                expected=f"1 to {MAX_DETECTIONS_LIMIT}",
+            )
         self._inputs = {**_starts(_IN), **setup.inputs}
         self._outputs = self._perceive(self._inputs)
         return self._outputs
@@ -110,36 +128,18 @@ class PerceptionParticipant(Participant):
         frame = inputs.get("image", b"")
         if not isinstance(frame, bytes) or not frame:
             return _result(BaliseDetections())
-        image, data = without_bytes(Image, frame, "data")  # the pixels a view, not copies
-        if image.encoding != RGB8:
-            raise ChannelValueError(
-                f"channel 'image' carries a '{image.encoding}' frame of sensor "
-                f"'{image.sensor}'; the detector reads '{RGB8}' (connect a camera, not a "
-                f"depth sensor)",
-                channel="image",
-                expected=RGB8,
-            )
-        size = image.width * image.height * 3
-        if len(data) != size:
-            raise ChannelValueError(
-                f"channel 'image': sensor '{image.sensor}' declares {image.width} x "
-                f"{image.height} rgb8 ({size} bytes) but its data has {len(data)} bytes",
-                channel="image",
-                expected=f"{size} bytes",
-            )
-        state = TrainState()
-        raw_state = inputs.get("train_state", b"")
-        if isinstance(raw_state, bytes):
-            state.ParseFromString(raw_state)
+        image, data = _image(frame)
+        intrinsics = _intrinsics(image)
+        state = _train_state(inputs.get("train_state", b""))
         p = self._parameters
         pixels = np.frombuffer(data, dtype=np.uint8).reshape(image.height, image.width, 3)
-        k = image.intrinsics
-        found = detect(
+        found = find(
             pixels,
-            Intrinsics(fx=k.fx, fy=k.fy, cx=k.cx, cy=k.cy),
+            intrinsics,
             Mounting(height_m=float(p["camera_height"]), pitch_deg=float(p["camera_pitch"])),
             max_range_m=float(p["max_range"]),
             min_pixels=int(p["min_pixels"]),
+            max_detections=int(p["max_detections"]),
         )
         camera_at = float(p["track_offset"]) + state.distance_m
         message = BaliseDetections(
@@ -153,10 +153,72 @@ class PerceptionParticipant(Participant):
                     track_position_m=round(camera_at + d.distance_ahead_m, 3),
                     confidence=d.confidence,
                 )
-                for d in found
+                for d in found.detections
             ],
+            omitted=found.omitted,
         )
         return _result(message)
+
+
+def _image(frame: bytes) -> tuple[Image, memoryview]:
+    """The Image in ``frame`` and its pixels (a view); ChannelValueError when it is none."""
+    try:
+        image, data = without_bytes(Image, frame, "data")  # the pixels a view, not copies
+    except DecodeError:
+        raise ChannelValueError(
+            f"channel 'image' carries {len(frame)} bytes that are not a coupler.v1.Image "
+            f"(connect a camera channel: the OpenRails bridge's sensor output)",
+            channel="image",
+            expected="coupler.v1.Image",
+        ) from None
+    if image.encoding != RGB8:
+        raise ChannelValueError(
+            f"channel 'image' carries a '{image.encoding}' frame of sensor "
+            f"'{image.sensor}'; the detector reads '{RGB8}' (connect a camera, not a "
+            f"depth sensor)",
+            channel="image",
+            expected=RGB8,
+        )
+    size = image.width * image.height * 3
+    if len(data) != size:
+        raise ChannelValueError(
+            f"channel 'image': sensor '{image.sensor}' declares {image.width} x "
+            f"{image.height} rgb8 ({size} bytes) but its data has {len(data)} bytes",
+            channel="image",
+            expected=f"{size} bytes",
+        )
+    return image, data
+
+
+def _train_state(raw: Value) -> TrainState:
+    """The TrainState in ``raw`` (empty: travelled 0 m); ChannelValueError when it is none."""
+    state = TrainState()
+    try:
+        state.ParseFromString(raw if isinstance(raw, bytes) else b"")
+    except DecodeError:
+        raise ChannelValueError(
+            f"channel 'train_state' carries {len(raw) if isinstance(raw, bytes) else 0} bytes "
+            f"that are not a coupler.v1.TrainState (connect the OpenRails bridge's train_state)",
+            channel="train_state",
+            expected="coupler.v1.TrainState",
+        ) from None
+    return state
+
+
+def _intrinsics(image: Image) -> Intrinsics:
+    """The frame's camera; ChannelValueError for intrinsics no camera has (the distances
+    would be NaN, or a division by zero)."""
+    k = image.intrinsics
+    focal_ok = all(math.isfinite(f) and f > 0 for f in (k.fx, k.fy))
+    if not focal_ok or not all(math.isfinite(c) for c in (k.cx, k.cy)):
+        raise ChannelValueError(
+            f"channel 'image': sensor '{image.sensor}' has intrinsics fx={k.fx!r}, "
+            f"fy={k.fy!r}, cx={k.cx!r}, cy={k.cy!r}; a camera's focal lengths are finite and "
+            f"positive and its centre finite (pixels): fix the sensor's fov and size",
+            channel="image",
+            expected="fx, fy > 0 and finite; cx, cy finite",
+        )
+    return Intrinsics(fx=k.fx, fy=k.fy, cx=k.cx, cy=k.cy)
 
 
 def _starts(causality: Causality) -> dict[str, Value]:

@@ -206,10 +206,16 @@ class BaliseDetections(_message.Message):
     TIME_S_FIELD_NUMBER: _builtins.int
     SENSOR_FIELD_NUMBER: _builtins.int
     DETECTIONS_FIELD_NUMBER: _builtins.int
+    OMITTED_FIELD_NUMBER: _builtins.int
     time_s: _builtins.float
     """Simulation time of the frame [s]."""
     sensor: _builtins.str
     """Name of the sensor whose frame was searched."""
+    omitted: _builtins.int
+    """How many more balise-like things the participant found in the frame and left out of
+    `detections` by its bound on detections per frame (the farthest); 0: none left out. A
+    frame of yellow confetti gives a bounded answer that says it was bounded.
+    """
     @_builtins.property
     def detections(self) -> _containers.RepeatedCompositeFieldContainer[Global___BaliseDetection]: ...
     def __init__(
@@ -218,10 +224,11 @@ class BaliseDetections(_message.Message):
         time_s: _builtins.float = ...,
         sensor: _builtins.str = ...,
         detections: _abc.Iterable[Global___BaliseDetection] | None = ...,
+        omitted: _builtins.int = ...,
     ) -> None: ...
     _HasFieldArgType: _TypeAlias = _Never  # noqa: Y015
     def HasField(self, field_name: _HasFieldArgType) -> _builtins.bool: ...
-    _ClearFieldArgType: _TypeAlias = _typing.Literal["detections", b"detections", "sensor", b"sensor", "time_s", b"time_s"]  # noqa: Y015
+    _ClearFieldArgType: _TypeAlias = _typing.Literal["detections", b"detections", "omitted", b"omitted", "sensor", b"sensor", "time_s", b"time_s"]  # noqa: Y015
     def ClearField(self, field_name: _ClearFieldArgType) -> None: ...
     def WhichOneof(self, oneof_group: _Never) -> None: ...
 

@@ -28,7 +28,14 @@ from typing import Any
 
 from coupler.errors import CouplerError, ScenarioError
 
-RUN_FILES = ("results.csv", "results.parquet", "summary.json", "recordings", "frames")
+RUN_FILES = (
+    "results.csv",
+    "results.parquet",
+    "summary.json",
+    "recordings",
+    "frames",
+    "kept-frames",
+)
 """What a run writes into its folder (``--force`` removes these, and nothing else)."""
 LATEST = "latest"
 """The link, in a base folder, to its newest run's folder."""

@@ -30,6 +30,8 @@ A campaign file (TOML) names the scenario and its variants::
     [outputs]                                 # campaign table columns from results.csv
     y_max = "max(Gain.y)"                     # max min first last mean count_changes
     y_final = "Gain.y"                        # a bare channel: its last value
+    recall = "reports.perception.recall"      # a value of summary.json's reports (an item of
+                                              # a list by its index: ...by_distance.3.recall)
 
     [[derive]]                                # columns computed by a Python function
     function = "coupler_railway.campaign:balise_detections"

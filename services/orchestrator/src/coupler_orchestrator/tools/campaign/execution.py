@@ -204,6 +204,7 @@ def _store(runs_dir: Path, job: RunJob, report: RunReport) -> None:
     shutil.rmtree(directory, ignore_errors=True)
     directory.mkdir(parents=True)
     for name, content in report.files.items():
+        (directory / name).parent.mkdir(parents=True, exist_ok=True)
         (directory / name).write_bytes(content)
     report.files = {}
     write_json(directory / "variant.json", job.variant)

@@ -25,13 +25,14 @@ class CampaignError(ScenarioError):
 
 @dataclass(frozen=True, kw_only=True)
 class Output:
-    """A campaign table column read off a run's results.csv."""
+    """A campaign table column read off a run's results.csv, or its summary.json's reports."""
 
     name: str
     reduction: str
     """One of REDUCTIONS."""
     channel: str
-    """``Component.connector`` (a results.csv column)."""
+    """``Component.connector`` (a results.csv column), or ``reports.<report>.<key>...`` (a
+    value of summary.json's reports: ``reports.perception.recall``)."""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -190,6 +191,12 @@ class _Reader:
             if channel.endswith(")") and "(" in channel:
                 reduction, _, channel = channel[:-1].partition("(")
                 reduction, channel = reduction.strip(), channel.strip()
+            if channel.startswith("reports.") and reduction != "last":
+                raise self.fail(
+                    "outputs",
+                    f'{name} = "{text}": a report\'s value is one value per run',
+                    f'write {name} = "{channel}" (summary.json\'s reports, as the run wrote them)',
+                )
             if reduction not in REDUCTIONS or "." not in channel:
                 raise self.fail(
                     "outputs",

@@ -19,6 +19,7 @@ import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import Any
 
 from coupler.errors import CouplerError
 from coupler.logs import configure_logging
@@ -32,6 +33,8 @@ from coupler_orchestrator.tools.campaign.variants import RUN_OPTIONS, Scalar, nu
 from coupler_orchestrator.tools.fleet import Fleet, FleetError, FleetSpec, free_port, port_variables
 
 COMPLETED = ("completed", "terminated")
+REPORTS = "reports."
+"""An output read off the run's summary.json (``reports.<name>.<key>``), not results.csv."""
 SERVICE_LOGS = "service-logs"
 """The folder of a run's scratch folder its fleet's services log into (``service-NAME.log`` in
 the run's folder when the run did not complete)."""
@@ -136,9 +139,11 @@ def _collect(job: RunJob, scratch: Path, report: RunReport, ran: bool) -> None:
             report.values = _values(job, scratch)
     except Exception as exc:  # a derive function is user code: its failure is the run's reason
         report.reason = (report.reason + "; " if report.reason else "") + f"outputs: {exc}"
-    for path in scratch.iterdir():
-        if path.is_file() and not path.name.startswith("."):
-            report.files[path.name] = path.read_bytes()
+    for path in sorted(scratch.rglob("*")):
+        name = path.relative_to(scratch).as_posix()
+        hidden = any(part.startswith(".") for part in path.relative_to(scratch).parts)
+        if path.is_file() and not hidden and not name.startswith(f"{SERVICE_LOGS}/"):
+            report.files[name] = path.read_bytes()  # the reports' folders too (their frames)
     if report.status not in COMPLETED:  # what its services said, to debug it
         for path in sorted(scratch.glob(f"{SERVICE_LOGS}/*/*.log")):
             report.files[f"service-{path.name}"] = path.read_bytes()
@@ -210,7 +215,13 @@ async def _coupler_run(
 def _values(job: RunJob, scratch: Path) -> dict[str, Scalar | None]:
     columns = read_columns(scratch / "results.csv")
     values: dict[str, Scalar | None] = {}
+    summary: Mapping[str, Any] | None = None
     for output in job.outputs:
+        if output.channel.startswith(REPORTS):
+            if summary is None:
+                summary = json.loads((scratch / "summary.json").read_text(encoding="utf-8"))
+            values[output.name] = report_value(summary, output.channel)
+            continue
         if output.channel not in columns:
             raise CampaignError(
                 f"output {output.name}: channel '{output.channel}' is not in results.csv "
@@ -228,6 +239,23 @@ def _values(job: RunJob, scratch: Path) -> dict[str, Scalar | None]:
             raise CampaignError(f"[[derive]] {derive.function}: {exc}") from None
         values.update(function(finished, **derive.options))
     return values
+
+
+def report_value(summary: Mapping[str, Any], path: str) -> Scalar | None:
+    """The value at ``path`` (``reports.perception.recall``; a number picks an item of a list:
+    ``reports.perception.by_distance.0.recall``) in a run's summary.json; None where the run
+    has no such value (a run its report did not cover, a report that failed)."""
+    value: Any = summary
+    for part in path.split("."):
+        if isinstance(value, dict):
+            value = value.get(part)
+        elif isinstance(value, list) and part.isdigit() and int(part) < len(value):
+            value = value[int(part)]
+        else:
+            return None
+    if isinstance(value, list | dict):
+        return json.dumps(value, sort_keys=True)
+    return value
 
 
 def _error_of(path: Path) -> str:

@@ -1,0 +1,93 @@
+"""The operating envelope of a perception campaign, from a campaign folder laid out as
+`coupler campaign` writes one (runs/<n>-<key>/variant.json, summary.json with
+reports.perception, perception-frames/): charts against each varied parameter, a map over
+two, boundaries at recall 0.9 and 0.5, the worst runs with links to their frames.
+
+Here: fog visibility x sun elevation, recall falling with fog and at low sun; two detectors.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from coupler_railway.envelope import boundary, read_campaign, write_envelope
+
+FOG = (50.0, 100.0, 200.0, 400.0)
+SUN = (5.0, 20.0, 45.0)
+
+
+def recall(fog: float, sun: float, detector: str) -> float:
+    made = min(1.0, fog / 200.0) * (0.6 if sun < 10 else 1.0)
+    return round(min(1.0, made * 1.5) if detector == "learned" else made, 3)
+
+
+def campaign(folder: Path) -> Path:
+    n = 0
+    for detector in ("colour", "learned"):
+        for fog in FOG:
+            for sun in SUN:
+                run = folder / "runs" / f"{n:03d}-key{n}"
+                (run / "perception-frames").mkdir(parents=True)
+                variant = {"detector": detector, "OpenRails.fog_m": fog, "OpenRails.sun_deg": sun}
+                value = recall(fog, sun, detector)
+                report = {"recall": value, "precision": 1.0, "max_abs_error_m": 2 - value,
+                          "mean_abs_error_m": 0.1}  # fmt: skip
+                (run / "variant.json").write_text(json.dumps(variant))
+                (run / "summary.json").write_text(json.dumps({"reports": {"perception": report}}))
+                if value < 1:
+                    (run / "perception-frames" / "t0012.4.png").write_bytes(b"\x89PNG")
+                n += 1
+    (folder / "runs" / "999-failed").mkdir()  # a run that wrote nothing: left out
+    return folder
+
+
+def test_the_envelope_reads_the_runs_and_their_axes(tmp_path: Path) -> None:
+    envelope = read_campaign(campaign(tmp_path))
+    assert len(envelope.runs) == 24
+    assert envelope.axes == ["OpenRails.fog_m", "OpenRails.sun_deg"]
+    assert envelope.detectors == ["colour", "learned"]
+    assert boundary([(50.0, 0.25), (100.0, 0.5), (200.0, 1.0)], 0.9) == [180.0]
+
+
+def test_the_command_writes_html_png_and_csv_with_boundaries_and_frame_links(
+    tmp_path: Path,
+) -> None:
+    folder = campaign(tmp_path / "campaign")
+    done = subprocess.run(
+        [str(Path(sys.executable).with_name("coupler-railway")), "envelope", str(folder)],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert done.returncode == 0, done.stderr
+    page = (folder / "envelope.html").read_text()
+    assert "<script" not in page and "http" not in page.replace("http://www.w3.org", "")
+    # the colour detector's mean recall over sun elevations crosses 0.9 and 0.5 along fog
+    assert "0.9 at" in page and "0.5 at" in page
+    assert page.count('stroke-width="3"') >= 2  # the map's boundaries, for each detector
+    assert 'href="runs/000-key0/perception-frames/t0012.4.png"' in page  # the worst run
+    assert (folder / "envelope.png").read_bytes()[:4] == b"\x89PNG"
+    with (folder / "envelope.csv").open() as handle:
+        rows = list(csv.DictReader(handle))
+    assert len(rows) == 24 and rows[0]["recall"] == "0.15"
+
+
+def test_a_folder_without_a_campaign_or_a_parameter_to_vary_is_refused(tmp_path: Path) -> None:
+    with pytest.raises(ValueError, match="no runs/ folder"):
+        write_envelope(tmp_path)
+    done = subprocess.run(
+        [str(Path(sys.executable).with_name("coupler-railway")), "envelope", str(tmp_path),
+         "--axes", "a", "b"],
+        capture_output=True, text=True, timeout=120,
+    )  # fmt: skip
+    assert (
+        done.returncode == 1
+        and done.stderr.startswith("error: ")
+        and "Traceback" not in (done.stderr)
+    )
