@@ -512,6 +512,54 @@ def test_a_full_disk_fails_the_run_keeping_whole_rows(
         subprocess.run(["umount", str(full)], check=False)
 
 
+CHAIN = SystemStructure(
+    "Chain",
+    components=[
+        fmu("Source", "${COUPLER_FMU_DIR}/Source2.fmu", outputs=["ramp"]),
+        fmu("Integ", "${COUPLER_FMU_DIR}/Integrator2.fmu", inputs=["u"]),
+    ],
+    connections=[("Source.ramp", "Integ.u")],
+    stop_time=10,
+)
+
+
+@pytest.mark.skipif(os.geteuid() != 0, reason="mounting a small tmpfs needs root")
+def test_a_disk_that_fills_at_the_last_flush_fails_the_run(tmp_path: Path) -> None:
+    """
+        Source --ramp--> Integ (in-process, 1000 steps in a few ms), results on a 16 KiB disk
+
+    Every row waits in results.csv's buffer until the run's end, when the disk is found full:
+    the run fails (exit 1, summary.json ``failed``) naming the file and the rows it keeps,
+    which are whole. (It used to end ``completed``, exit 0, with a fraction of the rows.)"""
+    full = tmp_path / "full"
+    full.mkdir()
+    mounted = subprocess.run(
+        ["mount", "-t", "tmpfs", "-o", "size=16k", "tmpfs", str(full)], capture_output=True
+    )
+    if mounted.returncode:
+        pytest.skip(f"cannot mount a tmpfs here: {mounted.stderr.decode().strip()}")
+    try:
+        out = full / "o"
+        outcome = Coupler.process(
+            "run", CHAIN.write(tmp_path / "chain.ssd"), "--out", out, "--step", "0.01"
+        )
+        assert outcome.code == 1, outcome
+        assert outcome.err.count("\n") == 1 and "Traceback" not in outcome.err, outcome.err
+        recorded = rows(out)
+        last = float(recorded[-1]["time"])
+        said = (
+            f"cannot write {out.resolve() / 'results.csv'}: No space left on device; it keeps "
+            f"the rows up to t={last:g} s ({len(recorded)} rows) (the run itself had completed "
+            "at t=10 s)"
+        )
+        assert outcome.err == f"error: run failed: {said}\n"
+        result = summary(out)
+        assert (result["status"], result["reason"]) == ("failed", said)
+        assert 0 < len(recorded) < 1001 and all(None not in row.values() for row in recorded)
+    finally:
+        subprocess.run(["umount", str(full)], check=False)
+
+
 @pytest.mark.slow
 @pytest.mark.skipif(os.geteuid() != 0, reason="mounting a small tmpfs needs root")
 def test_a_full_disk_leaves_no_unreadable_parquet_behind(
@@ -667,6 +715,42 @@ def test_an_interrupt_reaches_a_run_of_fast_in_process_fmus(
     result = summary(out)
     assert (result["status"], result["reason"]) == ("aborted", "interrupted by the user")
     assert 1000 <= len(assert_rows_kept(out)) < 100_000_001
+
+
+def test_a_crash_in_c_says_how_far_the_run_got(faulty_ssd: Path, tmp_path: Path) -> None:
+    """Unpaced, in-process FMUs step in C several hundred steps a call: a segfault at t = 30 s
+    (step 300) comes before any of them is told. The time reached is the step the native FMU
+    step had under way (it keeps it in the watching parent's shared page), not t = 0 (which it
+    used to say, with a header-only results.csv and no word why)."""
+    out = tmp_path / "o"
+    run = orchestrator(faulty_ssd, out, *RUN, "--stop-time", "100", "--param", "Faulty.crash_at=30")
+    _, err = run.communicate(timeout=60)
+    assert run.returncode == 128 + signal.SIGSEGV, err
+    assert err.startswith("error: run crashed at t=30 s: "), err
+    result = summary(out)
+    assert (result["status"], result["end_time"], result["steps"]) == ("crashed", 30.0, 300)
+    if len(rows(out)) < 300:  # rows told before the crash are kept whole; the rest said lost
+        assert "the steps computed in C since were lost with the process" in err, err
+
+
+def test_a_crash_before_the_first_step_leaves_no_summary_running(
+    faulty_fmus: dict[str, Path], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """An FMU that segfaults in fmi2Instantiate ends the process before the first step:
+    summary.json says ``crashed`` (it stayed ``running`` for good)."""
+    monkeypatch.setenv("FAULTY_FMU_DIR", str(faulty_fmus["Faulty2"].parent))
+    ssd = tmp_path / "crash.ssd"
+    ssd.write_text(FAULTY_SSD.xml().replace("Faulty2.fmu", "CrashOnInstantiate2.fmu"))
+    out = tmp_path / "o"
+    run = orchestrator(ssd, out, *RUN)
+    _, err = run.communicate(timeout=60)
+    assert run.returncode == 128 + signal.SIGSEGV, err
+    assert err.startswith("error: run crashed before its first step: "), err
+    assert err.rstrip().endswith(
+        f"nothing was recorded, in {out.resolve()} (summary.json: status crashed)"
+    )
+    result = summary(out)
+    assert result["status"] == "crashed" and "before its first step" in result["reason"]
 
 
 def test_an_fmu_crashing_in_process_ends_the_run_crashed_with_a_sentence(

@@ -145,7 +145,7 @@ def write_recording(path: Path, reals: list[float], *, multiple: int = 2) -> Non
     for k in range(steps + 1):
         j = k // multiple
         recorder.stepped(1.0 + k * 0.1, [float(k), reals[j], f"ü{j}", bytes([j]) * 3])
-    recorder.finished(RunEnd(status="completed", reason="", steps=steps, end_time=0, wall_time=0))
+    recorder.closing(RunEnd(status="completed", reason="", steps=steps, end_time=0, wall_time=0))
 
 
 def test_real_values_are_bit_exact(tmp_path: Path) -> None:
@@ -272,7 +272,7 @@ def test_a_replay_holds_one_block_in_memory_not_the_file(
     )  # fmt: skip
     for k in range(steps + 1):
         recorder.stepped(k * 0.1, [blob])
-    recorder.finished(RunEnd(status="completed", reason="", steps=steps, end_time=0, wall_time=0))
+    recorder.closing(RunEnd(status="completed", reason="", steps=steps, end_time=0, wall_time=0))
     size = path.stat().st_size
     assert size > 24_000_000
 

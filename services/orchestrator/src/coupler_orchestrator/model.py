@@ -269,6 +269,8 @@ class Plan:
     """Pace simulated time at this multiple of wall time; None runs as fast as possible."""
     on_abandoned: Callable[[RunEnd], None] | None = None
     """Told when the run is abandoned, its thread stuck (``RunOptions.on_abandoned``)."""
+    progress: memoryview | None = field(default=None, compare=False, repr=False)
+    """Where the native FMU step keeps the step under way (``RunOptions.progress``)."""
     native: bool = False
     """Step in-process FMUs in C when the plan allows it (``master.native_fmu_step``)."""
     openmcx: OpenMcx | None = None

@@ -1,6 +1,7 @@
 """What a run tells its observers: the CSV recorder, the summary, the progress display, live
 views and tests all see the same events, in this order: ``started``, then ``stepped`` (and
-``timed``) for every communication point from t_0 on, then ``finished`` — on every path.
+``timed``) for every communication point from t_0 on, then ``closing`` and ``finished`` — on
+every path.
 Where the master takes several base steps in one call into C (the native FMU step), it tells
 their points together, in order (``stepped_batch``, which by default calls ``stepped`` and
 ``timed`` for each); a batch spans at most a few hundred steps and a fiftieth of a second.
@@ -134,8 +135,14 @@ class Observer:
             if timed:
                 self.timed(steps.seconds(j))
 
+    def closing(self, end: RunEnd) -> None:
+        """The run has ended (``end``, as far as the steps go): write what is still buffered.
+        A recorder that cannot (a full disk) raises a CouplerError saying which file and what
+        it keeps; the run then ends ``failed`` with that reason, and ``finished`` says so to
+        every observer. Called for every observer before any is told ``finished``."""
+
     def finished(self, end: RunEnd) -> None:
-        """The run ended, however it ended."""
+        """The run ended, however it ended (after every observer's ``closing``)."""
 
 
 class ComponentObserver(Observer):

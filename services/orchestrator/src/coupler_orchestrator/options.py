@@ -85,6 +85,10 @@ class RunOptions:
     """Step a remote participant reached over ``unix://`` that offers a step socket
     (docs/protocol.md "Step socket") over it, natively and without gRPC. False, or with
     ``COUPLER_STEP_SOCKET=0``: over its StepStream, with the same results."""
+    progress: memoryview | None = field(default=None, compare=False, repr=False)
+    """Three doubles in memory that outlives this process (the supervisor's shared page): the
+    native FMU step keeps the step under way there (member slot, since, time), so a crash in C
+    still says how far the run got (``cli.supervisor``)."""
     on_abandoned: Callable[[RunEnd], None] | None = field(default=None, compare=False)
     """Called on the watchdog's thread when the run is abandoned because the master's thread
     is stuck in a participant (an in-process FMU hanging past its deadline, or through an

@@ -364,7 +364,7 @@ class Recorder(Observer):
             parts.append(_encode(channel.type, row[slot]))
         self._add(b"".join(parts))
 
-    def finished(self, end: RunEnd) -> None:
+    def closing(self, end: RunEnd) -> None:
         """Write the last block and the seal; when this component ended the run, its request
         closes the records (a record with j = ``END``: the end time and the reason, a String)."""
         if self._file is None:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import dataclasses
 import functools
 import sys
 from dataclasses import replace
@@ -119,6 +120,7 @@ async def run(args: argparse.Namespace, options: RunOptions, out: TextIO, sessio
     watched = beacon()
     if watched is not None:  # the parent process says what a crash of this one left
         observers.append(watched)
+        options = dataclasses.replace(options, progress=watched.progress)
     if not args.no_progress:
         observers.append(ProgressBar() if sys.stderr.isatty() else ProgressLines())
     async with contextlib.AsyncExitStack() as stack:

@@ -47,6 +47,9 @@ _HEAD = struct.Struct("<dqdI")
 """The beacon: time reached [s], communication points recorded, when the run started
 (``time.monotonic()``, the same clock in both processes), length of the results path."""
 _PAGE = 4096
+_WATCH = _PAGE - 24
+"""Where the native FMU step keeps the step under way: three doubles (member slot, since,
+time; ``RunOptions.progress``), at the page's end."""
 
 _beacon: Beacon | None = None
 
@@ -65,10 +68,13 @@ class Beacon(Observer):
         self._time = memoryview(self.page)[:8].cast("d")
         self._points = memoryview(self.page)[8:16].cast("q")
         self._count = 0
+        self.progress = memoryview(self.page)[_WATCH:]
+        """``RunOptions.progress``: the native FMU step writes the step under way here."""
+        struct.pack_into("<3d", self.page, _WATCH, -1.0, 0.0, math.nan)
 
     def results(self, directory: Path) -> None:
         """Where the run writes its results (``RunOptions.on_results``)."""
-        encoded = str(directory.resolve()).encode()[: _PAGE - _HEAD.size]
+        encoded = str(directory.resolve()).encode()[: _WATCH - _HEAD.size]
         self.page[_HEAD.size : _HEAD.size + len(encoded)] = encoded
         struct.pack_into("<I", self.page, 24, len(encoded))
 
@@ -85,13 +91,19 @@ class Beacon(Observer):
         self._time[0] = steps.times[-1]
         self._points[0] = self._count
 
-    def read(self) -> tuple[float, int, float, Path | None]:
+    def read(self) -> tuple[float, int, float, Path | None, bool]:
         """(time reached, communication points recorded, wall time since the run started,
-        results directory)."""
+        results directory, whether the time is the native FMU step's). The time reached is the later of the last point told and the
+        start of the step the native FMU step had under way (its points since its last batch
+        died with the process)."""
         time, points, started, length = _HEAD.unpack_from(self.page, 0)
+        slot, _, under_way = struct.unpack_from("<3d", self.page, _WATCH)
+        in_c = slot >= 0 and not math.isnan(under_way) and not under_way <= time
+        if in_c:
+            time = under_way
         raw = self.page[_HEAD.size : _HEAD.size + length]
         wall = wallclock.monotonic() - started
-        return time, points, wall, Path(raw.decode(errors="replace")) if length else None
+        return time, points, wall, Path(raw.decode(errors="replace")) if length else None, in_c
 
 
 def supervised() -> int | None:
@@ -145,9 +157,17 @@ class Crash:
     ``directory`` (None: not chosen yet)."""
 
     def __init__(
-        self, number: int, time: float, points: int, wall: float, directory: Path | None
+        self,
+        number: int,
+        time: float,
+        points: int,
+        wall: float,
+        directory: Path | None,
+        in_c: bool = False,
     ) -> None:
         self.signal = signal.Signals(number).name
+        self.in_c = in_c
+        """``time`` is the step the native FMU step had under way, past the last point told."""
         self.time = time
         self.points = points
         self.wall = wall
@@ -167,9 +187,17 @@ class Crash:
                 "crashed - most likely an FMU running in-process; run FMUs you do not trust with "
                 "--isolate-fmus, so that a crash fails the run instead"
             )
-        if self.directory is None or math.isnan(self.time):
+        if self.directory is None:
             return f"run crashed before it started: {how}; nothing was recorded"
+        if math.isnan(self.time):
+            self._summary(self.directory / "summary.json", f"{how} (before its first step)")
+            return (
+                f"run crashed before its first step: {how}; nothing was recorded, in "
+                f"{self.directory} (summary.json: status crashed)"
+            )
         kept = _whole_rows(self.directory / "results.csv")
+        if self.in_c:
+            kept += " (the steps computed in C since were lost with the process)"
         reason = f"{how} (the run had reached t={self.time:g} s; results.csv keeps {kept})"
         self._summary(self.directory / "summary.json", reason)
         return (
@@ -187,13 +215,16 @@ class Crash:
             return
         if data.get("status") != "running":
             return  # the run had ended; the crash came after it (while closing)
-        simulated = self.time - data.get("start_time", 0.0)
+        start = data.get("start_time", 0.0)
+        reached = start if math.isnan(self.time) else self.time
+        simulated = reached - start
+        step = data.get("step_size") or 0.0
         data.update(
             status="crashed",
             reason=reason,
-            end_time=self.time,
-            steps=max(self.points - 1, 0),
-            wall_time_s=round(self.wall, 6),
+            end_time=reached,
+            steps=round(simulated / step) if step > 0 else max(self.points - 1, 0),
+            wall_time_s=round(self.wall, 6) if math.isfinite(self.wall) else None,
             realtime_factor=round(simulated / self.wall, 3) if self.wall > 0 else None,
         )
         with contextlib.suppress(Exception):

@@ -25,7 +25,7 @@ import threading
 import time as wallclock
 from collections import defaultdict
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from operator import itemgetter
 
 import structlog
@@ -57,6 +57,16 @@ DUE_PATTERNS = 1024
 """At most this many distinct sets of due members are kept (members with large, coprime
 multiples make more; those are worked out step by step)."""
 Key = tuple[str, str]
+
+
+def _failed_recording(end: RunEnd, problem: str) -> RunEnd:
+    """``end`` after a recorder could not write what it held: failed, saying so."""
+    if end.status in ("completed", "terminated"):
+        reason = f"{problem} (the run itself had {end.status} at t={end.end_time:g} s)"
+    else:
+        reason = f"{end.reason}; and {problem}" if end.reason else problem
+    log.info("recording_failed", reason=problem)  # the outcome says it (the CLI: once)
+    return replace(end, status="failed", reason=reason, ended_by="", request="")
 
 
 async def _let_others_run() -> None:
@@ -254,7 +264,7 @@ class Master:
                 step_paths=self._paths,
                 **self._requested(status),
             )
-            self._finish(end)
+            end = self._finish(end)
         return end
 
     async def _advance(self, k: int) -> None:
@@ -278,10 +288,19 @@ class Master:
     def _time_reached(self) -> float:
         return self.plan.grid.time(self.completed_steps)
 
-    def _finish(self, end: RunEnd) -> None:
-        """Tell every observer, even if one of them fails (its failure is logged)."""
+    def _finish(self, end: RunEnd) -> RunEnd:
+        """Close, then tell every observer, even if one of them fails: a recorder that cannot
+        write what it holds fails the run (never ``completed`` with rows missing); any other
+        failure is logged. Returns how the run ended."""
         if self._abandoned:
-            return
+            return end
+        for observer in self.observers:
+            try:
+                observer.closing(end)
+            except CouplerError as exc:
+                end = _failed_recording(end, str(exc))
+            except Exception as exc:
+                log.error("observer_failed", observer=type(observer).__name__, error=str(exc))
         for observer in self.observers:
             try:
                 observer.finished(end)
@@ -294,6 +313,7 @@ class Master:
             wall_time_s=round(end.wall_time, 3),
             reason=end.reason or None,
         )
+        return end
 
     async def _initialize(self, initialized: list[Member]) -> None:
         grid = self.plan.grid
@@ -387,7 +407,7 @@ class Master:
                 wall_time=wallclock.perf_counter() - self._wall_start,
                 step_paths=self._paths,
             )
-            self._finish(end)
+            end = self._finish(end)
             self._abandoned = True
         told = self.plan.on_abandoned is not None  # the caller says it (the CLI: once)
         (log.info if told else log.error)(

@@ -144,7 +144,9 @@ class Kernel:
                 self._members[i], m, slots[m.name], gets.get(m.name, []), feeds.get(m.name, [])
             )
         self.timing = (ctypes.c_double * len(plan.members))()
-        self._watch = (ctypes.c_double * 3)(-1.0, 0.0, 0.0)
+        watch = ctypes.c_double * 3
+        self._watch = watch.from_buffer(plan.progress) if plan.progress else watch()
+        self._watch[0], self._watch[1], self._watch[2] = -1.0, 0.0, 0.0
         self._stop = (ctypes.c_int * 3)()
         pointer = self._ffi.cast
         self._arrays = (

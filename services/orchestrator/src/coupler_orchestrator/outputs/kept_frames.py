@@ -130,7 +130,7 @@ class KeptFrames(Observer):
             return
         super().stepped_batch(steps)
 
-    def finished(self, end: RunEnd) -> None:
+    def closing(self, end: RunEnd) -> None:
         for kept in self._kept:
             if kept.index:
                 write_json(kept.folder / "index.json", {"frames": kept.index})

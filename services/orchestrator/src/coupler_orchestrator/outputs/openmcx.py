@@ -78,12 +78,15 @@ class _File:
     def row(self, time: float, values: Mapping[str, Value]) -> None:
         assert self.file is not None
         cells = ",".join(_text(values[c.channel], c.type) for c in self.columns)
-        self.file.write(f"{time:.13E},{cells}\n")
+        try:
+            self.file.write(f"{time:.13E},{cells}\n")
+        except OSError as exc:
+            raise CouplerError(f"cannot write {self.path}: {exc.strerror or exc}") from exc
 
     def close(self) -> None:
-        if self.file is not None:
-            self.file.close()
-            self.file = None
+        file, self.file = self.file, None
+        if file is not None:
+            file.close()
 
 
 class OpenMcxResults(ComponentObserver):
@@ -138,6 +141,14 @@ class OpenMcxResults(ComponentObserver):
         if f is not None:
             f.row(time, values)
 
-    def finished(self, end: RunEnd) -> None:
+    def closing(self, end: RunEnd) -> None:
+        problem = None
         for f in (*self.outputs.values(), *self.inputs.values()):
-            f.close()
+            try:
+                f.close()
+            except OSError as exc:
+                problem = problem or exc
+        if problem is not None:
+            raise CouplerError(
+                f"cannot write OpenMCx's result files into {self.directory}: {problem}"
+            ) from problem

@@ -109,7 +109,7 @@ class ParquetRecorder(Observer):
             "(results.csv keeps every complete row)"
         )
 
-    def finished(self, end: RunEnd) -> None:
+    def closing(self, end: RunEnd) -> None:
         writer = self._writer
         if writer is None:
             return

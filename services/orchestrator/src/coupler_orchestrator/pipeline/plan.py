@@ -31,6 +31,7 @@ def build_plan(checked: Checked, links: tuple[Link, ...], options: RunOptions) -
         lease=lease_of(options, checked),
         realtime_factor=options.realtime_factor or None,
         on_abandoned=options.on_abandoned,
+        progress=options.progress,
         native=wanted(options.native_steps) and openmcx is None,
         openmcx=openmcx,
     )
