@@ -268,5 +268,5 @@ def test_the_bridge_process_refuses_a_bad_sensor_file_without_a_traceback(
         timeout=60,
     )
     assert done.returncode == 1
-    assert f"openrails-bridge: {path}:2: not valid JSON" in done.stderr
+    assert f"openrails-bridge: {path}:2: the sensor configuration is not valid JSON" in done.stderr
     assert "Traceback" not in done.stderr

@@ -17,7 +17,6 @@ the frame's bytes go into it without passing through protobuf (``image``).
 
 from __future__ import annotations
 
-import json
 import re
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -30,6 +29,7 @@ from coupler.errors import ScenarioError
 from coupler.messages import with_bytes
 from coupler.v1.sensors_pb2 import CameraIntrinsics, Image
 from coupler_railway.messages import BYTES_PER_PIXEL, DEPTH16_CLASS_ID, IMAGE, RGB8, image_bytes
+from coupler_railway.openrails.config import read_json
 
 from .replies import CameraSensor
 
@@ -38,6 +38,8 @@ ENCODING: dict[SensorType, str] = {"rgb": RGB8, "depth": DEPTH16_CLASS_ID}
 """Image.encoding of each sensor type."""
 FIELD = "sensors"
 """Where the frames are in ``OpenRailsAdapter.get_state()``: ``sensors.<name>``."""
+MAX_SENSORS = 64
+"""Most sensors the bridge reads (OpenRails' mock renders as many)."""
 _NAME = re.compile(r"^[A-Za-z0-9_.\-]{1,64}$")
 
 
@@ -77,15 +79,17 @@ def load_sensors(path: Path) -> tuple[Sensor, ...]:
     the entry and the fix. Keys the bridge does not need (trainName, fov, range) are
     OpenRails' business and not checked here."""
     where = f"{path} (OPENRAILS_BRIDGE_SENSORS)"
-    try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except OSError as exc:
-        raise ScenarioError(f"cannot read the sensor configuration {where}: {exc}") from exc
-    except json.JSONDecodeError as exc:
-        raise ScenarioError(f"{path}:{exc.lineno}: not valid JSON: {exc.msg}") from exc
+    data = read_json(
+        path, what="sensor configuration", setting="OPENRAILS_BRIDGE_SENSORS, --sensors"
+    )
     if not isinstance(data, list):
         raise ScenarioError(f"{where}: must be a JSON list of sensors, as given to OpenRails")
-    sensors: list[Sensor] = []
+    if len(data) > MAX_SENSORS:
+        raise ScenarioError(
+            f"{where}: {len(data)} sensors, more than the {MAX_SENSORS} the bridge reads each "
+            f"step; configure the sensors the run reads"
+        )
+    sensors: dict[str, Sensor] = {}
     for index, entry in enumerate(data):
         at = f"{where}: sensor {index}"
         if not isinstance(entry, dict):
@@ -107,10 +111,10 @@ def load_sensors(path: Path) -> tuple[Sensor, ...]:
                 f"{at} ({name!r}): width and height must be positive whole numbers of pixels, "
                 f"got {size[0]!r} x {size[1]!r}"
             )
-        if any(s.name == name for s in sensors):
+        if name in sensors:
             raise ScenarioError(f"{at}: sensorName {name!r} is used twice")
-        sensors.append(Sensor(name, kind, int(size[0]), int(size[1])))  # type: ignore[arg-type]
-    return tuple(sensors)
+        sensors[name] = Sensor(name, kind, int(size[0]), int(size[1]))  # type: ignore[arg-type]
+    return tuple(sensors.values())
 
 
 def image(sensor: Sensor, described: CameraSensor, data: Sequence[bytes], time_s: float) -> bytes:

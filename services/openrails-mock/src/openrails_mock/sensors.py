@@ -20,7 +20,6 @@ file, the entry and the key, with the fix.
 
 from __future__ import annotations
 
-import json
 import math
 import re
 from collections.abc import Sequence
@@ -29,6 +28,7 @@ from pathlib import Path
 from typing import Any, Literal
 
 from coupler.errors import ScenarioError
+from coupler_railway.openrails.config import read_json
 
 from .renderer import CameraModel, Renderer
 
@@ -45,6 +45,8 @@ DEFAULT_MAX_DISTANCE_M = 400.0
 """A depth sensor's range when its entry has none (OpenRails' ``DepthSensor`` default)."""
 MAX_RANGE_M = 10_000.0
 """Longest depth range accepted."""
+MAX_SENSORS = 64
+"""Most sensors one simulation takes (every one is rendered each step it is asked for)."""
 KEYS = ("sensorName", "sensorType", "trainName", "width", "height", "fov", "range")
 """Every key an entry may have."""
 _NAME = re.compile(r"^[A-Za-z0-9_.\-]{1,64}$")
@@ -98,19 +100,7 @@ class SensorSpec:
 
 def load_sensors(path: Path, *, train_name: str) -> tuple[SensorSpec, ...]:
     """The sensors of a configuration file; ScenarioError naming the file and the problem."""
-    try:
-        text = path.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise ScenarioError(
-            f"cannot read the sensor configuration {path} (OPENRAILS_MOCK_SENSORS, --sensors): "
-            f"{exc.strerror or exc}"
-        ) from exc
-    try:
-        data = json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise ScenarioError(
-            f"{path}:{exc.lineno}: the sensor configuration is not valid JSON: {exc.msg}"
-        ) from exc
+    data = read_json(path, what="sensor configuration", setting="OPENRAILS_MOCK_SENSORS, --sensors")
     return parse_sensors(data, source=str(path), train_name=train_name)
 
 
@@ -121,16 +111,21 @@ def parse_sensors(data: object, *, source: str, train_name: str) -> tuple[Sensor
             f"{source}: the sensor configuration must be a JSON list of sensors, "
             f'[{{"sensorName": ..., "sensorType": "rgb", ...}}], not {type(data).__name__}'
         )
-    specs: list[SensorSpec] = []
+    if len(data) > MAX_SENSORS:
+        raise ScenarioError(
+            f"{source}: {len(data)} sensors, more than the {MAX_SENSORS} the mock renders; "
+            f"configure the sensors the run reads"
+        )
+    specs: dict[str, SensorSpec] = {}
     for index, entry in enumerate(data):
         spec = _sensor(entry, f"{source}: sensor {index}", train_name)
-        if any(s.name == spec.name for s in specs):
+        if spec.name in specs:
             raise ScenarioError(
                 f"{source}: sensor {index}: sensorName {spec.name!r} is used twice; "
                 f"give every sensor its own name"
             )
-        specs.append(spec)
-    return tuple(specs)
+        specs[spec.name] = spec
+    return tuple(specs.values())
 
 
 def _sensor(entry: object, where: str, train_name: str) -> SensorSpec:
