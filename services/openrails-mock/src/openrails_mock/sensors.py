@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import math
 import re
+import threading
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -30,7 +31,8 @@ from typing import Any, Literal
 from coupler.errors import ScenarioError
 from coupler_railway.openrails.config import read_json
 
-from .renderer import CameraModel, Renderer
+from .conditions import Conditions
+from .renderer import CameraModel, ObjectLabel, Renderer, View
 
 SensorType = Literal["rgb", "depth"]
 SENSOR_TYPES: tuple[SensorType, ...] = ("rgb", "depth")
@@ -211,38 +213,117 @@ def sensor_names(specs: Sequence[SensorSpec]) -> str:
     return ", ".join(repr(s.name) for s in specs) or "none"
 
 
-class Cameras:
-    """The configured sensors' frames: rendered on request, once per train position."""
+MAX_CACHED_BYTES = 64 * 1024 * 1024
+"""Most bytes of frames kept for the current state (beyond: rendered per request)."""
 
-    def __init__(self, specs: Sequence[SensorSpec], renderer: Renderer) -> None:
+
+@dataclass(frozen=True)
+class Shot:
+    """What a frame shows: the train's front on the line, and the state besides the place."""
+
+    distance_m: float
+    view: View
+
+
+@dataclass(frozen=True)
+class Rendered:
+    """A sensor's frame as served, and its labels (colour sensors)."""
+
+    data: bytes
+    labels: tuple[ObjectLabel, ...] = ()
+    exposure_ms: float = 0.0
+    gain: float = 0.0
+
+
+class Cameras:
+    """The configured sensors' frames: rendered on request, once per state.
+
+    Frames of the current state only are kept (a new step drops the last one's), at most
+    ``max_cached_bytes`` of them; one frame renders at a time (requests for the same frame
+    wait for it instead of rendering it again), so memory stays at one render's worth."""
+
+    def __init__(
+        self,
+        specs: Sequence[SensorSpec],
+        renderer: Renderer,
+        *,
+        max_cached_bytes: int = MAX_CACHED_BYTES,
+    ) -> None:
         self.specs = {spec.name: spec for spec in specs}
         self.renderer = renderer
-        self._cache: dict[str, tuple[float, bytes]] = {}
+        self.max_cached_bytes = max_cached_bytes
+        self._lock = threading.Lock()
+        self._state: object = None
+        self._cache: dict[str, Rendered] = {}
+        self.renders = 0
+        """Frames rendered so far."""
+
+    @property
+    def cached_bytes(self) -> int:
+        return sum(len(r.data) for r in self._cache.values())
+
+    def set_conditions(self, conditions: Conditions) -> None:
+        """Render under ``conditions`` from now on."""
+        with self._lock:
+            if conditions != self.renderer.conditions:
+                self.renderer = self.renderer.with_conditions(conditions)
+            self._state, self._cache = None, {}
+
+    def warm(self) -> None:
+        """Compile the renderer's kernels (or load them from numba's cache) with two tiny
+        frames, so that the first step's frames take as long as any other."""
+        tiny = CameraModel(width=16, height=12, fov_deg=45.0)
+        self.renderer.render(tiny, 0.0, View(speed_mps=1.0))
+        self.renderer.depth(tiny, 0.0, 100.0)
 
     def descriptions(self) -> dict[str, dict[str, Any]]:
         """``CameraSensors`` of a lockstep reply."""
         return {name: spec.description() for name, spec in self.specs.items()}
 
-    def cached(self, name: str, distance_m: float) -> bytes | None:
+    def _key(self, shot: Shot) -> object:
+        """What a frame depends on: the place; the time too where the conditions make the
+        frame change with it; the speed with motion blur."""
+        c = self.renderer.conditions
+        return (
+            shot.distance_m,
+            shot.view.elapsed_s if c.changes_with_time else None,
+            shot.view.clock_s if c.light == "sun" else None,
+            shot.view.speed_mps if c.motion_blur else None,
+        )
+
+    def cached(self, name: str, shot: Shot) -> Rendered | None:
         """The frame ``frame`` would return if it is already rendered, else None: the
         server answers it without handing the request to a thread."""
-        cached = self._cache.get(name)
-        return cached[1] if cached is not None and cached[0] == distance_m else None
+        if self._state != self._key(shot):
+            return None
+        return self._cache.get(name)
 
-    def frame(self, name: str, distance_m: float) -> bytes:
-        """The raw frame of sensor ``name`` with the train's front ``distance_m`` along the
-        line (KeyError for an unknown name): RGB bytes, or little-endian uint16 triples."""
+    def frame(self, name: str, shot: Shot) -> Rendered:
+        """The raw frame of sensor ``name`` for ``shot`` (KeyError for an unknown name): RGB
+        bytes with labels, or little-endian uint16 triples."""
         spec = self.specs[name]
-        cached = self.cached(name, distance_m)
-        if cached is not None:
-            return cached
+        with self._lock:
+            key = self._key(shot)
+            if key != self._state:
+                self._state, self._cache = key, {}
+            found = self._cache.get(name)
+            if found is not None:
+                return found
+            rendered = self._render(spec, shot)
+            if self.cached_bytes + len(rendered.data) <= self.max_cached_bytes:
+                self._cache[name] = rendered
+            return rendered
+
+    def _render(self, spec: SensorSpec, shot: Shot) -> Rendered:
         camera = CameraModel(width=spec.width, height=spec.height, fov_deg=spec.fov_deg)
+        self.renders += 1
         if spec.type == "rgb":
-            data = self.renderer.rgb(camera, distance_m).tobytes()
+            frame = self.renderer.render(camera, shot.distance_m, shot.view)
+            data = frame.pixels.tobytes()
+            rendered = Rendered(data, frame.labels, frame.exposure_ms, frame.gain)
         else:
             assert spec.max_distance_m is not None
-            pixels = self.renderer.depth(camera, distance_m, spec.max_distance_m)
-            data = pixels.astype("<u2", copy=False).tobytes()
-        assert len(data) == spec.frame_bytes, (name, len(data), spec.frame_bytes)
-        self._cache[name] = (distance_m, data)
-        return data
+            pixels = self.renderer.depth(camera, shot.distance_m, spec.max_distance_m)
+            rendered = Rendered(pixels.astype("<u2", copy=False).tobytes())
+        assert len(rendered.data) == spec.frame_bytes, (spec.name, len(rendered.data))
+        return rendered
