@@ -324,8 +324,13 @@ async def test_the_runs_environment_reaches_the_simulator_at_initialize(
                 found: dict[str, Any] = await resp.json()
                 return found
 
-        parameters = {"weather": "snow", "season": "3", "time_of_day": 61200.0,
-                      "visibility": 120.0, "conditions": '{"noise": true, "dirt": 0.2}'}  # fmt: skip
+        parameters = {
+            "weather": "snow",
+            "season": "3",
+            "time_of_day": 61200.0,
+            "visibility": 120.0,
+            "conditions": '{"noise": true, "dirt": 0.2}',
+        }
         await remote.initialize(
             RunSetup(run_id="e", start_time=0.0, step_size=0.2, parameters=parameters)
         )
