@@ -776,18 +776,20 @@ class Renderer:
         half = BALISE_ALONG_M / 2.0
         across = BALISE_ACROSS_M / 2.0
         low, high = -RAIL_HEIGHT_M, -RAIL_HEIGHT_M + BALISE_HEIGHT_M
-        for balise in self.scene.balises:
-            d = balise.distance_m
-            if not camera_m + NEAR_M + half < d < ahead - half:
-                continue
-            (c0, c1), _, (r0, r1) = self.scene.at([d - half, d + half])
-
-            def corner(c: FloatArray, r: FloatArray, side: float, z: float) -> FloatArray:
-                return np.asarray(c + side * across * r + np.array([0.0, 0.0, z]))
-
+        places = np.array([b.distance_m for b in self.scene.balises])
+        chosen = np.flatnonzero((places > camera_m + NEAR_M + half) & (places < ahead - half))
+        if not len(chosen):
+            return
+        d = places[chosen]
+        centres, _, rights = self.scene.at(np.concatenate([d - half, d + half]))
+        n = len(d)
+        segments = bounds[_segment_of(bounds, d)] - camera_m
+        for i, index in enumerate(chosen.tolist()):
+            balise = self.scene.balises[index]
+            ends = ((centres[i], rights[i]), (centres[n + i], rights[n + i]))
             box = {
-                (a, s, z): corner(c, r, s, z)
-                for a, c, r in ((0, c0, r0), (1, c1, r1))
+                (a, s, z): c + s * across * r + np.array([0.0, 0.0, z])
+                for a, (c, r) in enumerate(ends)
                 for s in (-1.0, 1.0)
                 for z in (low, high)
             }
@@ -799,22 +801,20 @@ class Renderer:
                 [box[0, -1, high], box[0, 1, high], box[1, 1, high], box[1, -1, high]],  # top
             ]
             (top, side), texture = self._balise_look(balise.code)
-            colours = np.array([side] * 4 + [top])
-            seg = _segment_of(bounds, np.array([d]))[0]
-            (centre,), _, _ = self.scene.at(d)
+            centre = (ends[0][0] + ends[1][0]) / 2.0
             obj = objects.add(
                 "balise",
                 balise.code,
                 balise.name,
-                d - camera_m,
+                float(d[i]) - camera_m,
                 centre + np.array([0.0, 0.0, high]),
             )
             faces.add(
                 np.array(quads),
-                colours,
+                np.array([side] * 4 + [top]),
                 code(BALISE, balise.code),
                 group=1,
-                distance=float(bounds[seg]) - camera_m,
+                distance=float(segments[i]),
                 layer=5 + np.arange(5) / 10.0,
                 obj=obj,
                 texture=np.array(texture),
@@ -866,11 +866,14 @@ class Renderer:
     def _signals(
         self, faces: _Faces, bounds: FloatArray, camera_m: float, ahead: float, objects: _Objects
     ) -> None:
-        for signal in self.scene.signals:
-            d = signal.distance_m
-            if not camera_m + 2.0 < d < ahead:
-                continue
-            (c,), _, (r,) = self.scene.at(d)
+        places = np.array([g.distance_m for g in self.scene.signals])
+        chosen = np.flatnonzero((places > camera_m + 2.0) & (places < ahead))
+        if not len(chosen):
+            return
+        centres, _, rights = self.scene.at(places[chosen])
+        for i, index in enumerate(chosen.tolist()):
+            signal = self.scene.signals[index]
+            d, c, r = signal.distance_m, centres[i], rights[i]
             ident = code(SIGNAL, signal.index)
             lateral = signal.side * SIGNAL_OFFSET_M
             quads = np.array(
@@ -909,34 +912,30 @@ class Renderer:
         """Trees from the seed, per 100 m of line: a trunk and a crown, each a panel facing
         the camera (and, for their shadows, facing the sun)."""
         c = self.conditions
-        for cell in range(int(camera_m // TREE_CELL_M), int(ahead // TREE_CELL_M) + 1):
-            for along, lateral, radius, trunk, tint in _trees_of(c.seed, c.trees_per_km, cell):
-                if not camera_m + 3.0 < along < ahead:
-                    continue
-                (centre,), _, (right,) = self.scene.at(along)
-                foot = centre + lateral * right + np.array([0.0, 0.0, TERRAIN_M])
-                towards = pose.position[:2] - foot[:2]
-                facing = np.array([-towards[1], towards[0], 0.0]) / max(
-                    float(np.linalg.norm(towards)), 1e-9
-                )
-                parts = _tree_quads(foot, facing, radius, trunk)
-                seg = _segment_of(bounds, np.array([along]))[0]
-                crown = np.array(CROWN, dtype=np.float64) * tint
-                crown = crown * (1.0 - c.snow * 0.5) + np.asarray(SNOW) * c.snow * 0.5
-                for i, colour in enumerate((TRUNK, crown)):
-                    faces.add(
-                        parts[i : i + 1],
-                        colour,
-                        code(TERRAIN, 0),
-                        group=1,
-                        distance=float(bounds[seg]) - camera_m,
-                        layer=8 + i / 10,
-                        kind=CASTER,
-                    )
-                sideways = np.array([-sun[1], sun[0], 0.0]) if sun is not None else np.zeros(3)
-                if np.linalg.norm(sideways) > 1e-9:
-                    sideways /= np.linalg.norm(sideways)
-                    self._cast(faces, _tree_quads(foot, sideways, radius, trunk), along)
+        cells = range(int(camera_m // TREE_CELL_M), int(ahead // TREE_CELL_M) + 1)
+        rows = [row for cell in cells for row in _trees_of(c.seed, c.trees_per_km, cell)]
+        table = np.array(rows, dtype=np.float64).reshape(-1, 5)
+        table = table[(table[:, 0] > camera_m + 3.0) & (table[:, 0] < ahead)]
+        if not len(table):
+            return
+        along, lateral, radius, trunk, tint = table.T
+        centre, _, right = self.scene.at(along)
+        foot = centre + lateral[:, None] * right + np.array([0.0, 0.0, TERRAIN_M])
+        towards = pose.position[:2] - foot[:, :2]
+        facing = np.column_stack([-towards[:, 1], towards[:, 0], np.zeros(len(foot))])
+        facing /= np.maximum(np.linalg.norm(facing, axis=1, keepdims=True), 1e-9)
+        stems, crowns = _tree_quads(foot, facing, radius, trunk)
+        distance = bounds[_segment_of(bounds, along)] - camera_m
+        crown = np.asarray(CROWN, dtype=np.float64) * tint[:, None]
+        crown = crown * (1.0 - c.snow * 0.5) + np.asarray(SNOW) * c.snow * 0.5
+        terrain = code(TERRAIN, 0)
+        faces.add(stems, TRUNK, terrain, group=1, distance=distance, layer=8, kind=CASTER)
+        faces.add(crowns, crown, terrain, group=1, distance=distance, layer=8.1, kind=CASTER)
+        if sun is not None and math.hypot(sun[0], sun[1]) > 1e-9:
+            sideways = np.array([-sun[1], sun[0], 0.0]) / math.hypot(sun[0], sun[1])
+            across = np.broadcast_to(sideways, foot.shape)
+            stems, crowns = _tree_quads(foot, across, radius, trunk)
+            self._cast(faces, np.concatenate([stems, crowns]), np.concatenate([along, along]))
 
     def _leaves(self, faces: _Faces, bounds: FloatArray, camera_m: float, ahead: float) -> None:
         """Leaves (and other yellow things) on and beside the ballast, per 10 m of line."""
@@ -1058,23 +1057,20 @@ def _leaves_of(seed: int, per_m2: float, cell: int) -> npt.NDArray[np.float64]:
     ).reshape(n, 5)
 
 
-def _tree_quads(foot: FloatArray, across: FloatArray, radius: float, trunk: float) -> FloatArray:
-    """A trunk (0.3 m wide) and a diamond crown, upright, spanning ``across``."""
+def _tree_quads(
+    foot: FloatArray, across: FloatArray, radius: FloatArray, trunk: FloatArray
+) -> tuple[FloatArray, FloatArray]:
+    """Trunks (0.3 m wide) and diamond crowns ``(n, 4, 3)``, upright, spanning ``across``."""
     up = np.array([0.0, 0.0, 1.0])
-    stem = [
-        foot - 0.15 * across,
-        foot + 0.15 * across,
-        foot + 0.15 * across + trunk * up,
-        foot - 0.15 * across + trunk * up,
-    ]
-    middle = foot + (trunk + radius) * up
-    crown = [
-        middle - radius * up,
-        middle + radius * across,
-        middle + radius * up,
-        middle - radius * across,
-    ]
-    return np.array([stem, crown])
+    side = 0.15 * across
+    top = trunk[:, None] * up
+    stems = np.stack([foot - side, foot + side, foot + side + top, foot - side + top], axis=1)
+    middle = foot + (trunk + radius)[:, None] * up
+    r = radius[:, None]
+    crowns = np.stack(
+        [middle - r * up, middle + r * across, middle + r * up, middle - r * across], axis=1
+    )
+    return stems, crowns
 
 
 class _Prepared:
