@@ -177,8 +177,9 @@ def create_app(
     app[SERVER] = server
 
     async def on_startup(app: web.Application) -> None:
-        if app[SERVER].cameras is not None:  # before serving: READY means frames come at once
-            await asyncio.to_thread(app[SERVER].cameras.warm)
+        cameras = app[SERVER].cameras
+        if cameras is not None:  # before serving: READY means frames come at once
+            await asyncio.to_thread(cameras.warm)
         app[SERVER].start()
 
     app.on_startup.append(on_startup)

@@ -288,10 +288,10 @@ def _checked(key: str, value: Any, source: str) -> Any:
                 f"{source}: {key} is a whole number from {low} to {high}, got {value!r}"
             )
         return int(number)
-    low, high, unit = _RANGES[key]
+    bottom, top, unit = _RANGES[key]
     number = _number(key, value, source)
-    if not low <= number <= high:
-        raise ScenarioError(f"{source}: {key} is {unit}, from {low:g} to {high:g}, got {value!r}")
+    if not bottom <= number <= top:
+        raise ScenarioError(f"{source}: {key} is {unit}, from {bottom:g} to {top:g}, got {value!r}")
     return number
 
 

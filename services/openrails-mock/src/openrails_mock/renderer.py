@@ -47,6 +47,7 @@ import io
 import math
 from dataclasses import dataclass, field
 from functools import lru_cache
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -1150,7 +1151,7 @@ class _Prepared:
         return np.ascontiguousarray(self.pose.to_camera(ground))
 
 
-def _with_none(values: npt.NDArray[np.generic], none: float = 0) -> npt.NDArray[np.generic]:
+def _with_none(values: npt.NDArray[Any], none: float = 0) -> npt.NDArray[Any]:
     """``values`` with a row for id 0 (nothing) in front."""
     head = np.full((1, *values.shape[1:]), none, dtype=values.dtype)
     return np.ascontiguousarray(np.concatenate([head, values]))
