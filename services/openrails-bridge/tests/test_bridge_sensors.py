@@ -1,8 +1,10 @@
-"""OpenRails' camera and depth sensors through the bridge: one Binary channel per sensor.
+"""OpenRails' camera and depth sensors through the bridge: one Binary channel per sensor,
+and the labels of each colour camera's frames beside it.
 
     sensors.json --> openrails_mock (renders the frames)
-    sensors.json --> bridge: Describe lists `front` and `lidar` (coupler.v1.Image)
-    RemoteParticipant --gRPC--> bridge --GET /API/CAMERASENSOR/<name>--> mock
+    sensors.json --> bridge: Describe lists `front`, `front_labels` and `lidar`
+    RemoteParticipant --gRPC--> bridge --GET /API/CAMERASENSOR/<name>[/LABELS]--> mock
+    RemoteParticipant --Initialize(weather=snow, ...)--> bridge --POST /API/RESET--> mock
 
 The frames arrive unchanged (byte for byte what the mock serves for that state), wrapped in
 an Image with the size, encoding and intrinsics of the sensor. What the mock cannot do (a
@@ -25,8 +27,8 @@ from aiohttp import web
 from coupler.channels import Causality, RunSetup, ValueType
 from coupler.errors import ParticipantError, ScenarioError
 from coupler.messages import decode_message
-from coupler.v1.sensors_pb2 import Image
-from coupler_railway.messages import IMAGE
+from coupler.v1.sensors_pb2 import FrameLabels, Image, ObjectClass
+from coupler_railway.messages import FRAME_LABELS, IMAGE
 from openrails_bridge.__main__ import build
 from openrails_bridge.config import BridgeSettings
 
@@ -62,7 +64,7 @@ async def test_describe_offers_one_image_channel_per_sensor(
         description = await remote.describe()
         received = remote.limits.received
     outputs = description.of(Causality.OUTPUT)
-    assert [c.name for c in outputs][-2:] == ["front", "lidar"]
+    assert [c.name for c in outputs][-3:] == ["front", "front_labels", "lidar"]
     for name in ("front", "lidar"):
         channel = description.channel(name)
         assert channel is not None
@@ -74,6 +76,7 @@ async def test_describe_offers_one_image_channel_per_sensor(
     assert maxima == {
         "train_state": 128,
         "front": 256 + 800 * 600 * 3,
+        "front_labels": 256 * 1024,  # the ground truth beside the colour camera
         "lidar": 256 + 200 * 150 * 6,
     }
     assert received == sum(maxima.values())  # what its client lets through (plus framing)
@@ -268,5 +271,83 @@ def test_the_bridge_process_refuses_a_bad_sensor_file_without_a_traceback(
         timeout=60,
     )
     assert done.returncode == 1
-    assert f"openrails-bridge: {path}:2: not valid JSON" in done.stderr
+    assert f"openrails-bridge: {path}:2: the sensor configuration is not valid JSON" in done.stderr
     assert "Traceback" not in done.stderr
+
+
+async def test_labels_ride_beside_the_camera_for_the_same_frame(
+    mock: Mock, bridge: Bridge, sensors: Path
+) -> None:
+    config = {"sensors": sensors, "railml": TEST_LINE, "start_distance_m": 75.0}
+    async with mock(**config) as url, bridge(url, sensors=sensors) as remote:
+        description = await remote.describe()
+        first = await remote.initialize(RunSetup(run_id="l", start_time=0.0, step_size=0.4))
+        outputs = await remote.do_step(0.0, 0.4, {})
+        async with aiohttp.ClientSession(url) as http:
+            async with http.get("/API/CAMERASENSOR/front/LABELS") as resp:
+                served = await resp.json()
+            async with http.get("/API/CAMERASENSOR/lidar/LABELS") as resp:
+                assert resp.status == 404  # labels are the colour cameras'
+        await remote.terminate()
+    channel = description.channel("front_labels")
+    assert channel is not None and channel.message_type == FRAME_LABELS
+    assert "lidar_labels" not in [c.name for c in description.channels]
+    for answer in (first, outputs):
+        labels = FrameLabels()
+        labels.ParseFromString(answer["front_labels"])
+        assert (labels.sensor, labels.width, labels.height) == ("front", 800, 600)
+        balises = {
+            o.id: o for o in labels.objects if o.object_class == ObjectClass.OBJECT_CLASS_BALISE
+        }
+        assert {101, 102} <= set(balises)  # the group 45 m ahead of the camera at 75 m
+    assert labels.time_s == pytest.approx(0.4)
+    mine = {(o["class"], o["id"]): o for o in served["objects"]}
+    for o in labels.objects:
+        their = mine[("balise" if o.object_class == ObjectClass.OBJECT_CLASS_BALISE else
+                      "signal" if o.object_class == ObjectClass.OBJECT_CLASS_SIGNAL else
+                      "platform_edge", o.id)]  # fmt: skip
+        assert (o.pixels, o.unoccluded_pixels) == (their["pixels"], their["unoccludedPixels"])
+        if o.pixels:
+            assert [o.box.left, o.box.top, o.box.right, o.box.bottom] == their["box"]
+        assert o.visible_fraction == pytest.approx(their["visibleFraction"])
+
+
+async def test_the_runs_environment_reaches_the_simulator_at_initialize(
+    mock: Mock, bridge: Bridge, sensors: Path
+) -> None:
+    """The OpenRails participant's parameters set the world of the run (POST /API/RESET with
+    an Environment); a run without them gets the world the simulator was started with."""
+    async with mock(sensors=sensors) as url, bridge(url, sensors=sensors) as remote:
+
+        async def environment() -> dict[str, Any]:
+            async with aiohttp.ClientSession(url) as http, http.get("/API/ENVIRONMENT") as resp:
+                found: dict[str, Any] = await resp.json()
+                return found
+
+        parameters = {
+            "weather": "snow",
+            "season": "3",
+            "time_of_day": 61200.0,
+            "visibility": 120.0,
+            "conditions": '{"noise": true, "dirt": 0.2}',
+        }
+        await remote.initialize(
+            RunSetup(run_id="e", start_time=0.0, step_size=0.2, parameters=parameters)
+        )
+        world = await environment()
+        await remote.terminate()
+        await remote.initialize(RunSetup(run_id="f", start_time=0.0, step_size=0.2))
+        plain = await environment()
+        await remote.terminate()
+        with pytest.raises(ParticipantError) as caught:
+            await remote.initialize(
+                RunSetup(run_id="g", start_time=0.0, step_size=0.2, parameters={"weather": "hail"})
+            )
+    conditions = world["conditions"]
+    assert (conditions["weather"], conditions["season"], conditions["light"]) == (
+        "snow", "winter", "sun")  # fmt: skip
+    assert conditions["visibility_m"] == 120.0 and conditions["noise"] is True
+    assert conditions["dirt"] == 0.2
+    assert world["time"] == 61200.0  # 17:00, the clock at the run's start
+    assert plain["conditions"]["weather"] == "clear" and plain["time"] == 8 * 3600.0
+    assert "weather must be one of clear (0), snow (1), rain (2), got 'hail'" in str(caught.value)

@@ -322,3 +322,26 @@ def test_the_fleet_file_keeps_services_on_tcp(fleet_dir: Path) -> None:
     path.write_text(FLEET.replace('out = "out"', 'out = "out"\nunix_sockets = "no"'))
     with pytest.raises(ScenarioError, match=r"fleet.toml: not a fleet file .*unix_sockets = 'no'"):
         FleetSpec.load(path, root=fleet_dir)
+
+
+@pytest.mark.slow
+def test_fleet_takes_stop_time_params_and_output_variables_like_run(
+    fleet_dir: Path, env: dict[str, str]
+) -> None:
+    """The run of ``coupler fleet`` is shortened, parameterised and its recording chosen on
+    the command line, as with ``coupler run``: no copy of the fleet file."""
+    args = ["fleet", "fleet.toml", "--exit", "--stop-time", "1.0", "--param", "Gain.gain=6",
+            "--output-variables", "Gain.y"]  # fmt: skip
+    done = coupler(args, fleet_dir, env)
+    assert done.returncode == 0, done.stderr
+    rows = (fleet_dir / "out" / "latest" / "results.csv").read_text().splitlines()
+    assert rows[0].split(",") == ["time", "Gain.y"]
+    times = [float(row.split(",")[0]) for row in rows[1:]]
+    assert times[-1] == 1.0  # the SSD's stop time is 1.5
+    plain = coupler(["fleet", "fleet.toml", "--exit", "--out", "plain"], fleet_dir, env)
+    assert plain.returncode == 0, plain.stderr
+    header, *lines = (fleet_dir / "plain" / "results.csv").read_text().splitlines()
+    y = header.split(",").index("Gain.y")
+    doubled = [float(row.split(",")[1]) for row in rows[1:]]  # the SSD's gain is 3
+    assert doubled == [2 * float(line.split(",")[y]) for line in lines[: len(doubled)]]
+    assert any(v != 0 for v in doubled)

@@ -52,9 +52,10 @@ def test_balises_beyond_the_range_are_not_reported(
     first = next(b for b in test_line.balises if b.code == 101).distance_m
     pixels = renderer.rgb(CAMERA, first - 45.0)
     assert detect(pixels, intrinsics(), Mounting()) == []  # 40 m by default
-    # farther, the two balises of the group (45 and 48 m ahead) are one blob: the limit
-    [merged] = detect(pixels, intrinsics(), Mounting(), max_range_m=60.0)
-    assert 45.0 < merged.distance_ahead_m < 48.0
+    # farther, the two balises of the group (55 and 58 m ahead) are one blob: the limit
+    pixels = renderer.rgb(CAMERA, first - 55.0)
+    [merged] = detect(pixels, intrinsics(), Mounting(), max_range_m=70.0)
+    assert 55.0 < merged.distance_ahead_m < 58.0
 
 
 def test_a_synthetic_yellow_blob_is_placed_by_the_ground_plane() -> None:

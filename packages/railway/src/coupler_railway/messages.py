@@ -2,9 +2,9 @@
 
 Importing this module makes the messages of ``railway.proto`` (``coupler.v1.TrainState``,
 ``BaliseReading``, ``GeoPoint``, ``BaliseDetections``) and of ``sensors.proto``
-(``coupler.v1.Image``, a camera or depth frame) known to ``coupler.messages``: binary channels
-carrying them can be encoded, decoded and written as JSON in results. The message names live
-here and nowhere else.
+(``coupler.v1.Image``, a camera or depth frame; ``FrameLabels``, its ground truth) known
+to ``coupler.messages``: binary channels carrying them can be encoded, decoded and written
+as JSON in results. The message names live here and nowhere else.
 """
 
 from __future__ import annotations
@@ -17,9 +17,18 @@ from coupler.v1.railway_pb2 import (
     GeoPoint,
     TrainState,
 )
-from coupler.v1.sensors_pb2 import Image
+from coupler.v1.sensors_pb2 import FrameLabels, Image, ObjectLabel
 
-register(TrainState, BaliseReading, GeoPoint, BaliseDetection, BaliseDetections, Image)
+register(
+    TrainState,
+    BaliseReading,
+    GeoPoint,
+    BaliseDetection,
+    BaliseDetections,
+    Image,
+    ObjectLabel,
+    FrameLabels,
+)
 
 TRAIN_STATE = TrainState.DESCRIPTOR.full_name
 """Full name of the train state message (``coupler.v1.TrainState``)."""
@@ -31,6 +40,11 @@ BALISE_DETECTIONS = BaliseDetections.DESCRIPTOR.full_name
 """Full name of the message of every balise a perception participant saw in one frame."""
 IMAGE = Image.DESCRIPTOR.full_name
 """Full name of a camera or depth frame (``coupler.v1.Image``, sensors.proto)."""
+FRAME_LABELS = FrameLabels.DESCRIPTOR.full_name
+"""Full name of a camera frame's ground truth (``coupler.v1.FrameLabels``, sensors.proto)."""
+FRAME_LABELS_BYTES = 256 * 1024
+"""The largest serialized ``FrameLabels`` a labels channel carries: about 2500 objects (a label
+is about 100 bytes); a frame shows a few dozen."""
 
 RGB8 = "rgb8"
 """``Image.encoding`` of 8-bit RGB pixels, rows top to bottom."""

@@ -74,16 +74,21 @@ def build(settings: BridgeSettings) -> AdapterParticipant:
             f"{settings.sensors} (OPENRAILS_BRIDGE_SENSORS): camera sensors exist in OpenRails' "
             f"build for simulation only: use --mode lockstep, or no sensors"
         )
-    names = {c.name for c in config.channel}
+    channels = [*config.channel]
     for sensor in sensors:
-        if sensor.name in names:
+        channels.append(sensor.channel())
+        if sensor.labelled:
+            channels.append(sensor.labels_channel())
+    names: set[str] = set()
+    for channel in channels:
+        if channel.name in names:
             raise ScenarioError(
-                f"{settings.sensors}: sensor '{sensor.name}' would be a channel of the same "
-                f"name as one of the channel mapping's; rename the sensor"
+                f"{settings.sensors}: sensor '{channel.name}' would be a channel of the same "
+                f"name as another one (the channel mapping's, or a sensor's labels channel "
+                f"<sensor>_labels); rename the sensor"
             )
-    config = config.model_copy(
-        update={"channel": [*config.channel, *(s.channel() for s in sensors)]}
-    )
+        names.add(channel.name)
+    config = config.model_copy(update={"channel": channels})
     inputs = {c.field: c.name for c in config.channel if c.causality is Causality.INPUT}
     adapter = OpenRailsAdapter(settings, name=config.name, channel_names=inputs, sensors=sensors)
     return AdapterParticipant(adapter, config, implementation="openrails-bridge")

@@ -39,6 +39,7 @@ once per step after the last post, beside GET /API/MAP.
 from __future__ import annotations
 
 import asyncio
+import json
 import math
 import re
 import time as wallclock
@@ -52,6 +53,7 @@ from coupler.channels import RunSetup, Value
 from coupler.errors import ChannelValueError, ParticipantUnavailable, ScenarioError
 from coupler.participant import HealthReport
 from coupler.v1.railway_pb2 import GeoPoint, TrainState
+from coupler_railway.messages import FRAME_LABELS_BYTES
 
 from .client import OpenRailsClient
 from .config import BridgeSettings
@@ -61,6 +63,7 @@ from .replies import (
     CameraSensor,
     ControlValue,
     DisplayRow,
+    LabelsReply,
     LatLonDirection,
     LocomotiveState,
     StepReply,
@@ -69,7 +72,7 @@ from .replies import (
     TrainLength,
     WorldPosition,
 )
-from .sensors import Sensor, image
+from .sensors import Sensor, frame_labels, image
 
 log = structlog.get_logger("openrails_bridge")
 
@@ -82,6 +85,9 @@ START_PLACE_TOLERANCE_M = 1.0
 STANDSTILL_MPS = 0.01
 """Without reset: a train slower than this stands."""
 EARTH_RADIUS_M = 6_371_008.8
+ENVIRONMENT = "Environment."
+"""Parameter fields under this prefix are the run's environment, sent with POST /API/RESET
+(``Environment.weather``: the mock's condition ``weather``)."""
 NO_RESET = (404, 405)
 """Answers to POST /API/RESET of a simulator that has no reset."""
 _SPEED = re.compile(r"(-?\d+(?:\.\d+)?)\s*(km/h|mph|m/s)", re.IGNORECASE)
@@ -133,6 +139,9 @@ class OpenRailsAdapter(Adapter):
         # the sensors as the last step reply describes them, and their latest frames
         self._described: Mapping[str, CameraSensor] = {}
         self._frames: dict[str, bytes] = {sensor.name: b"" for sensor in self.sensors}
+        self._labels: dict[str, bytes] = {s.name: b"" for s in self.sensors if s.labelled}
+        self._serves_labels = True  # until OpenRails answers 404 to a labels request
+        self._environment: dict[str, Value] = {}
         # readiness: why OpenRails cannot take a run (None: it can), and who to tell
         self._reason: str | None = f"connecting to OpenRails at {self.base_url}"
         self._ready = asyncio.Event()
@@ -169,6 +178,8 @@ class OpenRailsAdapter(Adapter):
         self._last_poll = None
         self._stale = True
         self._frames = {sensor.name: b"" for sensor in self.sensors}
+        self._labels = {s.name: b"" for s in self.sensors if s.labelled}
+        self._environment = _environment(parameters)
         await self._reset()
 
     async def apply_inputs(self, inputs: Mapping[str, Value]) -> None:
@@ -226,6 +237,7 @@ class OpenRailsAdapter(Adapter):
             "time": self._time,
             "train_state": train_state,
             "sensors": dict(self._frames),
+            "labels": dict(self._labels),
         }
 
     async def shutdown(self) -> None:
@@ -307,11 +319,27 @@ class OpenRailsAdapter(Adapter):
     # --- each run from the scenario's start --------------------------------------------------
 
     async def _reset(self) -> None:
-        """POST /API/RESET; without it, make sure the train stands where the run starts."""
-        answer = await self.client.send("POST", "/API/RESET", call="initialize")
+        """POST /API/RESET, with the run's environment (its time and conditions, from the
+        SSD's parameters) when one is set; without a reset, make sure the train stands where
+        the run starts."""
+        body = {"Environment": self._environment} if self._environment else None
+        answer = await self.client.send("POST", "/API/RESET", body=body, call="initialize")
         if answer.status in NO_RESET:
+            if self._environment:
+                raise ScenarioError(
+                    f"OpenRails at {self.base_url} cannot reset (POST /API/RESET answered "
+                    f"{answer.status}), so it cannot take this run's environment "
+                    f"({', '.join(sorted(self._environment))}): OpenRails takes its time, "
+                    f"season and weather on its command line at start; start it with them, "
+                    f"or use services/openrails-mock"
+                )
             await self._check_at_start(answer.status)
             return
+        if answer.status == 400 and self._environment:
+            raise ScenarioError(
+                f"OpenRails at {self.base_url} refused this run's environment: "
+                f"{_error_text(answer.text)} (the OpenRails participant's parameters)"
+            )
         self.client.check(answer, "POST", "/API/RESET", call="initialize")
         self._reverser = 1
         self._train = None
@@ -391,9 +419,37 @@ class OpenRailsAdapter(Adapter):
         return train
 
     async def _fetch_frames(self, time_s: float, *, call: str = "step") -> dict[str, bytes]:
-        """Every sensor's current frame as a serialized Image, fetched side by side."""
-        frames = await _together(*(self._frame(s, time_s, call) for s in self.sensors))
+        """Every sensor's current frame as a serialized Image, fetched side by side; each
+        colour sensor's labels right after its frame (into ``_labels``)."""
+        frames = await _together(*(self._frame_and_labels(s, time_s, call) for s in self.sensors))
         return {sensor.name: frame for sensor, frame in zip(self.sensors, frames, strict=True)}
+
+    async def _frame_and_labels(self, sensor: Sensor, time_s: float, call: str) -> bytes:
+        frame = await self._frame(sensor, time_s, call)
+        if sensor.labelled:
+            self._labels[sensor.name] = await self._frame_labels(sensor, time_s, call)
+        return frame
+
+    async def _frame_labels(self, sensor: Sensor, time_s: float, call: str) -> bytes:
+        """GET /API/CAMERASENSOR/<name>/LABELS as a serialized FrameLabels; empty when
+        OpenRails has no labels (404: asked once per run, then not again)."""
+        if not self._serves_labels:
+            return b""
+        path = f"/API/CAMERASENSOR/{sensor.name}/LABELS"
+        answer = await self.client.send("GET", path, call=call)
+        if answer.status == 404:
+            self._serves_labels = False
+            return b""
+        self.client.check(answer, "GET", path, call=call)
+        reply = self.client.parse(answer, path, LabelsReply, call=call)
+        data = frame_labels(sensor, reply, time_s)
+        if len(data) > FRAME_LABELS_BYTES:
+            raise self.client.error(
+                f"OpenRails at {self.base_url}{path} labels {len(reply.objects)} objects, "
+                f"{len(data)} bytes: more than the channel's {FRAME_LABELS_BYTES}",
+                call=call,
+            )
+        return data
 
     async def _frame(self, sensor: Sensor, time_s: float, call: str) -> bytes:
         """GET /API/CAMERASENSOR/<name>, checked against the size ``CameraSensors`` declares."""
@@ -543,6 +599,40 @@ async def _together(*calls: Awaitable[Any]) -> list[Any]:
             task.cancel()
         await asyncio.gather(*tasks, return_exceptions=True)
         raise
+
+
+def _environment(parameters: Mapping[str, Value]) -> dict[str, Any]:
+    """The run's environment from the parameters under ``Environment.``; ``conditions`` (a
+    JSON object) is spread out, the named parameters win over it."""
+    environment: dict[str, Any] = {
+        field.removeprefix(ENVIRONMENT): value
+        for field, value in parameters.items()
+        if field.startswith(ENVIRONMENT)
+    }
+    extra = environment.pop("conditions", "")
+    if not extra:
+        return environment
+    try:
+        spread = json.loads(str(extra))
+    except ValueError as exc:
+        raise ScenarioError(
+            f"parameter conditions is not a JSON object of conditions: {exc}; e.g. "
+            f'{{"noise": true, "jpeg_quality": 60}}'
+        ) from None
+    if not isinstance(spread, dict):
+        raise ScenarioError(
+            f"parameter conditions must be a JSON object of conditions, got {extra!r}"
+        )
+    return {**spread, **environment}
+
+
+def _error_text(text: str) -> str:
+    """The ``error`` of a JSON error answer, else the text (shortened)."""
+    try:
+        value = json.loads(text)
+    except ValueError:
+        return text[:300]
+    return str(value.get("error", text))[:300] if isinstance(value, dict) else text[:300]
 
 
 def _base_url(url: str) -> str:

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from typing import Literal
 
-from pydantic import BaseModel, ConfigDict, TypeAdapter
+from pydantic import BaseModel, ConfigDict, Field, TypeAdapter
 
 
 class Reply(BaseModel):
@@ -85,6 +85,33 @@ class CameraSensor(Reply):
     """M22 of the sensor's projection matrix."""
     max_distance: float | None = None
     """Depth sensors: the distance 65535 stands for [m]."""
+
+
+class ObjectLabelReply(Reply):
+    """One object of GET /API/CAMERASENSOR/<name>/LABELS (the OpenRails mock's extension)."""
+
+    class_: str = Field(alias="class")
+    id: int = Field(ge=0, lt=2**32)
+    name: str = ""
+    box: tuple[int, int, int, int]
+    pixels: int = Field(ge=0)
+    unoccludedPixels: int = Field(ge=0)
+    snowPixels: int = Field(ge=0)
+    distanceAlong: float
+    distance: float
+    transmittance: float
+    visibleFraction: float
+
+
+class LabelsReply(Reply):
+    """GET /API/CAMERASENSOR/<name>/LABELS: the ground truth of the sensor's current frame."""
+
+    sensor: str
+    width: int
+    height: int
+    exposureMs: float = 0.0
+    gain: float = 0.0
+    objects: list[ObjectLabelReply] = Field(max_length=4096)
 
 
 class StepReply(Reply):

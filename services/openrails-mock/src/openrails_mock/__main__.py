@@ -1,4 +1,17 @@
-"""``python -m openrails_mock``: run the mock; options override ``OPENRAILS_MOCK_*``."""
+"""``python -m openrails_mock``: run the mock; options override ``OPENRAILS_MOCK_*``.
+
+It also takes OpenRails' own start command line, as OpenRails' simulation client launches
+``RunActivity.exe`` (``openrails_interface/open_rails_server_interface.py``)::
+
+    -start -syncsimulation "<route>\\PATHS\\<path>.pat" "<consist>" HH:MM <season 0-3>
+        <weather 0-2> <step_ms> <trains.json> <sensors.json> port=<port>
+    -start -explore "<route>\\PATHS\\<path>.pat" "<consist>" HH:MM <season> <weather> port=<port>
+
+beside its own options (``--host``, ``--loading-delay-s``, ...): the synced form runs in
+lockstep, the explore form in stock mode; the route folder is the part of the path before
+``PATHS`` (backslashes or slashes), the consist a name holding one of the mock's presets
+(``br642``), and the time of day makes the sun follow the clock (light ``sun``).
+"""
 
 from __future__ import annotations
 
@@ -15,12 +28,14 @@ import structlog
 from aiohttp import web
 from pydantic import ValidationError
 
-from coupler.errors import CouplerError
+from coupler.errors import CouplerError, ScenarioError
 from coupler.ports import host_port, listening
 from coupler.server import run
 
 from .api import SERVER, create_app
+from .conditions import clock_of
 from .config import MockConfig
+from .physics import PRESETS
 
 log = structlog.get_logger("openrails_mock")
 
@@ -46,6 +61,22 @@ def _parse(argv: list[str] | None) -> MockConfig:
         help="sensor configuration: JSON list of {sensorName, sensorType, trainName, width, "
         "height, fov[, range]} (lockstep only)",
     )
+    parser.add_argument(
+        "--time", type=_clock, dest="start_time_s", help="time of day HH:MM (the sun follows)"
+    )
+    parser.add_argument("--season", help="spring, summer, autumn, winter (or 0-3)")
+    parser.add_argument("--weather", help="clear, snow, rain (or 0-2)")
+    parser.add_argument(
+        "--environment", type=Path, help="JSON object of conditions (docs/railway-perception.md)"
+    )
+    parser.add_argument(
+        "--condition",
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="one condition, e.g. visibility_m=50 (repeatable)",
+    )
+    parser.add_argument("--consist-preset", dest="consist_preset")
     parser.add_argument("--camera-height", type=float, dest="camera_height_m")
     parser.add_argument("--camera-pitch", type=float, dest="camera_pitch_deg")
     parser.add_argument(
@@ -55,9 +86,123 @@ def _parse(argv: list[str] | None) -> MockConfig:
         default=None,
         help="answer POST /API/RESET with 404, as OpenRails' builds do",
     )
-    args = parser.parse_args(argv)
+    openrails: dict[str, Any] = {}
+    arguments = list(sys.argv[1:] if argv is None else argv)
+    if "-start" in arguments:
+        openrails, arguments = _openrails_form(arguments)
+    args = parser.parse_args(arguments)
     overrides: dict[str, Any] = {k: v for k, v in vars(args).items() if v is not None}
-    return MockConfig(**overrides)
+    conditions = {**openrails.pop("conditions", {}), **_pairs(overrides.pop("condition"))}
+    if args.start_time_s is not None:
+        conditions.setdefault("light", "sun")
+    return MockConfig(**{**openrails, **overrides, "conditions": conditions})
+
+
+def _clock(text: str) -> float:
+    try:
+        return clock_of(text, "--time")
+    except ScenarioError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def _pairs(items: list[str]) -> dict[str, str]:
+    pairs = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        if not sep or not key:
+            raise ScenarioError(f"--condition {item!r}: write NAME=VALUE, e.g. visibility_m=50")
+        pairs[key.strip()] = value.strip()
+    return pairs
+
+
+def _openrails_form(argv: list[str]) -> tuple[dict[str, Any], list[str]]:
+    """OpenRails' start command line (the module docstring) as configuration, and the
+    arguments that are the mock's own options."""
+    rest = list(argv)
+    rest.remove("-start")
+    modes = [a for a in rest if a in ("-syncsimulation", "-explore")]
+    if len(modes) != 1:
+        raise ScenarioError(
+            "OpenRails' command line: -start needs -syncsimulation or -explore, e.g. -start "
+            '-syncsimulation "ROUTE\\PATHS\\1.pat" "CONSIST" 12:00 0 0 200 trains.json '
+            "sensors.json port=2150"
+        )
+    rest.remove(modes[0])
+    synced = modes[0] == "-syncsimulation"
+    own: list[str] = []
+    words: list[str] = []
+    options = iter(rest)
+    for item in options:
+        if item.startswith("--"):
+            own.append(item)
+            if "=" not in item and item not in FLAGS:
+                own.append(next(options, ""))
+        elif item.startswith("port="):
+            own += ["--port", item.removeprefix("port=")]
+        else:
+            words.append(item)
+    wanted = 8 if synced else 5
+    names = ["path", "consist", "HH:MM", "season", "weather", "step_ms", "trains", "sensors"]
+    if len(words) != wanted:
+        raise ScenarioError(
+            f"OpenRails' command line ({modes[0]}): expected {', '.join(names[:wanted])} and "
+            f"port=N, got {len(words)} arguments: {' '.join(words)}"
+        )
+    route, path = _route_and_path(words[0])
+    config: dict[str, Any] = {
+        "mode": "lockstep" if synced else "stock",
+        "route": route,
+        "path": path,
+        "consist_preset": _preset(words[1]),
+        "start_time_s": clock_of(words[2], "OpenRails' command line, HH:MM"),
+        "season": words[3],
+        "weather": words[4],
+        "conditions": {"light": "sun"},
+    }
+    if synced:
+        try:
+            config["step_ms"] = float(words[5])
+        except ValueError:
+            raise ScenarioError(
+                f"OpenRails' command line: step_ms must be a number, got {words[5]!r}"
+            ) from None
+        config["trains"] = Path(words[6])
+        config["sensors"] = Path(words[7])
+    return config, own
+
+
+FLAGS = ("--no-reset",)
+"""The mock's options that take no value."""
+
+
+def _route_and_path(text: str) -> tuple[Path, Path]:
+    """``<route>\\PATHS\\<n>.pat`` as the route folder and the path inside it."""
+    parts = [p for p in text.replace("\\", "/").split("/")]
+    upper = [p.upper() for p in parts]
+    if "PATHS" not in upper or upper.index("PATHS") != len(parts) - 2:
+        raise ScenarioError(
+            f"OpenRails' command line: the path {text!r} is not <route>\\PATHS\\<name>.pat"
+        )
+    at = upper.index("PATHS")
+    route = Path("/".join(parts[:at]) or ".")
+    if not route.is_dir():
+        raise ScenarioError(
+            f"OpenRails' command line: the route folder {str(route)!r} (of {text!r}) does not "
+            f"exist here; give the route's folder on this machine"
+        )
+    return route, Path("PATHS") / parts[-1]
+
+
+def _preset(consist: str) -> str:
+    """The mock's consist preset a consist name holds (``Dlr\\BR642.con``: ``br642``)."""
+    plain = "".join(ch for ch in consist.lower() if ch.isalnum())
+    for name in PRESETS:
+        if name in plain:
+            return name
+    raise ScenarioError(
+        f"OpenRails' command line: the consist {consist!r} is not one the mock models; it has "
+        f"{', '.join(sorted(PRESETS))} (a consist whose name holds one of them)"
+    )
 
 
 async def _serve(config: MockConfig) -> None:
@@ -102,6 +247,9 @@ def main(argv: list[str] | None = None) -> None:
     logging.basicConfig(level=logging.INFO, format="%(message)s")
     try:
         config = _parse(argv)
+    except ScenarioError as exc:
+        print(f"openrails-mock: error: {exc}", file=sys.stderr)
+        sys.exit(1)
     except ValidationError as exc:
         problems = "; ".join(
             f"{'.'.join(str(p) for p in e['loc'])}: {e['msg']}" for e in exc.errors()

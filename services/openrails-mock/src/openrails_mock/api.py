@@ -12,23 +12,25 @@ the simulation build's (README: "Endpoints"). Every request the mock cannot take
 from __future__ import annotations
 
 import asyncio
+import dataclasses
 import itertools
 import json
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from typing import Any
 
 from aiohttp import web
 
 from coupler.errors import ScenarioError
 
+from .conditions import clock_of
 from .config import MAX_STEP_MS, MockConfig
 from .objects import CommandError
-from .renderer import Mount, Renderer
+from .renderer import Mount, ObjectLabel, Renderer, View
 from .route import Route, StraightRoute, load_infrastructure_file
 from .scene import Scene
-from .sensors import Cameras, load_sensors, sensor_names
+from .sensors import Cameras, Rendered, Shot, load_sensors, sensor_names
 from .simulation import (
     CONTROL_SPECS,
     ControlError,
@@ -81,6 +83,42 @@ class MockServer:
         """The configured camera and depth sensors (None: none)."""
         self.ready_at = math.inf
         self.last_wall_s = 0.0
+        self.conditions = config.build_conditions()
+        """The world's conditions as the mock was started with them (a reset without an
+        environment goes back to them)."""
+        self.start_time_s = config.start_time_s
+        self.environment: dict[str, Any] = {}
+        """The environment of the current run, as the last reset gave it."""
+        if cameras is not None:
+            cameras.set_conditions(self.conditions)
+
+    def shot(self) -> Shot:
+        """What the cameras see now."""
+        simulation = self.simulation
+        return Shot(
+            simulation.front_distance_m,
+            View(
+                elapsed_s=simulation.elapsed_s,
+                clock_s=simulation.clock_time_s,
+                speed_mps=abs(simulation.dynamics.state.speed_mps),
+            ),
+        )
+
+    def start_run(self, environment: Mapping[str, Any]) -> None:
+        """The conditions and start time of a run: the start's, changed by ``environment``
+        (condition names, and ``time``: HH:MM or seconds; setting the time makes the sun
+        follow the clock unless ``light`` is given). Checked whole before anything changes;
+        ScenarioError naming the key."""
+        changes = dict(environment)
+        start_time = self.start_time_s
+        if "time" in changes:
+            start_time = clock_of(changes.pop("time"), "Environment.time")
+            changes.setdefault("light", "sun")
+        conditions = self.conditions.updated(changes, source="Environment")
+        self.simulation.set_start_time(start_time)
+        self.environment = dict(environment)
+        if self.cameras is not None:
+            self.cameras.set_conditions(conditions)
 
     def start(self) -> None:
         """Start the loading phase and the wall clock."""
@@ -139,6 +177,9 @@ def create_app(
     app[SERVER] = server
 
     async def on_startup(app: web.Application) -> None:
+        cameras = app[SERVER].cameras
+        if cameras is not None:  # before serving: READY means frames come at once
+            await asyncio.to_thread(cameras.warm)
         app[SERVER].start()
 
     app.on_startup.append(on_startup)
@@ -157,6 +198,8 @@ def create_app(
     app.router.add_get("/API/TRAINDRIVINGDISPLAY", get_traindrivingdisplay)
     app.router.add_get("/API/OBJECTS", get_objects)
     app.router.add_get("/API/CAMERASENSOR/{name}", get_camerasensor)
+    app.router.add_get("/API/CAMERASENSOR/{name}/LABELS", get_camerasensor_labels)
+    app.router.add_get("/API/ENVIRONMENT", get_environment)
     return app
 
 
@@ -177,7 +220,7 @@ def _cameras(config: MockConfig, route: Route) -> Cameras | None:
     else:
         scene = Scene(route)
     mount = Mount(height_m=config.camera_height_m, pitch_deg=config.camera_pitch_deg)
-    return Cameras(specs, Renderer(scene, mount))
+    return Cameras(specs, Renderer(scene, mount, config.build_conditions()))
 
 
 def _error(status: int, message: str) -> web.Response:
@@ -243,8 +286,19 @@ async def post_reset(request: web.Request) -> web.Response:
     """
     server = request.app[SERVER]
     text = await request.text()
-    if text.strip() and await _json_body(request) != {}:
-        raise BadRequest("POST /API/RESET takes no options: send no body or {}")
+    body = await _json_body(request) if text.strip() else {}
+    if not isinstance(body, dict) or set(body) - {"Environment"}:
+        raise BadRequest(
+            'POST /API/RESET takes no body, {} or {"Environment": {...}} (the run\'s time and '
+            "conditions)"
+        )
+    environment = body.get("Environment", {})
+    if not isinstance(environment, dict):
+        raise BadRequest('"Environment" must be an object of conditions, e.g. {"weather": "snow"}')
+    try:
+        server.start_run(environment)
+    except ScenarioError as exc:
+        raise BadRequest(str(exc)) from None
     reset_world(server.world, server.simulation)
     server.last_wall_s = server.clock()
     return web.json_response(_state(server))
@@ -347,11 +401,70 @@ async def get_camerasensor(request: web.Request) -> web.StreamResponse:
             f"No camera sensor named {name} found (configured: {configured}; "
             f"OPENRAILS_MOCK_SENSORS / --sensors)",
         )
-    distance = server.simulation.front_distance_m
-    data = cameras.cached(name, distance)  # a standing train's frame: no thread hop
-    if data is None:
-        data = await asyncio.to_thread(cameras.frame, name, distance)
-    return await _send_frame(request, data)
+    rendered = await _rendered(server, cameras, name)
+    return await _send_frame(request, rendered.data)
+
+
+async def _rendered(server: MockServer, cameras: Cameras, name: str) -> Rendered:
+    shot = server.shot()
+    rendered = cameras.cached(name, shot)  # a standing train's frame: no thread hop
+    if rendered is None:
+        rendered = await asyncio.to_thread(cameras.frame, name, shot)
+    return rendered
+
+
+async def get_camerasensor_labels(request: web.Request) -> web.StreamResponse:
+    """A mock extension: the ground truth of a colour sensor's current frame (the same
+    render as GET /API/CAMERASENSOR/<name>): every balise, signal and platform edge in view."""
+    server = request.app[SERVER]
+    name = request.match_info["name"]
+    cameras = server.cameras
+    if cameras is None or name not in cameras.specs:
+        configured = sensor_names(list(cameras.specs.values())) if cameras else "none"
+        return _error(404, f"No camera sensor named {name} found (configured: {configured})")
+    spec = cameras.specs[name]
+    if spec.type != "rgb":
+        return _error(404, f"sensor {name} is a {spec.type} sensor: labels are served for rgb")
+    rendered = await _rendered(server, cameras, name)
+    return web.json_response(
+        {
+            "sensor": name,
+            "width": spec.width,
+            "height": spec.height,
+            "exposureMs": rendered.exposure_ms,
+            "gain": rendered.gain,
+            "objects": [_label(label) for label in rendered.labels],
+        }
+    )
+
+
+def _label(label: ObjectLabel) -> dict[str, Any]:
+    return {
+        "class": label.kind,
+        "id": label.id,
+        "name": label.name,
+        "box": list(label.box),
+        "pixels": label.pixels,
+        "unoccludedPixels": label.unoccluded_pixels,
+        "snowPixels": label.snow_pixels,
+        "distanceAlong": label.distance_along_m,
+        "distance": label.distance_m,
+        "transmittance": label.transmittance,
+        "visibleFraction": label.visible_fraction,
+    }
+
+
+async def get_environment(request: web.Request) -> web.Response:
+    """A mock extension: the world's time and conditions now."""
+    server = request.app[SERVER]
+    conditions = server.cameras.renderer.conditions if server.cameras else server.conditions
+    return web.json_response(
+        {
+            "time": server.simulation.clock_time_s,
+            "conditions": dataclasses.asdict(conditions),
+            "environment": server.environment,
+        }
+    )
 
 
 async def _send_frame(request: web.Request, data: bytes) -> web.StreamResponse:

@@ -8,13 +8,14 @@ from __future__ import annotations
 
 import dataclasses
 from pathlib import Path
-from typing import Literal
+from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
 from coupler.errors import ScenarioError
 
+from .conditions import Conditions, read_environment
 from .physics import PRESETS, Consist
 
 MAX_STEP_MS = 500.0
@@ -102,10 +103,33 @@ class MockConfig(BaseSettings):
     """Height of the sensors above the top of the rails, at the train's front."""
     camera_pitch_deg: float = Field(default=4.0, ge=-45, le=45)
     """How far the sensors look down from the track's direction [deg]."""
+    season: str | None = None
+    """OpenRails' season (spring, summer, autumn, winter or 0-3); unset: summer."""
+    weather: str | None = None
+    """OpenRails' weather (clear, snow, rain or 0-2); unset: clear."""
+    environment: Path | None = None
+    """A JSON object of conditions (``conditions.Conditions``' names), applied after
+    ``season`` and ``weather``."""
+    conditions: dict[str, Any] = {}
+    """Conditions by name (``--condition KEY=VALUE``), applied last."""
     consist_preset: str = "br642"
     """Consist the train starts from (see ``physics.PRESETS``)."""
     consist: ConsistOverrides = ConsistOverrides()
     """Per-figure overrides of the preset."""
+
+    def build_conditions(self) -> Conditions:
+        """The world's conditions at start: season, weather, the environment file, then
+        ``conditions``; ScenarioError naming the setting and the fix."""
+        conditions = Conditions()
+        if self.season is not None:
+            conditions = conditions.updated({"season": self.season}, source="--season")
+        if self.weather is not None:
+            conditions = conditions.updated({"weather": self.weather}, source="--weather")
+        if self.environment is not None:
+            conditions = conditions.updated(
+                read_environment(self.environment), source=str(self.environment)
+            )
+        return conditions.updated(self.conditions, source="--condition")
 
     def build_consist(self) -> Consist:
         """The preset with the overrides applied."""

@@ -34,6 +34,8 @@ class SceneBalise:
     """The balise's numeric id (railML ``code``)."""
     distance_m: float
     """Its centre's distance along the line."""
+    name: str = ""
+    """railML ``id``."""
 
 
 @dataclass(frozen=True)
@@ -43,6 +45,8 @@ class SceneSignal:
     distance_m: float
     side: float
     """+1: right of the track seen towards increasing distance, -1: left."""
+    name: str = ""
+    """railML ``id``."""
 
 
 @dataclass(frozen=True)
@@ -55,6 +59,8 @@ class ScenePlatform:
     """+1: right of the track seen towards increasing distance, -1: left."""
     height_m: float
     """Height of the platform above the top of the rails."""
+    name: str = ""
+    """railML ``id``."""
 
 
 class Scene:
@@ -69,6 +75,9 @@ class Scene:
         platforms: Sequence[ScenePlatform] = (),
     ) -> None:
         self.length = float(route.length)
+        start = route.position(0.0)
+        self.place = (float(start.latitude_deg), float(start.longitude_deg))
+        """Latitude and longitude of the line's start [deg]: where the sun is computed for."""
         count = max(2, int(np.ceil(self.length / SAMPLE_SPACING_M)) + 1)
         s = np.linspace(0.0, self.length, count)
         xy = _local_xy(route, s)
@@ -95,14 +104,19 @@ class Scene:
         """The scene of a railML file read by ``coupler_railway.load_infrastructure``."""
         return cls(
             infrastructure.model,
-            balises=[SceneBalise(b.code, b.distance_m) for b in infrastructure.balises],
+            balises=[SceneBalise(b.code, b.distance_m, b.id) for b in infrastructure.balises],
             signals=[
-                SceneSignal(i + 1, s.distance_m, 1.0 if s.side == "right" else -1.0)
+                SceneSignal(i + 1, s.distance_m, 1.0 if s.side == "right" else -1.0, s.id)
                 for i, s in enumerate(infrastructure.signals)
             ],
             platforms=[
                 ScenePlatform(
-                    i + 1, p.start_m, p.end_m, 1.0 if p.side == "right" else -1.0, p.height_m
+                    i + 1,
+                    p.start_m,
+                    p.end_m,
+                    1.0 if p.side == "right" else -1.0,
+                    p.height_m,
+                    p.id,
                 )
                 for i, p in enumerate(infrastructure.platform_edges)
             ],

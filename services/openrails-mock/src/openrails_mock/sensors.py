@@ -20,17 +20,19 @@ file, the entry and the key, with the fix.
 
 from __future__ import annotations
 
-import json
 import math
 import re
+import threading
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
 
 from coupler.errors import ScenarioError
+from coupler_railway.openrails.config import read_json
 
-from .renderer import CameraModel, Renderer
+from .conditions import Conditions
+from .renderer import CameraModel, ObjectLabel, Renderer, View
 
 SensorType = Literal["rgb", "depth"]
 SENSOR_TYPES: tuple[SensorType, ...] = ("rgb", "depth")
@@ -45,6 +47,8 @@ DEFAULT_MAX_DISTANCE_M = 400.0
 """A depth sensor's range when its entry has none (OpenRails' ``DepthSensor`` default)."""
 MAX_RANGE_M = 10_000.0
 """Longest depth range accepted."""
+MAX_SENSORS = 64
+"""Most sensors one simulation takes (every one is rendered each step it is asked for)."""
 KEYS = ("sensorName", "sensorType", "trainName", "width", "height", "fov", "range")
 """Every key an entry may have."""
 _NAME = re.compile(r"^[A-Za-z0-9_.\-]{1,64}$")
@@ -98,19 +102,7 @@ class SensorSpec:
 
 def load_sensors(path: Path, *, train_name: str) -> tuple[SensorSpec, ...]:
     """The sensors of a configuration file; ScenarioError naming the file and the problem."""
-    try:
-        text = path.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise ScenarioError(
-            f"cannot read the sensor configuration {path} (OPENRAILS_MOCK_SENSORS, --sensors): "
-            f"{exc.strerror or exc}"
-        ) from exc
-    try:
-        data = json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise ScenarioError(
-            f"{path}:{exc.lineno}: the sensor configuration is not valid JSON: {exc.msg}"
-        ) from exc
+    data = read_json(path, what="sensor configuration", setting="OPENRAILS_MOCK_SENSORS, --sensors")
     return parse_sensors(data, source=str(path), train_name=train_name)
 
 
@@ -121,16 +113,21 @@ def parse_sensors(data: object, *, source: str, train_name: str) -> tuple[Sensor
             f"{source}: the sensor configuration must be a JSON list of sensors, "
             f'[{{"sensorName": ..., "sensorType": "rgb", ...}}], not {type(data).__name__}'
         )
-    specs: list[SensorSpec] = []
+    if len(data) > MAX_SENSORS:
+        raise ScenarioError(
+            f"{source}: {len(data)} sensors, more than the {MAX_SENSORS} the mock renders; "
+            f"configure the sensors the run reads"
+        )
+    specs: dict[str, SensorSpec] = {}
     for index, entry in enumerate(data):
         spec = _sensor(entry, f"{source}: sensor {index}", train_name)
-        if any(s.name == spec.name for s in specs):
+        if spec.name in specs:
             raise ScenarioError(
                 f"{source}: sensor {index}: sensorName {spec.name!r} is used twice; "
                 f"give every sensor its own name"
             )
-        specs.append(spec)
-    return tuple(specs)
+        specs[spec.name] = spec
+    return tuple(specs.values())
 
 
 def _sensor(entry: object, where: str, train_name: str) -> SensorSpec:
@@ -216,38 +213,117 @@ def sensor_names(specs: Sequence[SensorSpec]) -> str:
     return ", ".join(repr(s.name) for s in specs) or "none"
 
 
-class Cameras:
-    """The configured sensors' frames: rendered on request, once per train position."""
+MAX_CACHED_BYTES = 64 * 1024 * 1024
+"""Most bytes of frames kept for the current state (beyond: rendered per request)."""
 
-    def __init__(self, specs: Sequence[SensorSpec], renderer: Renderer) -> None:
+
+@dataclass(frozen=True)
+class Shot:
+    """What a frame shows: the train's front on the line, and the state besides the place."""
+
+    distance_m: float
+    view: View
+
+
+@dataclass(frozen=True)
+class Rendered:
+    """A sensor's frame as served, and its labels (colour sensors)."""
+
+    data: bytes
+    labels: tuple[ObjectLabel, ...] = ()
+    exposure_ms: float = 0.0
+    gain: float = 0.0
+
+
+class Cameras:
+    """The configured sensors' frames: rendered on request, once per state.
+
+    Frames of the current state only are kept (a new step drops the last one's), at most
+    ``max_cached_bytes`` of them; one frame renders at a time (requests for the same frame
+    wait for it instead of rendering it again), so memory stays at one render's worth."""
+
+    def __init__(
+        self,
+        specs: Sequence[SensorSpec],
+        renderer: Renderer,
+        *,
+        max_cached_bytes: int = MAX_CACHED_BYTES,
+    ) -> None:
         self.specs = {spec.name: spec for spec in specs}
         self.renderer = renderer
-        self._cache: dict[str, tuple[float, bytes]] = {}
+        self.max_cached_bytes = max_cached_bytes
+        self._lock = threading.Lock()
+        self._state: object = None
+        self._cache: dict[str, Rendered] = {}
+        self.renders = 0
+        """Frames rendered so far."""
+
+    @property
+    def cached_bytes(self) -> int:
+        return sum(len(r.data) for r in self._cache.values())
+
+    def set_conditions(self, conditions: Conditions) -> None:
+        """Render under ``conditions`` from now on."""
+        with self._lock:
+            if conditions != self.renderer.conditions:
+                self.renderer = self.renderer.with_conditions(conditions)
+            self._state, self._cache = None, {}
+
+    def warm(self) -> None:
+        """Compile the renderer's kernels (or load them from numba's cache) with two tiny
+        frames, so that the first step's frames take as long as any other."""
+        tiny = CameraModel(width=16, height=12, fov_deg=45.0)
+        self.renderer.render(tiny, 0.0, View(speed_mps=1.0))
+        self.renderer.depth(tiny, 0.0, 100.0)
 
     def descriptions(self) -> dict[str, dict[str, Any]]:
         """``CameraSensors`` of a lockstep reply."""
         return {name: spec.description() for name, spec in self.specs.items()}
 
-    def cached(self, name: str, distance_m: float) -> bytes | None:
+    def _key(self, shot: Shot) -> object:
+        """What a frame depends on: the place; the time too where the conditions make the
+        frame change with it; the speed with motion blur."""
+        c = self.renderer.conditions
+        return (
+            shot.distance_m,
+            shot.view.elapsed_s if c.changes_with_time else None,
+            shot.view.clock_s if c.light == "sun" else None,
+            shot.view.speed_mps if c.motion_blur else None,
+        )
+
+    def cached(self, name: str, shot: Shot) -> Rendered | None:
         """The frame ``frame`` would return if it is already rendered, else None: the
         server answers it without handing the request to a thread."""
-        cached = self._cache.get(name)
-        return cached[1] if cached is not None and cached[0] == distance_m else None
+        if self._state != self._key(shot):
+            return None
+        return self._cache.get(name)
 
-    def frame(self, name: str, distance_m: float) -> bytes:
-        """The raw frame of sensor ``name`` with the train's front ``distance_m`` along the
-        line (KeyError for an unknown name): RGB bytes, or little-endian uint16 triples."""
+    def frame(self, name: str, shot: Shot) -> Rendered:
+        """The raw frame of sensor ``name`` for ``shot`` (KeyError for an unknown name): RGB
+        bytes with labels, or little-endian uint16 triples."""
         spec = self.specs[name]
-        cached = self.cached(name, distance_m)
-        if cached is not None:
-            return cached
+        with self._lock:
+            key = self._key(shot)
+            if key != self._state:
+                self._state, self._cache = key, {}
+            found = self._cache.get(name)
+            if found is not None:
+                return found
+            rendered = self._render(spec, shot)
+            if self.cached_bytes + len(rendered.data) <= self.max_cached_bytes:
+                self._cache[name] = rendered
+            return rendered
+
+    def _render(self, spec: SensorSpec, shot: Shot) -> Rendered:
         camera = CameraModel(width=spec.width, height=spec.height, fov_deg=spec.fov_deg)
+        self.renders += 1
         if spec.type == "rgb":
-            data = self.renderer.rgb(camera, distance_m).tobytes()
+            frame = self.renderer.render(camera, shot.distance_m, shot.view)
+            data = frame.pixels.tobytes()
+            rendered = Rendered(data, frame.labels, frame.exposure_ms, frame.gain)
         else:
             assert spec.max_distance_m is not None
-            pixels = self.renderer.depth(camera, distance_m, spec.max_distance_m)
-            data = pixels.astype("<u2", copy=False).tobytes()
-        assert len(data) == spec.frame_bytes, (name, len(data), spec.frame_bytes)
-        self._cache[name] = (distance_m, data)
-        return data
+            pixels = self.renderer.depth(camera, shot.distance_m, spec.max_distance_m)
+            rendered = Rendered(pixels.astype("<u2", copy=False).tobytes())
+        assert len(rendered.data) == spec.frame_bytes, (spec.name, len(rendered.data))
+        return rendered

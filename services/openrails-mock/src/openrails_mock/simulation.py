@@ -166,6 +166,12 @@ class Simulation:
         for other in self.others.values():
             other.reset()
 
+    def set_start_time(self, start_time_s: float) -> None:
+        """The time of day the scenario starts at (every train's clock; takes effect now)."""
+        self._start_time_s = start_time_s
+        for other in self.others.values():
+            other.set_start_time(start_time_s)
+
     def follow_route(self) -> None:
         """The route changed beyond the train (a junction was thrown): new buffer stops."""
         self.dynamics.set_limits(

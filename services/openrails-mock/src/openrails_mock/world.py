@@ -11,12 +11,12 @@ index, and every train's route is replanned beyond the track it stands on.
 
 from __future__ import annotations
 
-import json
 import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from coupler.errors import CouplerError, ScenarioError
+from coupler_railway.openrails.config import read_json
 
 from .objects import CommandError, Pose, WorldObjects
 from .paths import TrainPath, load_path
@@ -122,14 +122,7 @@ def _default_path(folder: RouteFolder) -> Path:
 
 
 def _load_trains(world_folder: RouteFolder, network: TrackNetwork, file: Path) -> list[OtherTrain]:
-    try:
-        config = json.loads(file.read_text(encoding="utf-8"))
-    except OSError as exc:
-        raise ScenarioError(f"cannot read the trains config {file}: {exc.strerror or exc}") from exc
-    except json.JSONDecodeError as exc:
-        raise ScenarioError(
-            f"{file}:{exc.lineno}: the trains config is not JSON: {exc.msg}"
-        ) from exc
+    config = read_json(file, what="trains config", setting="OPENRAILS_MOCK_TRAINS, --trains")
     if not isinstance(config, list):
         raise ScenarioError(f"{file}: the trains config must be a JSON list of trains")
     trains = []

@@ -22,17 +22,24 @@ _runtime_version.ValidateProtobufRuntimeVersion(
 _sym_db = _symbol_database.Default()
 
 
+from coupler.v1 import railway_pb2 as coupler_dot_v1_dot_railway__pb2
 
 
-DESCRIPTOR = _descriptor_pool.Default().AddSerializedFile(b'\n\x18\x63oupler/v1/sensors.proto\x12\ncoupler.v1\"B\n\x10\x43\x61meraIntrinsics\x12\n\n\x02\x66x\x18\x01 \x01(\x01\x12\n\n\x02\x66y\x18\x02 \x01(\x01\x12\n\n\x02\x63x\x18\x03 \x01(\x01\x12\n\n\x02\x63y\x18\x04 \x01(\x01\"\xb0\x01\n\x05Image\x12\x0e\n\x06sensor\x18\x01 \x01(\t\x12\x0e\n\x06time_s\x18\x02 \x01(\x01\x12\r\n\x05width\x18\x03 \x01(\r\x12\x0e\n\x06height\x18\x04 \x01(\r\x12\x10\n\x08\x65ncoding\x18\x05 \x01(\t\x12\x30\n\nintrinsics\x18\x06 \x01(\x0b\x32\x1c.coupler.v1.CameraIntrinsics\x12\x16\n\x0emax_distance_m\x18\x07 \x01(\x01\x12\x0c\n\x04\x64\x61ta\x18\x08 \x01(\x0c\x62\x06proto3')
+DESCRIPTOR = _descriptor_pool.Default().AddSerializedFile(b'\n\x18\x63oupler/v1/sensors.proto\x12\ncoupler.v1\x1a\x18\x63oupler/v1/railway.proto\"B\n\x10\x43\x61meraIntrinsics\x12\n\n\x02\x66x\x18\x01 \x01(\x01\x12\n\n\x02\x66y\x18\x02 \x01(\x01\x12\n\n\x02\x63x\x18\x03 \x01(\x01\x12\n\n\x02\x63y\x18\x04 \x01(\x01\"\xb0\x01\n\x05Image\x12\x0e\n\x06sensor\x18\x01 \x01(\t\x12\x0e\n\x06time_s\x18\x02 \x01(\x01\x12\r\n\x05width\x18\x03 \x01(\r\x12\x0e\n\x06height\x18\x04 \x01(\r\x12\x10\n\x08\x65ncoding\x18\x05 \x01(\t\x12\x30\n\nintrinsics\x18\x06 \x01(\x0b\x32\x1c.coupler.v1.CameraIntrinsics\x12\x16\n\x0emax_distance_m\x18\x07 \x01(\x01\x12\x0c\n\x04\x64\x61ta\x18\x08 \x01(\x0c\"\x99\x01\n\x0b\x46rameLabels\x12\x0e\n\x06sensor\x18\x01 \x01(\t\x12\x0e\n\x06time_s\x18\x02 \x01(\x01\x12\r\n\x05width\x18\x03 \x01(\r\x12\x0e\n\x06height\x18\x04 \x01(\r\x12(\n\x07objects\x18\x05 \x03(\x0b\x32\x17.coupler.v1.ObjectLabel\x12\x13\n\x0b\x65xposure_ms\x18\x06 \x01(\x01\x12\x0c\n\x04gain\x18\x07 \x01(\x01\"\x98\x02\n\x0bObjectLabel\x12-\n\x0cobject_class\x18\x01 \x01(\x0e\x32\x17.coupler.v1.ObjectClass\x12\n\n\x02id\x18\x02 \x01(\r\x12\x0c\n\x04name\x18\x03 \x01(\t\x12!\n\x03\x62ox\x18\x04 \x01(\x0b\x32\x14.coupler.v1.PixelBox\x12\x0e\n\x06pixels\x18\x05 \x01(\r\x12\x19\n\x11unoccluded_pixels\x18\x06 \x01(\r\x12\x13\n\x0bsnow_pixels\x18\x07 \x01(\r\x12\x18\n\x10\x64istance_along_m\x18\x08 \x01(\x01\x12\x12\n\ndistance_m\x18\t \x01(\x01\x12\x15\n\rtransmittance\x18\n \x01(\x01\x12\x18\n\x10visible_fraction\x18\x0b \x01(\x01*}\n\x0bObjectClass\x12\x1c\n\x18OBJECT_CLASS_UNSPECIFIED\x10\x00\x12\x17\n\x13OBJECT_CLASS_BALISE\x10\x01\x12\x17\n\x13OBJECT_CLASS_SIGNAL\x10\x02\x12\x1e\n\x1aOBJECT_CLASS_PLATFORM_EDGE\x10\x03\x62\x06proto3')
 
 _globals = globals()
 _builder.BuildMessageAndEnumDescriptors(DESCRIPTOR, _globals)
 _builder.BuildTopDescriptorsAndMessages(DESCRIPTOR, 'coupler.v1.sensors_pb2', _globals)
 if not _descriptor._USE_C_DESCRIPTORS:
   DESCRIPTOR._loaded_options = None
-  _globals['_CAMERAINTRINSICS']._serialized_start=40
-  _globals['_CAMERAINTRINSICS']._serialized_end=106
-  _globals['_IMAGE']._serialized_start=109
-  _globals['_IMAGE']._serialized_end=285
+  _globals['_OBJECTCLASS']._serialized_start=752
+  _globals['_OBJECTCLASS']._serialized_end=877
+  _globals['_CAMERAINTRINSICS']._serialized_start=66
+  _globals['_CAMERAINTRINSICS']._serialized_end=132
+  _globals['_IMAGE']._serialized_start=135
+  _globals['_IMAGE']._serialized_end=311
+  _globals['_FRAMELABELS']._serialized_start=314
+  _globals['_FRAMELABELS']._serialized_end=467
+  _globals['_OBJECTLABEL']._serialized_start=470
+  _globals['_OBJECTLABEL']._serialized_end=750
 # @@protoc_insertion_point(module_scope)

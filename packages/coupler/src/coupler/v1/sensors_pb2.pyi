@@ -9,8 +9,12 @@ changes the generic protocol: an Image rides in a Binary channel whose descripti
 `coupler.v1.Image`.
 """
 
+from collections import abc as _abc
+from coupler.v1 import railway_pb2 as _railway_pb2
 from google.protobuf import descriptor as _descriptor
 from google.protobuf import message as _message
+from google.protobuf.internal import containers as _containers
+from google.protobuf.internal import enum_type_wrapper as _enum_type_wrapper
 import builtins as _builtins
 import sys
 import typing as _typing
@@ -21,6 +25,36 @@ else:
     from typing_extensions import TypeAlias as _TypeAlias, Never as _Never
 
 DESCRIPTOR: _descriptor.FileDescriptor
+
+class _ObjectClass:
+    ValueType = _typing.NewType("ValueType", _builtins.int)
+    V: _TypeAlias = ValueType  # noqa: Y015
+
+class _ObjectClassEnumTypeWrapper(_enum_type_wrapper._EnumTypeWrapper[_ObjectClass.ValueType], _builtins.type):
+    DESCRIPTOR: _descriptor.EnumDescriptor
+    OBJECT_CLASS_UNSPECIFIED: _ObjectClass.ValueType  # 0
+    OBJECT_CLASS_BALISE: _ObjectClass.ValueType  # 1
+    """A Eurobalise between the rails; `ObjectLabel.id` is its railML `code` (the balise id the
+    TrackBalises FMU reports).
+    """
+    OBJECT_CLASS_SIGNAL: _ObjectClass.ValueType  # 2
+    """A signal beside the track; `id` is its 1-based number along the line."""
+    OBJECT_CLASS_PLATFORM_EDGE: _ObjectClass.ValueType  # 3
+    """A platform edge; `id` is its 1-based number along the line."""
+
+class ObjectClass(_ObjectClass, metaclass=_ObjectClassEnumTypeWrapper):
+    """What an object is."""
+
+OBJECT_CLASS_UNSPECIFIED: ObjectClass.ValueType  # 0
+OBJECT_CLASS_BALISE: ObjectClass.ValueType  # 1
+"""A Eurobalise between the rails; `ObjectLabel.id` is its railML `code` (the balise id the
+TrackBalises FMU reports).
+"""
+OBJECT_CLASS_SIGNAL: ObjectClass.ValueType  # 2
+"""A signal beside the track; `id` is its 1-based number along the line."""
+OBJECT_CLASS_PLATFORM_EDGE: ObjectClass.ValueType  # 3
+"""A platform edge; `id` is its 1-based number along the line."""
+Global___ObjectClass: _TypeAlias = ObjectClass  # noqa: Y015
 
 @_typing.final
 class CameraIntrinsics(_message.Message):
@@ -107,3 +141,127 @@ class Image(_message.Message):
     def WhichOneof(self, oneof_group: _Never) -> None: ...
 
 Global___Image: _TypeAlias = Image  # noqa: Y015
+
+@_typing.final
+class FrameLabels(_message.Message):
+    """The ground truth of one camera frame: every labelled object in view (balises, signals,
+    platform edges), taken from the renderer's object-id buffer of the same frame, so a scorer
+    never guesses what the camera could see. It rides in its own Binary channel beside the
+    camera's (the OpenRails bridge: `<sensor>_labels`), for the same time; a simulator that
+    cannot label its frames leaves the channel empty (zero bytes), never a message with no
+    objects that would claim an empty view.
+    """
+
+    DESCRIPTOR: _descriptor.Descriptor
+
+    SENSOR_FIELD_NUMBER: _builtins.int
+    TIME_S_FIELD_NUMBER: _builtins.int
+    WIDTH_FIELD_NUMBER: _builtins.int
+    HEIGHT_FIELD_NUMBER: _builtins.int
+    OBJECTS_FIELD_NUMBER: _builtins.int
+    EXPOSURE_MS_FIELD_NUMBER: _builtins.int
+    GAIN_FIELD_NUMBER: _builtins.int
+    sensor: _builtins.str
+    """The camera's name as the simulator knows it: the `Image.sensor` these labels belong to."""
+    time_s: _builtins.float
+    """Simulation time of the frame [s], the `Image.time_s` of the same frame."""
+    width: _builtins.int
+    height: _builtins.int
+    exposure_ms: _builtins.float
+    """The exposure [ms] and gain the frame was taken with (the camera's auto-exposure)."""
+    gain: _builtins.float
+    @_builtins.property
+    def objects(self) -> _containers.RepeatedCompositeFieldContainer[Global___ObjectLabel]:
+        """One entry per object the frame would show with nothing in front of it, in no order."""
+
+    def __init__(
+        self,
+        *,
+        sensor: _builtins.str = ...,
+        time_s: _builtins.float = ...,
+        width: _builtins.int = ...,
+        height: _builtins.int = ...,
+        objects: _abc.Iterable[Global___ObjectLabel] | None = ...,
+        exposure_ms: _builtins.float = ...,
+        gain: _builtins.float = ...,
+    ) -> None: ...
+    _HasFieldArgType: _TypeAlias = _Never  # noqa: Y015
+    def HasField(self, field_name: _HasFieldArgType) -> _builtins.bool: ...
+    _ClearFieldArgType: _TypeAlias = _typing.Literal["exposure_ms", b"exposure_ms", "gain", b"gain", "height", b"height", "objects", b"objects", "sensor", b"sensor", "time_s", b"time_s", "width", b"width"]  # noqa: Y015
+    def ClearField(self, field_name: _ClearFieldArgType) -> None: ...
+    def WhichOneof(self, oneof_group: _Never) -> None: ...
+
+Global___FrameLabels: _TypeAlias = FrameLabels  # noqa: Y015
+
+@_typing.final
+class ObjectLabel(_message.Message):
+    """One labelled object of a frame."""
+
+    DESCRIPTOR: _descriptor.Descriptor
+
+    OBJECT_CLASS_FIELD_NUMBER: _builtins.int
+    ID_FIELD_NUMBER: _builtins.int
+    NAME_FIELD_NUMBER: _builtins.int
+    BOX_FIELD_NUMBER: _builtins.int
+    PIXELS_FIELD_NUMBER: _builtins.int
+    UNOCCLUDED_PIXELS_FIELD_NUMBER: _builtins.int
+    SNOW_PIXELS_FIELD_NUMBER: _builtins.int
+    DISTANCE_ALONG_M_FIELD_NUMBER: _builtins.int
+    DISTANCE_M_FIELD_NUMBER: _builtins.int
+    TRANSMITTANCE_FIELD_NUMBER: _builtins.int
+    VISIBLE_FRACTION_FIELD_NUMBER: _builtins.int
+    object_class: Global___ObjectClass.ValueType
+    id: _builtins.int
+    name: _builtins.str
+    """Its railML `id` (e.g. "bal_1050"); empty when the scene has none."""
+    pixels: _builtins.int
+    """Pixels that show it in this frame (nothing nearer in front)."""
+    unoccluded_pixels: _builtins.int
+    """Pixels it would cover with nothing in front of it."""
+    snow_pixels: _builtins.int
+    """Of `pixels`, those under snow (showing snow, not the object's surface)."""
+    distance_along_m: _builtins.float
+    """Along the track from the camera (the train's front) to the object [m] (a platform edge:
+    to its nearest point ahead).
+    """
+    distance_m: _builtins.float
+    """Straight line from the camera to the object [m] (a balise: the centre of its top; a
+    signal: its head; a platform edge: its nearest point ahead).
+    """
+    transmittance: _builtins.float
+    """Contrast left after the air between camera and object, exp(-extinction * distance_m)
+    (fog and haze by Koschmieder, rain and snow): 1 in a vacuum.
+    """
+    visible_fraction: _builtins.float
+    """Of what the object would show alone in clear air, the fraction a camera sees: (pixels -
+    snow_pixels) / unoccluded_pixels * transmittance. 0 when it is hidden, in dense fog or
+    under snow.
+    """
+    @_builtins.property
+    def box(self) -> _railway_pb2.PixelBox:
+        """The box of the pixels that show it (railway.proto's PixelBox, as a detection's); unset
+        when none does (fully occluded).
+        """
+
+    def __init__(
+        self,
+        *,
+        object_class: Global___ObjectClass.ValueType = ...,
+        id: _builtins.int = ...,
+        name: _builtins.str = ...,
+        box: _railway_pb2.PixelBox | None = ...,
+        pixels: _builtins.int = ...,
+        unoccluded_pixels: _builtins.int = ...,
+        snow_pixels: _builtins.int = ...,
+        distance_along_m: _builtins.float = ...,
+        distance_m: _builtins.float = ...,
+        transmittance: _builtins.float = ...,
+        visible_fraction: _builtins.float = ...,
+    ) -> None: ...
+    _HasFieldArgType: _TypeAlias = _typing.Literal["box", b"box"]  # noqa: Y015
+    def HasField(self, field_name: _HasFieldArgType) -> _builtins.bool: ...
+    _ClearFieldArgType: _TypeAlias = _typing.Literal["box", b"box", "distance_along_m", b"distance_along_m", "distance_m", b"distance_m", "id", b"id", "name", b"name", "object_class", b"object_class", "pixels", b"pixels", "snow_pixels", b"snow_pixels", "transmittance", b"transmittance", "unoccluded_pixels", b"unoccluded_pixels", "visible_fraction", b"visible_fraction"]  # noqa: Y015
+    def ClearField(self, field_name: _ClearFieldArgType) -> None: ...
+    def WhichOneof(self, oneof_group: _Never) -> None: ...
+
+Global___ObjectLabel: _TypeAlias = ObjectLabel  # noqa: Y015

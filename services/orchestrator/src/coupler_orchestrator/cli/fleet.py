@@ -49,6 +49,24 @@ def arguments(fleet: argparse.ArgumentParser) -> None:
         help="[s] per service",
     )
     record_options(fleet)
+    # as `coupler run` takes them, added after the fleet file's run arguments (so they win)
+    fleet.add_argument("--stop-time", type=float, help="stop time [s] (instead of the SSD's)")
+    fleet.add_argument(
+        "--param",
+        action="append",
+        default=[],
+        metavar="COMPONENT.NAME=VALUE",
+        help="override a parameter or input start value (repeatable), e.g. "
+        "OpenRails.fog_visibility=50",
+    )
+    fleet.add_argument(
+        "--output-variables",
+        action="append",
+        default=[],
+        metavar="NAME[,NAME...]",
+        help="record only these outputs (Component.output names or globs, comma-separated; "
+        "repeatable); a coupler.v1.Image channel named here is recorded as PNG files",
+    )
 
 
 async def execute(args: argparse.Namespace, out: TextIO, session: Session) -> int:
@@ -64,6 +82,10 @@ async def execute(args: argparse.Namespace, out: TextIO, session: Session) -> in
     run_argv += [f"--replay={item}" for item in args.replay]
     if args.realtime_factor is not None:
         run_argv += ["--realtime-factor", str(args.realtime_factor)]
+    if args.stop_time is not None:
+        run_argv += ["--stop-time", repr(args.stop_time)]
+    run_argv += [f"--param={item}" for item in args.param]
+    run_argv += [f"--output-variables={item}" for item in args.output_variables]
     run_args = parser().parse_args(run_argv)
     if args.out is None:
         run_args.results_base = spec.out
