@@ -333,3 +333,24 @@ def test_switch_to_nowhere_is_one_clear_error(tmp_path: Path) -> None:
         f"error: {bad}:{line}: <connection id=\"b1c\">: ref 'sw1c' names a switch connection "
         "that does not refer back to it; set that switch connection's ref to 'b1c'\n"
     )
+
+
+LINE = DATA / "test-line.railml"
+
+
+@pytest.mark.parametrize("ident", ["../../PWNED", "{tmp}/ABSOLUTE", "a&#10;b", "CON", "x:y"])
+def test_an_id_that_cannot_name_a_file_is_refused_with_its_line(tmp_path: Path, ident: str) -> None:
+    """An ocp's id names the route's path files (``PATHS/<from>-<to>.pat``): an id with a
+    path in it wrote outside the route folder (rc 0); now the export refuses it naming its
+    line, and writes nothing at all."""
+    ident = ident.format(tmp=tmp_path)
+    text = LINE.read_text(encoding="utf-8").replace('<ocp id="ocpW"', f'<ocp id="{ident}"')
+    bad = tmp_path / "bad.railml"
+    bad.write_text(text, encoding="utf-8")
+    done = export(bad, tmp_path / "out" / "route")
+    assert done.returncode == 1, done.stdout
+    line = next(i for i, t in enumerate(text.splitlines(), start=1) if "<ocp id=" in t)
+    assert done.stderr.startswith(f"error: {bad}:{line}: <ocp id="), done.stderr
+    assert "cannot be a file name in the route folder" in done.stderr
+    assert "Traceback" not in done.stderr and done.stderr.count("\n") == 1
+    assert sorted(p.name for p in tmp_path.rglob("*")) == ["bad.railml"]

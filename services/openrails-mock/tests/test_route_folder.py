@@ -351,3 +351,21 @@ def test_a_corrupted_track_database_is_one_clear_error(
     assert done.stderr.startswith(f"openrails-mock: error: {route / 'hand.tdb'}:")
     assert message in done.stderr
     assert done.stderr.count("\n") == 1
+
+
+def test_stf_strings_the_exporter_quotes_read_back_whole(tmp_path: Path) -> None:
+    """A name with quotes, a backslash, a newline or a tab is one STF string the reader gives
+    back as written (a newline used to end up raw inside the file); a control character no
+    STF reader decodes is written as a space."""
+    from coupler_railway.openrails.stf import StfWriter, quote
+    from openrails_mock.stf import read_stf
+
+    name = 'A "quoted" \\ name\non two lines\tand a tab\x01'
+    stf = StfWriter("JINX0r0t")
+    stf.line("Name", quote(name))
+    stf.line("Next", 1)
+    path = stf.save(tmp_path / "x.trk")
+    root = read_stf(path)
+    assert root.block("Name").values == ['A "quoted" \\ name\non two lines\tand a tab ']
+    assert root.block("Next").values == ["1"]
+    assert "\n" not in path.read_bytes().decode("utf-16").split("Name (")[1].split(")")[0]

@@ -18,6 +18,7 @@ from __future__ import annotations
 import itertools
 import math
 import os
+import re
 import shutil
 from collections import deque
 from dataclasses import dataclass, field
@@ -25,6 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
+from coupler_railway.errors import RailMLError
 from coupler_railway.infrastructure import Infrastructure, Network, Station, Switch
 from coupler_railway.openrails.fit import FitError, Section, fit_error, fit_sections
 from coupler_railway.openrails.stf import StfWriter, quote
@@ -171,6 +173,8 @@ class _Builder:
         self.frame = WorldFrame.around(self.lines[0].model.frame)
         self.segments: list[_Segment] = []
         self.nodes: list[_Node] = []
+        self.paths: list[tuple[str, tuple[str, str], list[_Node]]] = []
+        """The paths to write (``_plan_paths``)."""
         self.items: list[_Item] = []
         self.base_elevation: list[float] = []
         self.base_elevation = self._base_elevations()
@@ -298,6 +302,7 @@ class _Builder:
                 shrink = 1.0 - math.cos(math.atan(slope / 1000.0))
                 self.slope_offset = max(self.slope_offset, section.length * shrink)
         self._place_items(line_segments)
+        self.paths = self._plan_paths()
 
     def _junction(
         self, node: _Node, switch: Switch, line: int, line_segments: list[list[_Segment]]
@@ -802,9 +807,9 @@ class _Builder:
         return found
 
     def _end_name(self, node: _Node) -> tuple[str, str]:
-        """Id and name of the station at a line end (within 200 m), else the railML track's
-        id and name there."""
-        best: tuple[float, str, str] | None = None
+        """File stem (the id) and name of the station at a line end (within 200 m), else of the
+        railML track there."""
+        best: tuple[float, Station] | None = None
         for infra in self.lines:
             for station in infra.stations:
                 east, north = (
@@ -813,31 +818,35 @@ class _Builder:
                 )
                 distance = math.hypot(east - node.east, north - node.north)
                 if distance < 200.0 and (best is None or distance < best[0]):
-                    best = (distance, station.id, station.name)
+                    best = (distance, station)
         if best is not None:
-            return best[1], best[2]
+            station = best[1]
+            return file_stem(station.id, self.file, station.line, "ocp"), station.name
         segment = next(s for s in self.segments if s.index == node.pins[0][0])
         tracks = self.lines[segment.line].tracks
         track = tracks[0] if node.pins[0][1] == 1 else tracks[-1]
-        return track.id, track.name
+        return file_stem(track.id, self.file, track.line, "track"), track.name
 
-    def _write_paths(self, folder: Path) -> list[str]:
-        written: list[str] = []
+    def _plan_paths(self) -> list[tuple[str, tuple[str, str], list[_Node]]]:
+        """Every path to write: (file stem, names of its ends, its nodes); worked out before
+        anything is written, so an id that cannot name a file leaves no folder behind."""
+        planned: list[tuple[str, tuple[str, str], list[_Node]]] = []
+        stems: list[str] = []
         ends = [n for n in self.nodes if n.switch is None]
         for start in ends:
             for end, passed in self._routes(start):
                 (first, first_name), (last, last_name) = self._end_name(start), self._end_name(end)
                 stem = f"{first}-{last}"
-                if f"PATHS/{stem}.pat" in written:  # two ends named alike (no station near)
-                    stem = f"{stem}-{sum(w.startswith(f'PATHS/{stem}') for w in written) + 1}"
-                self._write_path(
-                    folder / "PATHS" / f"{stem}.pat",
-                    stem,
-                    (first_name, last_name),
-                    [start, *passed, end],
-                )
-                written.append(f"PATHS/{stem}.pat")
-        return sorted(written)
+                if stem in stems:  # two ends named alike (no station near)
+                    stem = f"{stem}-{sum(w.startswith(stem) for w in stems) + 1}"
+                stems.append(stem)
+                planned.append((stem, (first_name, last_name), [start, *passed, end]))
+        return planned
+
+    def _write_paths(self, folder: Path) -> list[str]:
+        for stem, names, nodes in self.paths:
+            self._write_path(folder / "PATHS" / f"{stem}.pat", stem, names, nodes)
+        return sorted(f"PATHS/{stem}.pat" for stem, _, _ in self.paths)
 
     def _write_path(
         self, path: Path, stem: str, names: tuple[str, str], nodes: list[_Node]
@@ -864,6 +873,42 @@ class _Builder:
         stf.end()
         stf.end()
         stf.save(path)
+
+
+_UNSAFE = re.compile(r'[\x00-\x1f\x7f<>:"/\\|?*]')
+_DEVICES = {
+    "con",
+    "prn",
+    "aux",
+    "nul",
+    *(f"com{i}" for i in range(10)),
+    *(f"lpt{i}" for i in range(10)),
+}
+
+
+def file_stem(ident: str, file: str, line: int, element: str) -> str:
+    """A railML id as the stem of a file in the route folder (a path's ``PATHS/<from>-<to>``):
+    the id as it is, or RailMLError naming its line when it could name a file elsewhere or
+    none at all -- a path separator (``../../x``, ``/etc/x``, ``C:\\x``), ``..``, a control
+    character, a character or device name Windows (OpenRails' platform) forbids."""
+    if (
+        not ident
+        or ident in (".", "..")
+        or _UNSAFE.search(ident)
+        or ident != ident.strip()
+        or ident.endswith(".")
+        or ident.split(".")[0].lower() in _DEVICES
+    ):
+        shown = ident.encode("unicode_escape").decode("ascii")  # a newline as \n, on one line
+        raise RailMLError(
+            file,
+            line,
+            f'<{element} id="{shown}">',
+            "its id names the route's path files, and this one cannot be a file name in the "
+            "route folder (a path separator, '..', a control or reserved character)",
+            "give it an id of letters, digits, '-', '_' and '.'",
+        )
+    return ident
 
 
 def _stretches(

@@ -9,6 +9,7 @@ single-precision float.
 from __future__ import annotations
 
 import os
+import unicodedata
 from pathlib import Path
 
 import numpy as np
@@ -22,9 +23,18 @@ def number(value: float) -> str:
     return "0" if text in ("-0", "") else text
 
 
+_ESCAPES = {"\\": "\\\\", '"': '\\"', "\n": "\\n", "\t": "\\t"}
+
+
 def quote(text: str) -> str:
-    """``text`` as an STF string: in double quotes, quotes and backslashes escaped."""
-    return '"' + text.replace("\\", "\\\\").replace('"', '\\"') + '"'
+    """``text`` as an STF string: in double quotes; quotes, backslashes, newlines and tabs
+    escaped as OpenRails' reader reads them (``\\n``, ``\\t``); any other control character
+    (which no STF reader decodes) becomes a space."""
+    return (
+        '"'
+        + "".join(_ESCAPES.get(c, " " if unicodedata.category(c) == "Cc" else c) for c in text)
+        + '"'
+    )
 
 
 def _text(value: Value) -> str:
