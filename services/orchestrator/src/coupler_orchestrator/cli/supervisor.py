@@ -93,9 +93,9 @@ class Beacon(Observer):
 
     def read(self) -> tuple[float, int, float, Path | None, bool]:
         """(time reached, communication points recorded, wall time since the run started,
-        results directory, whether the time is the native FMU step's). The time reached is the later of the last point told and the
-        start of the step the native FMU step had under way (its points since its last batch
-        died with the process)."""
+        results directory, whether the time is the native FMU step's). The time reached is the
+        later of the last point told and the start of the step the native FMU step had under
+        way (its points since its last batch died with the process)."""
         time, points, started, length = _HEAD.unpack_from(self.page, 0)
         slot, _, under_way = struct.unpack_from("<3d", self.page, _WATCH)
         in_c = slot >= 0 and not math.isnan(under_way) and not under_way <= time
