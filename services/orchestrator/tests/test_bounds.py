@@ -61,6 +61,8 @@ def test_the_attacks_are_refused_before_anything_runs(
         ("run", "--lease", "-5", f"{SECONDS}, got -5.0"),
         ("run", "--lease", "86401", f"{SECONDS}, got 86401.0"),
         ("run", "--lease", "0", f"{SECONDS}, got 0.0"),
+        ("run", "--lease", "1e-300", "must be at least 1 s, got 1e-300: a participant would end"),
+        ("run", "--lease", "0.5", "must be at least 1 s, got 0.5"),
         ("run", "--call-timeout", "inf", f"{SECONDS}, got inf"),
         ("run", "--call-timeout", "0", f"{SECONDS}, got 0.0"),
         ("validate", "--call-timeout", "nan", f"{SECONDS}, got nan"),

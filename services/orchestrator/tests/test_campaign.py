@@ -247,6 +247,16 @@ def test_a_pool_of_running_participants_serves_one_run_each(
         ('[sample]\nn = 3\n"Gain.gain" = { normal = [1, 2] }\n', "'Gain.gain' has no law"),
         ('[table]\nfile = "missing.csv"\n', "cannot read"),
         ('[[derive]]\nfunction = "nothing"\n', "'nothing' is not module:function"),
+        (
+            '[[derive]]\nfunction = "no_such_module:f"\n',
+            "function = 'no_such_module:f' cannot be loaded (ModuleNotFoundError",
+        ),
+        ('[[derive]]\nfunction = "json:nothing"\n', "cannot be loaded (AttributeError"),
+        (
+            '[[variant]]\n"Gain.gain" = 1\n[[variant]]\n"Gain.gain" = 2\nstop_time = "abc"\n',
+            "[variant]: variant 2 has stop_time = 'abc', which is not a number of seconds > 0",
+        ),
+        ('[grid]\nstep = [0.1, 0]\n', "variant 2 has step = 0, which is not a number"),
     ],
 )
 def test_campaign_files_that_cannot_run_are_refused(

@@ -17,6 +17,10 @@ MAX_LEASE = 86_400.0
 """The longest lease a participant grants [s]: 24 h."""
 MAX_TIMEOUT = 86_400.0
 """The longest call deadline or connect timeout [s]: 24 h."""
+MIN_LEASE = 1.0
+"""The shortest lease the orchestrator asks for [s]: a shorter one (``--lease 1e-300``) runs
+out between two calls, and the participant ends the run before its first step (a participant
+still grants any positive lease: this is the asking side's sense, not a protocol rule)."""
 
 
 def problem(value: float, maximum: float) -> str | None:
@@ -27,9 +31,11 @@ def problem(value: float, maximum: float) -> str | None:
     return f"must be a number of seconds > 0 and <= {bound}, got {value!r}"
 
 
-def argument(maximum: float, *, zero: bool = False) -> Callable[[str], float]:
-    """An argparse type: a number of seconds in (0, ``maximum``] (and 0, with ``zero``); the
-    error names the bound (argparse adds the option)."""
+def argument(
+    maximum: float, *, zero: bool = False, minimum: float = 0.0
+) -> Callable[[str], float]:
+    """An argparse type: a number of seconds in (0, ``maximum``] (and 0, with ``zero``), at
+    least ``minimum`` when given; the error names the bound (argparse adds the option)."""
 
     def seconds(text: str) -> float:
         try:
@@ -40,9 +46,14 @@ def argument(maximum: float, *, zero: bool = False) -> Callable[[str], float]:
             return value
         if why := problem(value, maximum):
             raise argparse.ArgumentTypeError(why)
+        if value < minimum:
+            raise argparse.ArgumentTypeError(
+                f"must be at least {minimum:g} s, got {value!r}: a participant would end the run "
+                "between two calls"
+            )
         return value
 
     return seconds
 
 
-__all__ = ["MAX_LEASE", "MAX_TIMEOUT", "argument", "problem"]
+__all__ = ["MAX_LEASE", "MAX_TIMEOUT", "MIN_LEASE", "argument", "problem"]

@@ -345,3 +345,39 @@ def test_a_forged_archive_is_a_scenario_error(tmp_path: Path) -> None:
     archive.write_bytes(bytes(data))
     with pytest.raises(ScenarioError, match="not a readable zip archive"):
         load_ssp(archive, workdir=tmp_path / "work")
+
+
+def test_a_unit_defined_twice_is_refused_naming_both_lines(tmp_path: Path) -> None:
+    """Two ``ssc:Unit name="km"`` kept the last one silently (a factor of 1 instead of 1000,
+    say); now the SSD is refused naming both lines."""
+    folder = tmp_path / "data"
+    shutil.copytree(DATA, folder)
+    ssd = folder / "scenario.ssd"
+    text = ssd.read_text().replace(
+        '<ssc:Unit name="K">',
+        '<ssc:Unit name="km"><ssc:BaseUnit m="1"/></ssc:Unit>\n<ssc:Unit name="K">',
+    )
+    ssd.write_text(text)
+    with pytest.raises(ScenarioError) as info:
+        load_ssp(ssd, env=ENV)
+    assert "scenario.ssd line 173: unit 'km' is defined twice (first on line 172)" in str(
+        info.value
+    )
+
+
+def test_a_parameter_given_twice_is_refused_naming_both_lines(tmp_path: Path) -> None:
+    folder = tmp_path / "data"
+    shutil.copytree(DATA, folder)
+    ssv = folder / "params.ssv"
+    text = ssv.read_text().replace(
+        '<ssv:Parameter name="enabled">',
+        '<ssv:Parameter name="gain_factor"><ssv:Real value="4.0"/></ssv:Parameter>\n'
+        '    <ssv:Parameter name="enabled">',
+    )
+    ssv.write_text(text)
+    with pytest.raises(ScenarioError) as info:
+        load_ssp(folder / "scenario.ssd", env=ENV)
+    assert (
+        "params.ssv line 8: parameter 'gain_factor' is given twice in this parameter set "
+        "(first on line 6)"
+    ) in str(info.value)

@@ -141,9 +141,9 @@ def run_options(command: argparse.ArgumentParser) -> None:
     command.add_argument("--run-id", help="run id sent to participants (default: a random UUID)")
     command.add_argument(
         "--lease",
-        type=durations.argument(durations.MAX_LEASE),
+        type=durations.argument(durations.MAX_LEASE, minimum=durations.MIN_LEASE),
         help="[s] a participant ends the run after this long without a call (default: the "
-        "larger of 60 s and 4 call deadlines; at most 86400 = 24 h)",
+        "larger of 60 s and 4 call deadlines; at least 1 s, at most 86400 = 24 h)",
     )
     command.add_argument(
         "--connect-timeout",

@@ -9,7 +9,7 @@ from coupler.channels import Value, ValueType
 from coupler.errors import ScenarioError, ValidationError
 from coupler.values import parse, widen
 
-from .documents import Element, boolean, child, children, elements, local, required, where
+from .documents import Element, boolean, child, children, elements, line_of, local, required, where
 from .model import (
     BooleanMappingTransformation,
     Component,
@@ -126,8 +126,15 @@ def read_parameter_set(
     """(name, value) of each ``ssv:Parameter`` of an ``ssv:ParameterSet``."""
     params = child(root, "Parameters")
     result: list[tuple[str, ParameterValue]] = []
+    lines: dict[str, int] = {}
     for parameter in children(params, "Parameter") if params is not None else ():
         name = required(parameter, "name", display)
+        if name in lines:
+            raise ScenarioError(
+                f"{where(display, parameter)}: parameter '{name}' is given twice in this "
+                f"parameter set (first on line {lines[name]}); keep one value"
+            )
+        lines[name] = line_of(parameter)
         typed = next((e for e in elements(parameter) if local(e) != "Annotations"), None)
         if typed is None:
             raise ScenarioError(

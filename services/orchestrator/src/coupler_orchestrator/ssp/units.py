@@ -34,6 +34,11 @@ def read_units(units: Element | None, display: str) -> dict[str, Unit]:
         return result
     for element in children(units, "Unit"):
         name = required(element, "name", display)
+        if name in result:
+            raise ScenarioError(
+                f"{where(display, element)}: unit '{name}' is defined twice (first on line "
+                f"{result[name].line}); remove one, or give it another name"
+            )
         base = child(element, "BaseUnit")
         if base is None:
             raise ScenarioError(f"{where(display, element)}: unit '{name}' lacks <ssc:BaseUnit>")

@@ -4,6 +4,7 @@ that cannot run is refused before anything starts, naming the file, the section 
 
 from __future__ import annotations
 
+import importlib
 import tomllib
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -219,6 +220,16 @@ class _Reader:
                     'write [[derive]] tables with function = "package.module:function"',
                 )
             assert isinstance(entry, dict)
+            try:
+                function = getattr(importlib.import_module(module), name)
+            except Exception as exc:  # user code: any failure to import it is the file's
+                raise self.fail(
+                    "derive",
+                    f"function = '{target}' cannot be loaded ({type(exc).__name__}: {exc})",
+                    "install the module where the campaign runs, or fix the name",
+                ) from None
+            if not callable(function):
+                raise self.fail("derive", f"'{target}' is not a function", "name a function")
             options = {k: v for k, v in entry.items() if k != "function"}
             functions.append(Derive(function=target, options=options))
         return tuple(functions)

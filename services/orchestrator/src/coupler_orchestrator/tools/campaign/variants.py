@@ -168,7 +168,32 @@ def counted(parts: Mapping[str, Part], fail: Fail) -> Variants:
             f"than the {MAXIMUM:,} a campaign may run",
             "split the campaign into several files, or sample the space ([sample] n = ...)",
         )
+    for name, part in parts.items():
+        check_run_options(name, part, fail)
     return Variants(list(parts.values()))
+
+
+def check_run_options(section: str, part: Part, fail: Fail) -> None:
+    """Every variant's run options (``stop_time``, ``start_time``, ``step``) are numbers a run
+    takes, checked before the campaign's first run (not when that variant's run starts)."""
+    keys = [k for k in part.names() if k in RUN_OPTIONS]
+    for i in range(len(part) if keys else 0):
+        variant = part[i]
+        for key in keys:
+            if key not in variant:
+                continue
+            value = variant[key]
+            try:
+                number = float(value) if not isinstance(value, bool) else math.nan
+            except ValueError:
+                number = math.nan
+            if not math.isfinite(number) or (key != "start_time" and number <= 0):
+                raise fail(
+                    section,
+                    f"variant {i + 1} has {key} = {value!r}, which is not a "
+                    f"{'finite number' if key == 'start_time' else 'number of seconds > 0'}",
+                    f"give {key} as a number (it becomes coupler run {RUN_OPTIONS[key]})",
+                )
 
 
 def grid(raw: Any, fail: Fail) -> Grid:
