@@ -314,9 +314,26 @@ async def test_unreachable_participant_is_unavailable_within_deadline() -> None:
     await remote.close()
 
 
-def test_bad_address_says_how_to_write_one() -> None:
+@pytest.mark.parametrize(
+    "address",
+    [
+        "http://example:80",
+        "grpc://127.0.0.1:1/../x",  # a path: accepted, and silently dropped, before
+        "grpc://127.0.0.1:1/x",
+        "grpc://127.0.0.1:1?x=1",
+        "grpc://127.0.0.1:1#x",
+        "grpc://user@127.0.0.1:1",
+    ],
+)
+def test_bad_address_says_how_to_write_one(address: str) -> None:
     with pytest.raises(ScenarioError, match="write grpc://HOST:PORT"):
-        parse_address("http://example:80")
+        parse_address(address)
+
+
+@pytest.mark.parametrize("address", ["unix://relative", "unix:///tmp/x?y", "unix:///tmp/x#y"])
+def test_bad_unix_address_says_how_to_write_one(address: str) -> None:
+    with pytest.raises(ScenarioError, match="write unix:///ABSOLUTE/PATH"):
+        parse_address(address)
 
 
 async def test_describe_over_the_wire_equals_local(gain_server: ParticipantServer) -> None:

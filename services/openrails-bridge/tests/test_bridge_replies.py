@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import asyncio
 import json
+import math
 from typing import Any
 
 import pytest
@@ -50,6 +51,14 @@ BAD_STEPS = {
     "a string for a number": (
         step_reply(locomotiveState__v="fast"),
         "trains.PLAYER.locomotiveState.v: Input should be a valid number (got 'fast')",
+    ),
+    "a NaN speed (Python's JSON reads it)": (
+        step_reply(locomotiveState__v=math.nan),
+        "trains.PLAYER.locomotiveState.v: Input should be a finite number (got nan)",
+    ),
+    "an infinite distance": (
+        step_reply(locomotiveState__distance=math.inf),
+        "trains.PLAYER.locomotiveState.distance: Input should be a finite number (got inf)",
     ),
     "a number for a bool": (
         step_reply(locomotiveState__wheelslip=0),

@@ -50,18 +50,22 @@ SCHEMES = ("grpc", "grpcs")
 
 def parse_address(address: str) -> str:
     """``grpc://host:port``, ``grpcs://host:port``, ``unix:///path`` (or bare ``host:port``) as
-    the target string grpc wants."""
+    the target string grpc wants; ScenarioError for anything else (a path after the port, a
+    query, a fragment, user information: none of them means anything to gRPC)."""
     if address.startswith("unix://"):
         path = address.removeprefix("unix://")
-        if not path.startswith("/"):
-            raise ScenarioError(f"'{address}' is not a unix socket address; write unix:///PATH")
+        if not path.startswith("/") or any(c in path for c in "?#\x00"):
+            raise ScenarioError(
+                f"'{address}' is not a unix socket address; write unix:///ABSOLUTE/PATH"
+            )
         return f"unix:{path}"
     try:
         parts = urlsplit(address if "://" in address else f"grpc://{address}")
         port = parts.port
     except ValueError:
         port = None
-    if parts.scheme not in SCHEMES or not parts.hostname or port is None:
+    extra = parts.path not in ("", "/") or parts.query or parts.fragment or "@" in parts.netloc
+    if parts.scheme not in SCHEMES or not parts.hostname or port is None or extra:
         raise ScenarioError(
             f"'{address}' is not a participant address; write grpc://HOST:PORT (or grpcs:// "
             f"for TLS), e.g. grpc://127.0.0.1:50051"

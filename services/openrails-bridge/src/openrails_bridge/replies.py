@@ -16,9 +16,10 @@ from pydantic import BaseModel, ConfigDict, Field, TypeAdapter
 
 
 class Reply(BaseModel):
-    """Base of the models: strict types, unknown fields ignored, frozen."""
+    """Base of the models: strict types, unknown fields ignored, frozen; NaN and infinity
+    (JSON extensions Python reads) are not numbers OpenRails means."""
 
-    model_config = ConfigDict(strict=True, extra="ignore", frozen=True)
+    model_config = ConfigDict(strict=True, extra="ignore", frozen=True, allow_inf_nan=False)
 
 
 class WorldPosition(Reply):

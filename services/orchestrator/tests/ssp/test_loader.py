@@ -226,6 +226,13 @@ def test_user_information_in_a_source_is_refused(tmp_path: Path) -> None:
         load_ssp(path, env={"A_HOST": "h"})
 
 
+@pytest.mark.parametrize("source", ["grpc://127.0.0.1:9/../x", "grpc://127.0.0.1:9?x"])
+def test_a_source_with_a_path_or_query_is_refused(tmp_path: Path, source: str) -> None:
+    path = write(tmp_path, [grpc("A", real("y", "output"), source=source)])
+    with pytest.raises(ValidationError, match=r"is not of the form grpc://HOST:PORT"):
+        load_ssp(path)
+
+
 def test_an_unpacked_ssp_folder_loads(tmp_path: Path) -> None:
     folder = tmp_path / "unpacked"
     for name in ("params.ssv", "mapping.ssm", "signals.ssb", "resources/gain.fmu"):

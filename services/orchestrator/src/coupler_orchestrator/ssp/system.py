@@ -9,9 +9,9 @@ from collections import Counter
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from urllib.parse import urlsplit
 
 from coupler.channels import ValueType
+from coupler.client import parse_address
 from coupler.errors import ScenarioError, ValidationError
 
 from . import openmcx
@@ -614,15 +614,10 @@ def _check_address(source: str, what: str, shown: str) -> None:
     """A remote component's source: ``grpc://HOST:PORT``, ``grpcs://HOST:PORT`` or
     ``unix:///ABSOLUTE/PATH`` (a participant on this host, over its unix socket); ``shown``:
     the source as the message quotes it (as written when it expanded variables)."""
-    parts = urlsplit(source)
-    if parts.scheme == "unix" and not parts.netloc and parts.path.startswith("/"):
-        return
     try:
-        port = parts.port
-    except ValueError:
-        port = None
-    if parts.scheme not in ("grpc", "grpcs") or not parts.hostname or port is None:
+        parse_address(source if "://" in source else "?")  # the SDK's one reading of addresses
+    except ScenarioError:
         raise ScenarioError(
             f"{what}: source {shown} is not of the form grpc://HOST:PORT (grpcs:// for TLS, "
             f"unix:///ABSOLUTE/PATH for a unix socket on this host); fix it"
-        )
+        ) from None
