@@ -37,6 +37,7 @@ DECLARED = {
         "EndRun",
         "FmuParticipant",
         "HealthReport",
+        "main",
         "Participant",
         "ParticipantError",
         "ParticipantServer",

@@ -11,7 +11,9 @@ from __future__ import annotations
 
 import asyncio
 import csv
+import json
 import os
+import socket
 import subprocess
 import sys
 from pathlib import Path
@@ -57,6 +59,53 @@ def test_the_written_participant_runs_as_it_is(tmp_path: Path) -> None:
         assert float(row["Heater.y"]) == 1.0
         assert float(row["Heater.x"]) == x
         x += 1.0 * 0.1
+
+
+FLEET = """
+[scenario]
+ssp = "Heater/Heater.ssd"
+out = "results"
+
+[[service]]
+name = "heater"
+command = ["python", "Heater/participant.py", "--port", "${HEATER_PORT:-50080}"]
+health = "grpc://127.0.0.1:${HEATER_PORT:-50080}"
+"""
+
+
+def test_the_written_participant_drops_into_a_fleet(tmp_path: Path) -> None:
+    """``coupler fleet`` serves it on a unix socket (``--socket``) and steps it over its step
+    socket, as every service of a fleet: the template takes every option a fleet passes
+    (``coupler.main``; it used to take only ``--port``: "unrecognized arguments: --socket")."""
+    assert coupler("new", "participant", "Heater", cwd=tmp_path).returncode == 0
+    (tmp_path / "fleet.toml").write_text(FLEET, encoding="utf-8")
+    ran = coupler("fleet", "fleet.toml", "--exit", cwd=tmp_path, HEATER_PORT=str(free_port()))
+    assert ran.returncode == 0, ran.stderr
+    assert "completed: 10 steps to t=1 s" in ran.stdout
+    summary = json.loads((tmp_path / "results" / "latest" / "summary.json").read_text())
+    assert summary["participants"]["Heater"]["step_path"]["path"] == "native step socket"
+
+
+def test_a_busy_port_is_one_line(tmp_path: Path) -> None:
+    """The written participant on a port another process holds: exit 1 and one sentence naming
+    the port and its holder (it printed a traceback)."""
+    assert coupler("new", "participant", "Heater", cwd=tmp_path).returncode == 0
+    with socket.socket() as holder:
+        holder.bind(("127.0.0.1", 0))
+        holder.listen()
+        port = holder.getsockname()[1]
+        served = subprocess.run(
+            [sys.executable, "participant.py", "--port", str(port)],
+            cwd=tmp_path / "Heater",
+            capture_output=True,
+            text=True,
+            timeout=60,
+        )
+    assert served.returncode == 1, served.stderr
+    assert "Traceback" not in served.stderr
+    assert served.stderr.splitlines()[-1].startswith(
+        f"Heater: cannot serve the participant on 127.0.0.1:{port}: the port is in use by pid "
+    )
 
 
 def test_the_written_program_is_clean(tmp_path: Path) -> None:

@@ -39,7 +39,7 @@ if TYPE_CHECKING:
     from coupler.participant import EndRun, HealthReport, Participant, Values
     from coupler.security import ClientSecurity, ServerSecurity
     from coupler.server import ParticipantServer, run, serve
-    from coupler.settings import ParticipantSettings, SecuritySettings
+    from coupler.settings import ParticipantSettings, SecuritySettings, main
 
 _HOMES = {
     "Adapter": "adapter",
@@ -73,6 +73,7 @@ _HOMES = {
     "ValueType": "channels",
     "Values": "participant",
     "configure_logging": "logs",
+    "main": "settings",
     "register": "messages",
     "run": "server",
     "serve": "server",
@@ -111,6 +112,7 @@ __all__ = [
     "ValueType",
     "Values",
     "configure_logging",
+    "main",
     "register",
     "run",
     "serve",

@@ -31,9 +31,7 @@ def problem(value: float, maximum: float) -> str | None:
     return f"must be a number of seconds > 0 and <= {bound}, got {value!r}"
 
 
-def argument(
-    maximum: float, *, zero: bool = False, minimum: float = 0.0
-) -> Callable[[str], float]:
+def argument(maximum: float, *, zero: bool = False, minimum: float = 0.0) -> Callable[[str], float]:
     """An argparse type: a number of seconds in (0, ``maximum``] (and 0, with ``zero``), at
     least ``minimum`` when given; the error names the bound (argparse adds the option)."""
 

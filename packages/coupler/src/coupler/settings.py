@@ -9,7 +9,7 @@ participants), never collides with the orchestrator's client settings (``COUPLER
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -28,6 +28,7 @@ __all__ = [
     "SecuritySettings",
     "add_security_arguments",
     "add_socket_argument",
+    "main",
 ]
 
 
@@ -103,3 +104,44 @@ class ParticipantSettings(SecuritySettings):
             )
         except CouplerError as exc:
             raise SystemExit(f"{program}: {exc}") from exc
+
+
+def main(
+    participant: Participant,
+    *,
+    name: str | None = None,
+    port: int | None = None,
+    argv: Sequence[str] | None = None,
+    settings: type[ParticipantSettings] = ParticipantSettings,
+) -> None:
+    """A participant program's whole main: ``main(MyParticipant())`` under ``if __name__ ==
+    "__main__"``. It takes every option ``coupler fleet`` passes a participant (``--host``,
+    ``--port``, ``--socket`` -- and with it the step socket --, the TLS and token options,
+    ``--log-level``; each also from the environment, ``settings``' prefix), configures logging,
+    prints ``serving NAME at ADDRESS`` and serves until SIGTERM or Ctrl-C. A problem (a taken
+    port, a bad certificate) ends the process with one line, ``NAME: the problem``. ``port``:
+    the program's own default port (before ``settings``' default, 50051)."""
+    import argparse
+
+    from coupler.logs import configure_logging
+
+    shown = name or type(participant).__name__.removesuffix("Participant") or "participant"
+    parser = argparse.ArgumentParser(description=f"Serve {shown} over gRPC (docs/participants.md).")
+    parser.add_argument("--host", help="bind address (default 127.0.0.1)")
+    parser.add_argument(
+        "--port", type=int, help=f"gRPC port; 0 picks a free one (default {port or 50051})"
+    )
+    add_socket_argument(parser)
+    parser.add_argument("--log-level", dest="log_level", help="DEBUG, INFO, WARNING or ERROR")
+    add_security_arguments(parser)
+    args = parser.parse_args(argv)
+    given = {k: v for k, v in vars(args).items() if v is not None}
+    if port is not None and "port" not in given:
+        given["port"] = port
+    chosen = settings(**given)
+    configure_logging(chosen.log_level, json=chosen.log_json)
+
+    def announce(server: ParticipantServer) -> None:
+        print(f"serving {shown} at {server.address}", flush=True)
+
+    chosen.serve(participant, program=shown, on_started=announce)

@@ -93,13 +93,13 @@ Per step from t to t + h, with the inputs held over the step:
     y = gain * u         [m/s]
     x = x + y * h        [m]    (x starts at the parameter x0)
 
-Serve it with `python participant.py --port @PORT@`; `coupler run @NAME@.ssd` drives it.
+Serve it with `python participant.py` (port @PORT@; it takes every option `coupler fleet`
+passes: --port, --socket, TLS; --help lists them); `coupler run @NAME@.ssd` drives it.
 Edit CHANNELS and the step; docs/participants.md explains every part.
 """
 
 from __future__ import annotations
 
-import argparse
 from collections.abc import Mapping
 
 from coupler import (
@@ -111,8 +111,7 @@ from coupler import (
     Value,
     Values,
     ValueType,
-    run,
-    serve,
+    main,
 )
 
 CHANNELS = (
@@ -192,11 +191,7 @@ class @CLASS@(Participant):
 
 
 if __name__ == "__main__":
-    parser = argparse.ArgumentParser(description="Serve @NAME@ over gRPC.")
-    parser.add_argument("--host", default="127.0.0.1", help="bind address")
-    parser.add_argument("--port", type=int, default=@PORT@, help="gRPC port (0: any free one)")
-    args = parser.parse_args()
-    run(serve(@CLASS@(), host=args.host, port=args.port))
+    main(@CLASS@(), name="@NAME@", port=@PORT@)
 '''
 
 SSD = """\
