@@ -21,6 +21,10 @@ from typing import Any
 import pytest
 
 from openrails_mock.config import MockConfig
+from openrails_mock.paths import load_path
+from openrails_mock.routefolder import load_route
+from openrails_mock.stf import MAX_FILE_BYTES, RouteError
+from openrails_mock.tdb import TrackNetwork
 
 from .conftest import Serve, body
 
@@ -369,3 +373,64 @@ def test_stf_strings_the_exporter_quotes_read_back_whole(tmp_path: Path) -> None
     assert root.block("Name").values == ['A "quoted" \\ name\non two lines\tand a tab ']
     assert root.block("Next").values == ["1"]
     assert "\n" not in path.read_bytes().decode("utf-16").split("Name (")[1].split(")")[0]
+
+
+def _refs(count: int) -> str:
+    return tdb().replace(
+        "TrVectorNode ( TrVectorSections ( 1 1000",
+        f"TrVectorNode ( TrItemRefs ( {count} ) TrVectorSections ( 1 1000",
+    )
+
+
+@pytest.mark.parametrize(
+    ("file", "corrupted", "says"),
+    [
+        ("hand.tdb", lambda: utf16(_refs(2_000_000_000)), "declares 2000000000 items but holds 0"),
+        (
+            "tsection.dat",
+            lambda: SECTIONS.replace("TrackSections ( 1002", "TrackSections ( 2147483647").encode(),
+            "TrackSections declares 2147483647 as its highest index, but holds 1002",
+        ),
+        (
+            "tsection.dat",
+            lambda: SECTIONS.replace("1000 200 0", "1000 1e30 0").encode(),
+            "track section 1000 is 1e+30 m long",
+        ),
+        (
+            "PATHS/straight.pat",
+            lambda: utf16(
+                pat(
+                    "straight", [(0.0, 0.0, "1 1"), (200.0, 0.0, "2 0"), (500.0, 0.0, "1 1")]
+                ).replace("TrPathNodes ( 3", "TrPathNodes ( 3000000000")
+            ),
+            "TrPathNodes declares 3000000000 path nodes but holds 3",
+        ),
+    ],
+)
+def test_counts_and_lengths_written_in_route_files_are_checked(
+    route: Path, file: str, corrupted: Any, says: str
+) -> None:
+    """A count that disagrees with what follows, or an absurd section, is a damaged file: one
+    error naming it (they were read past in silence)."""
+    (route / file).write_bytes(corrupted())
+    with pytest.raises(RouteError) as caught:
+        network = load_route(route)
+        load_path(TrackNetwork(network), route / "PATHS" / "straight.pat")
+    assert str(caught.value).startswith(str(route / file)), caught.value
+    assert says in str(caught.value)
+
+
+@pytest.mark.parametrize("kind", ["device", "huge"])
+def test_a_route_file_that_is_no_file_or_huge_is_refused_unread(route: Path, kind: str) -> None:
+    """A track database linked to /dev/zero (or any huge file) was read whole: MemoryError."""
+    database = route / "hand.tdb"
+    database.unlink()
+    if kind == "device":
+        database.symlink_to("/dev/zero")
+    else:
+        with database.open("wb") as sparse:
+            sparse.truncate(MAX_FILE_BYTES + 1)
+    with pytest.raises(RouteError) as caught:
+        load_route(route)
+    said = "is not a regular file" if kind == "device" else "is larger than 64 MB"
+    assert said in str(caught.value)

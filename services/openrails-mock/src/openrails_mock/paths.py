@@ -68,7 +68,7 @@ def load_path(network: TrackNetwork, file: str | Path) -> TrainPath:
     ]
     nodes = root.block("TrackPath").block("TrPathNodes")
     chain: list[_Point] = []
-    links = nodes.blocks("TrPathNode")
+    links = nodes.declared("TrPathNode", "path nodes")
     if not links:
         raise nodes.error("the path has no TrPathNode", "give it at least a start and an end")
     index, seen = 0, set()

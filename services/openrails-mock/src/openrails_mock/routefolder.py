@@ -188,34 +188,67 @@ def load_route(folder: str | Path) -> RouteFolder:
     return RouteFolder(root, name, start, nodes, items, objects, tdb_file)
 
 
+MAX_SECTIONS = 1_000_000
+"""The largest section index a TrackSections table may declare (a global tsection.dat declares
+its highest index, about 40,000)."""
+MAX_SECTION_M = 10_000.0
+"""The longest track section [m] (exported ones are at most 1000 m; a section is one straight
+or one arc)."""
+
+
 def _load_sections(root: Path) -> dict[int, SectionShape]:
     shapes: dict[int, SectionShape] = {}
     openrails = _child(root, "OpenRails")
     global_file = _child(openrails, "tsection.dat") if openrails is not None else None
     if global_file is not None:
-        for block in read_stf(global_file).blocks("TrackSections"):
-            for section in block.blocks("TrackSection"):
-                index = section.integer(0, "the section index")
-                size, curve = section.optional("SectionSize"), section.optional("SectionCurve")
-                if curve is not None:
-                    radius = curve.real(0, "the radius")
-                    angle = math.radians(curve.real(1, "the angle"))
-                    shapes[index] = SectionShape(index, radius * abs(angle), radius, angle)
-                elif size is not None:
-                    shapes[index] = SectionShape(index, size.real(1, "the length"), 0.0, 0.0)
+        for section in _sections(read_stf(global_file)):
+            index = section.integer(0, "the section index")
+            size, curve = section.optional("SectionSize"), section.optional("SectionCurve")
+            if curve is not None:
+                radius = curve.real(0, "the radius")
+                angle = math.radians(curve.real(1, "the angle"))
+                shapes[index] = _shape(section, index, radius * abs(angle), radius, angle)
+            elif size is not None:
+                shapes[index] = _shape(section, index, size.real(1, "the length"), 0.0, 0.0)
     local = _child(root, "tsection.dat")
     if local is None and not shapes:
         raise RouteError(root, None, "has no tsection.dat", "export the route again")
     if local is not None:
-        for block in read_stf(local).blocks("TrackSections"):
-            for section in block.blocks("TrackSection"):
-                index = section.integer(0, "the section index")
-                a, b = section.real(1, "the length or angle"), section.real(2, "0 or the radius")
-                if b == 0.0:
-                    shapes[index] = SectionShape(index, a, 0.0, 0.0)
-                else:
-                    shapes[index] = SectionShape(index, b * abs(a), b, a)
+        for section in _sections(read_stf(local)):
+            index = section.integer(0, "the section index")
+            a, b = section.real(1, "the length or angle"), section.real(2, "0 or the radius")
+            if b == 0.0:
+                shapes[index] = _shape(section, index, a, 0.0, 0.0)
+            else:
+                shapes[index] = _shape(section, index, b * abs(a), b, a)
     return shapes
+
+
+def _sections(root: Block) -> list[Block]:
+    """The TrackSection blocks of a tsection.dat, each table's declared highest index checked:
+    at least every index it holds, at most MAX_SECTIONS."""
+    found = []
+    for table in root.blocks("TrackSections"):
+        sections = table.blocks("TrackSection")
+        declared = table.integer(0, "the highest section index")
+        highest = max((s.integer(0, "the section index") for s in sections), default=0)
+        if not highest <= declared <= MAX_SECTIONS:
+            raise table.error(
+                f"TrackSections declares {declared} as its highest index, but holds {highest}",
+                f"give the highest index it holds (at most {MAX_SECTIONS})",
+            )
+        found.extend(sections)
+    return found
+
+
+def _shape(section: Block, index: int, length: float, radius: float, angle: float) -> SectionShape:
+    """A section's shape, its length a finite 0 < length <= MAX_SECTION_M."""
+    if not (0.0 < length <= MAX_SECTION_M and math.isfinite(radius) and math.isfinite(angle)):
+        raise section.error(
+            f"track section {index} is {length:g} m long (radius {radius:g} m)",
+            f"a section is a straight or an arc of 0 to {MAX_SECTION_M:g} m",
+        )
+    return SectionShape(index, length, radius, angle)
 
 
 def _load_tdb(
@@ -342,7 +375,7 @@ def _track_node(block: Block, shapes: dict[int, SectionShape]) -> TrackNode:
             raise sections_block.error(f"vector node {index} has no sections", "give it some")
         refs = vector.optional("TrItemRefs")
         if refs is not None:
-            node.items = [r.integer(0, "the item id") for r in refs.blocks("TrItemRef")]
+            node.items = [r.integer(0, "the item id") for r in refs.declared("TrItemRef", "items")]
         if in_pins != 1 or out_pins != 1:
             raise pins_block.error(
                 f"vector node {index} has {in_pins}/{out_pins} pins",

@@ -68,6 +68,18 @@ class Block:
             )
         return values[index]
 
+    def declared(self, child: str, what: str) -> list[Block]:
+        """The nested ``child`` blocks, exactly as many as the block's first value declares
+        (OpenRails reads that many; a count that disagrees is a damaged file)."""
+        count = self.integer(0, f"the number of {what}")
+        found = self.blocks(child)
+        if count != len(found):
+            raise self.error(
+                f"{self.name} declares {count} {what} but holds {len(found)}",
+                f"give the number of {child} blocks it holds",
+            )
+        return found
+
     def integer(self, index: int, what: str) -> int:
         text = self._value(index, what)
         try:
@@ -101,6 +113,9 @@ class Block:
 
 
 _IGNORED = {"comment", "skip"}
+MAX_FILE_BYTES = 64 * 1024 * 1024
+"""The largest route file read [bytes]: a big route's track database is a few MB; anything
+near this is not one (a link to /dev/zero, a runaway file), refused before it is read whole."""
 
 
 def _decode(path: Path, data: bytes) -> str:
@@ -118,7 +133,19 @@ def _decode(path: Path, data: bytes) -> str:
 def _stf_text(file: Path) -> tuple[str, int]:
     """The file's text after its SIMISA header, and the line number that text starts on."""
     try:
-        data = file.read_bytes()
+        if not file.is_file():
+            raise RouteError(
+                file, None, "is not a regular file", "give the route's file, not a device or pipe"
+            )
+        with file.open("rb") as opened:
+            data = opened.read(MAX_FILE_BYTES + 1)
+        if len(data) > MAX_FILE_BYTES:
+            raise RouteError(
+                file,
+                None,
+                f"is larger than {MAX_FILE_BYTES // (1024 * 1024)} MB, more than any route file",
+                "give the route's own file",
+            )
     except OSError as exc:
         raise RouteError(
             file, None, f"cannot read it: {exc.strerror or exc}", "check the path"
