@@ -39,19 +39,20 @@ pytestmark = pytest.mark.timeout(120)
 
 HEADER = struct.Struct("<IB")  # payload length (uint32 LE, the header not counted), kind (uint8)
 STEP, END = 0, 1
-OK, PERMISSION_DENIED, RESOURCE_EXHAUSTED, ABORTED = 0, 7, 8, 10
+OK, DEADLINE_EXCEEDED, PERMISSION_DENIED, RESOURCE_EXHAUSTED, ABORTED = 0, 4, 7, 8, 10
 
 
 class Gain:
     """The gain example served on a unix socket, and a gRPC stub to it."""
 
-    def __init__(self, folder: Path) -> None:
+    def __init__(self, folder: Path, *, umask: int | None = None) -> None:
         self.path = folder / "gain.sock"
         self.process = subprocess.Popen(
             [sys.executable, "-m", "coupler.examples", "gain", "--socket", str(self.path)],
             stdout=subprocess.PIPE,
             stderr=subprocess.DEVNULL,
             text=True,
+            umask=-1 if umask is None else umask,
         )
         assert self.process.stdout is not None
         assert "unix:///" in self.process.stdout.readline()
@@ -277,3 +278,67 @@ def test_a_run_ends_with_its_step_socket_connection(gain: Gain) -> None:
             assert time.monotonic() < deadline, "the lost connection's run did not end"
             time.sleep(0.05)
     gain.terminate("next", secret)
+
+
+def test_headers_alone_make_the_participant_hold_nothing_they_announce(gain: Gain) -> None:
+    """40 connections, each a 5-byte header announcing a 72 MiB frame (the receive limit),
+    then silence: the participant grew by gigabytes, allocating each announced frame before any
+    byte of it came. Now a frame's buffer grows with what arrives, and the fifth and later
+    connections are refused at once (RESOURCE_EXHAUSTED)."""
+    secret = secrets.token_bytes(32)
+    gain.initialize("headers", secret)
+    before = gain.memory()
+    size = (64 + 8) * 1024 * 1024
+    connections = [StepSocket(f"{gain.path}.steps") for _ in range(40)]
+    try:
+        for steps in connections:
+            with contextlib.suppress(OSError):  # a refused one may be closed already
+                steps.sock.sendall(HEADER.pack(size, STEP) + b"x" * 1000)
+        time.sleep(1.0)
+        grown = gain.memory() - before
+        refused = 0
+        for steps in connections[4:]:
+            end = steps.end()
+            refused += end.code == RESOURCE_EXHAUSTED and "connections at once" in end.message
+    finally:
+        for steps in connections:
+            steps.close()
+    assert grown < 64 * 1024, f"the participant grew by {grown} kB"  # under 300 MB in all
+    assert gain.memory() < 300 * 1024
+    assert refused == 36
+
+
+@pytest.mark.slow
+def test_a_frame_that_stalls_ends_its_connection(gain: Gain) -> None:
+    """A header and the frame's first bytes, then nothing: after FRAME_STALL_S (10 s) the
+    connection ends DEADLINE_EXCEEDED (it waited for the rest for good)."""
+    from coupler.server import FRAME_STALL_S
+
+    secret = secrets.token_bytes(32)
+    gain.initialize("stalled", secret)
+    steps = StepSocket(f"{gain.path}.steps")
+    steps.sock.settimeout(FRAME_STALL_S + 20)
+    started = time.monotonic()
+    steps.sock.sendall(HEADER.pack(1_000_000, STEP) + b"x" * 100_000)
+    end = steps.end()
+    waited = time.monotonic() - started
+    steps.close()
+    assert end.code == DEADLINE_EXCEEDED and "waited 10 s for its next bytes" in end.message
+    assert waited >= FRAME_STALL_S
+
+
+def test_the_grpc_socket_is_the_owners_alone_whatever_the_umask(tmp_path: Path) -> None:
+    """Served under ``umask 000`` the gRPC unix socket was world-connectable (0777): it is made
+    0600, as the step socket is."""
+    folder = Path(os.path.realpath("/tmp")) / f"um-{os.getpid()}-{free_port()}"
+    folder.mkdir(mode=0o700)
+    served = Gain(folder, umask=0)
+    try:
+        for path in (served.path, Path(f"{served.path}.steps")):
+            mode = os.stat(path).st_mode
+            assert stat.S_ISSOCK(mode) and stat.S_IMODE(mode) == 0o600, (path, oct(mode))
+    finally:
+        served.stop()
+        for entry in folder.iterdir():
+            entry.unlink()
+        folder.rmdir()

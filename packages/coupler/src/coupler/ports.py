@@ -131,9 +131,10 @@ SOCKET_PATH_MAX = 107
 
 
 def add_grpc_socket(server: Any, path: Path, credentials: Any, what: str) -> None:
-    """Bind ``server`` to the unix socket ``path`` (TLS with ``credentials`` unless None): a
-    live socket there is refused (PortInUse naming its process), a stale one removed first;
-    ScenarioError when the path cannot be a socket."""
+    """Bind ``server`` to the unix socket ``path`` (TLS with ``credentials`` unless None), mode
+    0600 (only its user connects, as to the step socket): a live socket there is refused
+    (PortInUse naming its process), a stale one removed first; ScenarioError when the path
+    cannot be a socket."""
     path = Path(os.path.abspath(path))
     if len(os.fsencode(path)) > SOCKET_PATH_MAX:
         raise ScenarioError(
@@ -146,13 +147,17 @@ def add_grpc_socket(server: Any, path: Path, credentials: Any, what: str) -> Non
         )
     clear_socket(path, what)
     bind = f"unix:{path}"
+    umask = os.umask(0o177)  # the socket file is made 0600 whatever the caller's umask
     try:
         if credentials is None:
             server.add_insecure_port(bind)
         else:
             server.add_secure_port(bind, credentials)
+        os.chmod(path, 0o600)
     except RuntimeError as exc:  # grpc says "Failed to bind", not why
         raise ScenarioError(f"cannot serve {what} on unix socket {path} ({exc})") from None
+    finally:
+        os.umask(umask)
 
 
 def clear_socket(path: Path, what: str) -> None:

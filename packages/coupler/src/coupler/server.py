@@ -442,7 +442,17 @@ _END = 1
 """Kind of the participant's last frame: a serialized StepSocketEnd."""
 _SMALL_FRAMES = 64 * 1024
 """A step socket connection's buffer of short frames [bytes]; a longer frame is read into a
-buffer of its own size."""
+buffer of its own."""
+_FIRST_LONG = 4 * 1024 * 1024
+"""The first buffer of a long frame [bytes] (the whole frame when it is shorter: a 1.44 MB
+camera frame is read into one buffer of its size); a longer frame's buffer doubles as its bytes
+arrive, so a header alone never makes the participant hold what it announces."""
+MAX_STEP_CONNECTIONS = 4
+"""Step socket connections served at once (one orchestrator steps a participant's run; the
+rest are a reconnect's overlap); one more is answered RESOURCE_EXHAUSTED and closed."""
+FRAME_STALL_S = 10.0
+"""How long a frame begun on the step socket may wait for its next bytes [s]; then the
+connection ends (DEADLINE_EXCEEDED), freeing what it held."""
 
 
 class _Aborted(Exception):
@@ -523,10 +533,14 @@ class _StepConnection(asyncio.BufferedProtocol):
         self._filled = 0
         """Bytes received into ``_small`` and not yet taken."""
         self._long: bytearray | None = None
-        """The frame being read into a buffer of its own (None: none), its kind and how many
-        of its bytes have arrived."""
+        """The frame being read into a buffer of its own (None: none), its kind, its length
+        and how many of its bytes have arrived."""
         self._long_kind = 0
+        self._long_length = 0
         self._long_got = 0
+        self._stall: asyncio.TimerHandle | None = None
+        """Ends the connection when a begun frame waits too long for its bytes."""
+        self._stalled = False
         self._frames: collections.deque[tuple[int, bytes | bytearray]] = collections.deque()
         self._oversize = 0
         """The length of a frame over the limit, refused unread (0: none)."""
@@ -538,6 +552,15 @@ class _StepConnection(asyncio.BufferedProtocol):
 
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
         self._transport = cast(asyncio.Transport, transport)  # uvloop's is not a subclass
+        if len(self._socket.connections) >= MAX_STEP_CONNECTIONS:
+            end = wire.step_socket_end(
+                grpc.StatusCode.RESOURCE_EXHAUSTED.value[0],
+                f"the step socket serves {MAX_STEP_CONNECTIONS} connections at once; this one "
+                "is one too many (step a run over one connection)",
+            )
+            self._transport.writelines((_HEADER.pack(len(end), _END), end))
+            self._transport.close()
+            return
         self._socket.connections.add(self)
         peer = f"unix:{self._socket.path}"
         raw = transport.get_extra_info("socket")
@@ -551,22 +574,27 @@ class _StepConnection(asyncio.BufferedProtocol):
 
     def get_buffer(self, sizehint: int) -> memoryview:
         if self._long is not None:
+            if self._long_got == len(self._long):  # full, the frame not: double it
+                grown = bytearray(min(2 * len(self._long), self._long_length))
+                grown[: self._long_got] = self._long
+                self._long = grown
             return memoryview(self._long)[self._long_got :]
-        if self._oversize:  # refused: what still arrives is dropped
+        if self._oversize or self._stalled:  # refused: what still arrives is dropped
             return memoryview(self._small)
         return memoryview(self._small)[self._filled :]
 
     def buffer_updated(self, nbytes: int) -> None:
-        if self._oversize:
+        if self._oversize or self._stalled:
             return
         if self._long is not None:
             self._long_got += nbytes
-            if self._long_got == len(self._long):
+            if self._long_got == self._long_length:
                 self._frames.append((self._long_kind, self._long))
                 self._long = None
         else:
             self._filled += nbytes
             self._split()
+        self._watch_stall()
         if len(self._frames) > 1:
             self._pause()  # one request at a time: the orchestrator waits for each answer
         if self._frames or self._oversize:
@@ -590,7 +618,8 @@ class _StepConnection(asyncio.BufferedProtocol):
                 at = end
                 continue
             if _HEADER.size + length > len(buffer):  # the rest into a buffer of its own
-                self._long, self._long_kind = bytearray(length), kind
+                self._long = bytearray(min(length, max(_FIRST_LONG, size - start)))
+                self._long_kind, self._long_length = kind, length
                 self._long_got = size - start
                 self._long[: self._long_got] = buffer[start:size]
                 at = size
@@ -600,6 +629,20 @@ class _StepConnection(asyncio.BufferedProtocol):
             buffer[:rest] = buffer[at:size]
             self._filled = rest
 
+    def _watch_stall(self) -> None:
+        """(Re)start the stall timer while a frame is begun, stop it when none is."""
+        if self._stall is not None:
+            self._stall.cancel()
+            self._stall = None
+        if (self._long is not None or self._filled) and not self._oversize:
+            self._stall = asyncio.get_running_loop().call_later(FRAME_STALL_S, self._on_stall)
+
+    def _on_stall(self) -> None:
+        self._stall, self._stalled = None, True
+        self._long = None  # what it held goes now, not when the connection closes
+        self._pause()
+        self._wake()
+
     def eof_received(self) -> bool:
         self._eof = True
         self._wake()
@@ -607,6 +650,10 @@ class _StepConnection(asyncio.BufferedProtocol):
 
     def connection_lost(self, exc: Exception | None) -> None:
         self._eof = True
+        self._long = None
+        if self._stall is not None:
+            self._stall.cancel()
+            self._stall = None
         self._socket.connections.discard(self)
         self._wake()
 
@@ -634,6 +681,12 @@ class _StepConnection(asyncio.BufferedProtocol):
                     assert self._transport is not None
                     self._transport.resume_reading()
                 return frame
+            if self._stalled:
+                raise _Aborted(
+                    grpc.StatusCode.DEADLINE_EXCEEDED,
+                    f"a frame begun on the step socket waited {FRAME_STALL_S:g} s for its next "
+                    "bytes; the connection ends (send each frame whole)",
+                )
             if self._oversize:
                 raise _Aborted(
                     grpc.StatusCode.RESOURCE_EXHAUSTED,
