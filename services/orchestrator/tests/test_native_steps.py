@@ -9,8 +9,12 @@ test_secure_run.py mutual TLS with a token.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import shutil
+import socket
+import struct
 import tempfile
+import threading
 from collections.abc import Iterator, Mapping
 from pathlib import Path
 from typing import Any
@@ -265,3 +269,57 @@ async def test_a_step_in_two_halves_over_the_step_socket(tmp_path: Path) -> None
                 await remote.terminate("failed")
             await remote.close()  # the sleepy one's run ends with its connection
     shutil.rmtree(folder, ignore_errors=True)
+
+
+class FakeSteps:
+    """A step socket that answers each frame with a well-framed payload that is no
+    DoStepResponse (a field cut short)."""
+
+    def __init__(self, path: Path) -> None:
+        self.server = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+        self.server.bind(str(path))
+        self.server.listen()
+        self.thread = threading.Thread(target=self._serve, daemon=True)
+        self.thread.start()
+
+    def _serve(self) -> None:
+        with contextlib.suppress(OSError):
+            connection, _ = self.server.accept()
+            with connection:
+                while header := connection.recv(5, socket.MSG_WAITALL):
+                    size, _ = struct.unpack("<IB", header)
+                    connection.recv(size, socket.MSG_WAITALL)
+                    payload = b"\x0a\x05ab"  # outputs of 5 bytes, 2 of them there
+                    connection.sendall(struct.pack("<IB", len(payload), 0) + payload)
+
+    def close(self) -> None:
+        self.server.close()
+        self.thread.join(5)
+
+
+@pytest.mark.usefixtures("native")
+def test_an_answer_that_is_no_do_step_response_fails_the_run_in_one_line(
+    coupler: Coupler, ssd: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A well-framed answer on the step socket that is not a DoStepResponse: the run fails
+    naming the participant (it ended with a DecodeError's traceback in the run_failed line)."""
+    folder = Path(tempfile.mkdtemp(prefix="gs-", dir="/tmp"))  # a socket's path: 107 bytes
+    monkeypatch.setenv("GAIN_PORT", "1")  # the SSD's address; --address moves it
+    try:
+        with serving(GainParticipant("Gain"), unix_socket=folder / "gain.sock") as server:
+            assert server.step_socket is not None
+            server.step_socket.unlink()  # its path now leads to the fake one
+            fake = FakeSteps(server.step_socket)
+            try:
+                outcome = coupler(
+                    "run", ssd, "--out", tmp_path / "o", "--step", "0.1",
+                    "--address", f"Gain={server.address}",
+                )  # fmt: skip
+            finally:
+                fake.close()
+    finally:
+        shutil.rmtree(folder, ignore_errors=True)
+    assert outcome.code == 1, outcome
+    reason = coupler.summary(tmp_path / "o")["reason"]
+    assert reason.startswith("Gain.DoStep [INTERNAL]: its answer is not a DoStepResponse"), reason
+    assert "Traceback" not in outcome.err
