@@ -26,6 +26,7 @@ from coupler.client import RemoteParticipant
 from coupler.errors import ParticipantError, ParticipantTimeout
 from coupler.examples.gain import GainParticipant
 from coupler.participant import EndRun, Values
+from coupler.v1 import component_pb2 as pb
 from coupler_orchestrator import ssp
 from coupler_orchestrator.master import native_step_channel as steps
 from coupler_orchestrator.native import MISSING
@@ -271,11 +272,28 @@ async def test_a_step_in_two_halves_over_the_step_socket(tmp_path: Path) -> None
     shutil.rmtree(folder, ignore_errors=True)
 
 
-class FakeSteps:
-    """A step socket that answers each frame with a well-framed payload that is no
-    DoStepResponse (a field cut short)."""
+GARBLED = [b"\x0a\x05ab"]
+"""An answer that is no DoStepResponse: outputs of 5 bytes, 2 of them there."""
+TWICE = [
+    pb.DoStepResponse(
+        outputs=[
+            pb.VariableBinding(channel="y", real=1.0),
+            pb.VariableBinding(channel="x", real=2.0),
+            pb.VariableBinding(channel="count", integer=0),
+            pb.VariableBinding(channel="inverted", boolean=True),
+            pb.VariableBinding(channel="echo", text=""),
+            pb.VariableBinding(channel="blob_out", binary=b""),
+        ]
+    ).SerializeToString()
+] * 2
+"""One well-formed answer, sent twice for every request."""
 
-    def __init__(self, path: Path) -> None:
+
+class FakeSteps:
+    """A step socket answering each request's frame with the frames ``answers``."""
+
+    def __init__(self, path: Path, answers: list[bytes]) -> None:
+        self.answers = answers
         self.server = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
         self.server.bind(str(path))
         self.server.listen()
@@ -289,8 +307,9 @@ class FakeSteps:
                 while header := connection.recv(5, socket.MSG_WAITALL):
                     size, _ = struct.unpack("<IB", header)
                     connection.recv(size, socket.MSG_WAITALL)
-                    payload = b"\x0a\x05ab"  # outputs of 5 bytes, 2 of them there
-                    connection.sendall(struct.pack("<IB", len(payload), 0) + payload)
+                    connection.sendall(
+                        b"".join(struct.pack("<IB", len(a), 0) + a for a in self.answers)
+                    )
 
     def close(self) -> None:
         self.server.close()
@@ -298,18 +317,32 @@ class FakeSteps:
 
 
 @pytest.mark.usefixtures("native")
-def test_an_answer_that_is_no_do_step_response_fails_the_run_in_one_line(
-    coupler: Coupler, ssd: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+@pytest.mark.parametrize(
+    ("answers", "says"),
+    [
+        (GARBLED, "Gain.DoStep [INTERNAL]: its answer is not a DoStepResponse"),
+        (TWICE, "Gain.DoStep [INTERNAL]: an answer arrived on the step socket before its request"),
+    ],
+    ids=["not a DoStepResponse", "two answers to one request"],
+)
+def test_answers_the_step_socket_did_not_ask_for_fail_the_run(
+    coupler: Coupler,
+    ssd: Path,
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+    answers: list[bytes],
+    says: str,
 ) -> None:
-    """A well-framed answer on the step socket that is not a DoStepResponse: the run fails
-    naming the participant (it ended with a DecodeError's traceback in the run_failed line)."""
+    """A well-framed answer that is not a DoStepResponse (it ended with a DecodeError's
+    traceback in the run_failed line), or two answers to every request (every later row was
+    the step before's, and the run completed): the run fails at once, in one sentence."""
     folder = Path(tempfile.mkdtemp(prefix="gs-", dir="/tmp"))  # a socket's path: 107 bytes
     monkeypatch.setenv("GAIN_PORT", "1")  # the SSD's address; --address moves it
     try:
         with serving(GainParticipant("Gain"), unix_socket=folder / "gain.sock") as server:
             assert server.step_socket is not None
             server.step_socket.unlink()  # its path now leads to the fake one
-            fake = FakeSteps(server.step_socket)
+            fake = FakeSteps(server.step_socket, answers)
             try:
                 outcome = coupler(
                     "run", ssd, "--out", tmp_path / "o", "--step", "0.1",
@@ -320,6 +353,7 @@ def test_an_answer_that_is_no_do_step_response_fails_the_run_in_one_line(
     finally:
         shutil.rmtree(folder, ignore_errors=True)
     assert outcome.code == 1, outcome
-    reason = coupler.summary(tmp_path / "o")["reason"]
-    assert reason.startswith("Gain.DoStep [INTERNAL]: its answer is not a DoStepResponse"), reason
+    summary = coupler.summary(tmp_path / "o")
+    assert summary["reason"].startswith(says), summary["reason"]
+    assert summary["steps"] <= 1
     assert "Traceback" not in outcome.err
