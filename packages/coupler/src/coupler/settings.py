@@ -9,11 +9,12 @@ participants), never collides with the orchestrator's client settings (``COUPLER
 
 from __future__ import annotations
 
-from collections.abc import Callable
+import argparse
+from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
-from pydantic_settings import BaseSettings, SettingsConfigDict
+from pydantic_settings import BaseSettings, PydanticBaseSettingsSource, SettingsConfigDict
 
 from coupler.arguments import add_security_arguments, add_socket_argument
 from coupler.errors import CouplerError
@@ -24,10 +25,12 @@ if TYPE_CHECKING:
     from coupler.server import ParticipantServer
 
 __all__ = [
+    "CommandLineSettings",
     "ParticipantSettings",
     "SecuritySettings",
     "add_security_arguments",
     "add_socket_argument",
+    "serve_main",
 ]
 
 
@@ -103,3 +106,67 @@ class ParticipantSettings(SecuritySettings):
             )
         except CouplerError as exc:
             raise SystemExit(f"{program}: {exc}") from exc
+
+
+class CommandLineSettings(ParticipantSettings):
+    """``ParticipantSettings`` from the command line alone: no environment variable is read
+    (``serve_main``'s default, for a participant program that has no prefix of its own)."""
+
+    @classmethod
+    def settings_customise_sources(
+        cls,
+        settings_cls: type[BaseSettings],
+        init_settings: PydanticBaseSettingsSource,
+        env_settings: PydanticBaseSettingsSource,
+        dotenv_settings: PydanticBaseSettingsSource,
+        file_secret_settings: PydanticBaseSettingsSource,
+    ) -> tuple[PydanticBaseSettingsSource, ...]:
+        return (init_settings,)
+
+
+def serve_main(
+    participant: Participant,
+    *,
+    port: int = 50051,
+    description: str | None = None,
+    program: str | None = None,
+    argv: Sequence[str] | None = None,
+    settings: type[ParticipantSettings] = CommandLineSettings,
+) -> None:
+    """A participant program's main: read the options every Coupler participant takes, serve
+    ``participant`` as they say until SIGTERM or SIGINT.
+
+    The options: ``--host``, ``--port`` (default ``port``; 0: any free one), ``--socket PATH``
+    (a unix socket instead of TCP, and the step socket beside it: what ``coupler fleet`` passes),
+    ``--log-level`` and the security options (``--tls-cert``, ``--tls-key``, ``--tls-client-ca``,
+    ``--token-file``, ``--insecure``, ``--reflection``, ``--health-port``; docs/security.md).
+    ``settings`` reads what the command line leaves unset (a service's subclass: its
+    environment variables). It prints ``serving NAME at ADDRESS`` once serving; a problem it
+    cannot serve through (a taken port, a bad certificate, ...) ends the process with one line,
+    ``PROGRAM: the problem``, and exit code 1, never a traceback.
+    """
+    parser = argparse.ArgumentParser(
+        prog=program,
+        description=description,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    parser.add_argument("--host", help="address to bind (default: 127.0.0.1)")
+    parser.add_argument("--port", type=int, help=f"gRPC port, 0 = any free one (default: {port})")
+    add_socket_argument(parser)
+    parser.add_argument(
+        "--log-level", dest="log_level", help="DEBUG, INFO (default), WARNING or ERROR"
+    )
+    add_security_arguments(parser)
+    args = parser.parse_args(argv)
+    given: dict[str, Any] = {k: v for k, v in vars(args).items() if v is not None}
+    chosen = settings(**given)
+    if "port" not in chosen.model_fields_set:
+        chosen = chosen.model_copy(update={"port": port})
+    from coupler.logs import configure_logging
+
+    configure_logging(chosen.log_level, json=chosen.log_json)
+
+    def announce(server: ParticipantServer) -> None:
+        print(f"serving {server.name} at {server.address}", flush=True)
+
+    chosen.serve(participant, program=parser.prog, on_started=announce)
