@@ -3,7 +3,9 @@ retyped or redescribed in the code fails here until the page says the same (the 
 the table to paste).
 
 - docs/participants.md "RunSetup": ``coupler.channels.RunSetup``'s fields, their types and
-  their docstrings.
+  their docstrings;
+- docs/fleet.md: every table and key a fleet file may have (``tools.fleet``'s ``TABLES``,
+  ``SCENARIO_KEYS``, ``SERVICE_KEYS``: what the loader accepts).
 """
 
 from __future__ import annotations
@@ -48,4 +50,23 @@ def test_the_runsetup_table_is_the_code() -> None:
     assert all("| |" not in row[-3:] for row in expected.splitlines()), "a field without docstring"
     shown = re.search(r"(?ms)^\| Field \| Type \| Meaning \|$.*?(?=\n\n)", page)
     assert shown is not None, "docs/participants.md has no RunSetup table"
-    assert shown.group(0) == expected, f"docs/participants.md's RunSetup table should be:\n{expected}"
+    assert shown.group(0) == expected, (
+        f"docs/participants.md's RunSetup table should be:\n{expected}"
+    )
+
+
+def keys_of(page: str, heading: str) -> list[str]:
+    """The first column of the table under ``heading`` (a ``## `` line) of ``page``."""
+    section = page.split(f"\n## {heading}\n", 1)[1].split("\n## ", 1)[0]
+    return re.findall(r"(?m)^\| `([^`]+)` \|", section)
+
+
+def test_the_fleet_file_reference_lists_every_key_the_loader_knows() -> None:
+    from coupler_orchestrator.tools.fleet import SCENARIO_KEYS, SERVICE_KEYS, TABLES
+
+    page = (ROOT / "docs" / "fleet.md").read_text(encoding="utf-8")
+    assert keys_of(page, "`[scenario]`") == list(SCENARIO_KEYS)
+    assert keys_of(page, "`[[service]]`") == list(SERVICE_KEYS)
+    assert [t for t in TABLES if f"\n## `[{t}]`\n" in page or f"\n## `[[{t}]]`\n" in page] == list(
+        TABLES
+    )
