@@ -2,6 +2,7 @@
 the test federation.
 
     python ramp_federate.py BROKER_PORT STEPS STEP SLOPE OUT.json [--unit U] [--name N]
+                            [--delay S]
 
 Publishes ``ramp`` (unit ``--unit``, default m/s) = SLOPE * t while the federation initializes
 (t = 0) and at every time it is granted (STEP apart), subscribes to ``coupler/y`` and writes
@@ -12,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import time
 
 import helics as h
 
@@ -22,6 +24,7 @@ def main() -> None:
         parser.add_argument(name)
     parser.add_argument("--unit", default="m/s")
     parser.add_argument("--name", default="ramp")
+    parser.add_argument("--delay", type=float, default=0.0, help="seconds to wait each step")
     args = parser.parse_args()
     step, slope = float(args.step), float(args.slope)
     info = h.helicsCreateFederateInfo()
@@ -46,6 +49,7 @@ def main() -> None:
             granted = h.helicsFederateRequestTime(federate, k * step)
             h.helicsPublicationPublishDouble(ramp, slope * granted)
             received.append((granted, h.helicsInputGetDouble(y)))
+            time.sleep(args.delay)
     finally:
         with open(args.out, "w") as out:
             json.dump(received, out)
