@@ -93,9 +93,14 @@ def test_mosaik_world_drives_a_coupler_participant_as_coupler_run_does(tmp_path:
             "RampGain",
             [
                 fmu("Source", SOURCE_FMU, outputs=["ramp"], parameters={"slope": SLOPE}),
-                remote("Gain", server.address, Connector("u", "input", "Real"),
-                       outputs=["y", "x"], parameters={"gain": GAIN}),
-            ],  # fmt: skip
+                remote(
+                    "Gain",
+                    server.address,
+                    Connector("u", "input", "Real"),
+                    outputs=["y", "x"],
+                    parameters={"gain": GAIN},
+                ),
+            ],
             [("Source.ramp", "Gain.u")],
             stop_time=STEPS,
         ).write(tmp_path / "ramp-gain.ssd")
@@ -166,9 +171,14 @@ unit = "m"
             "CsvGain",
             [
                 remote("CSV", source.address, outputs=["value"]),
-                remote("MGain", gain.address, inputs=["u"], outputs=["y", "x"],
-                       parameters={"gain": GAIN}),
-            ],  # fmt: skip
+                remote(
+                    "MGain",
+                    gain.address,
+                    inputs=["u"],
+                    outputs=["y", "x"],
+                    parameters={"gain": GAIN},
+                ),
+            ],
             [("CSV.value", "MGain.u")],
             stop_time=STEPS,
         ).write(tmp_path / "csv-gain.ssd")

@@ -107,7 +107,9 @@ class HelicsConfig(BaseModel):
         try:
             return cls.model_validate(tomllib.loads(path.read_text(encoding="utf-8")))
         except OSError as exc:
-            raise ScenarioError(f"cannot read HELICS participant file {path}: {exc.strerror}") from exc
+            raise ScenarioError(
+                f"cannot read HELICS participant file {path}: {exc.strerror}"
+            ) from exc
         except tomllib.TOMLDecodeError as exc:
             raise ScenarioError(f"{path}: not valid TOML: {exc}") from exc
         except PydanticValidationError as exc:

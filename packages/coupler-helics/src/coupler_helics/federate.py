@@ -107,7 +107,9 @@ class Federate:
                 f"{self.config.core_init}",
             )
             h.helicsFederateInfoSetFlagOption(info, h.HELICS_FLAG_UNINTERRUPTIBLE, True)
-            h.helicsFederateInfoSetFlagOption(info, h.HELICS_FLAG_WAIT_FOR_CURRENT_TIME_UPDATE, True)
+            h.helicsFederateInfoSetFlagOption(
+                info, h.HELICS_FLAG_WAIT_FOR_CURRENT_TIME_UPDATE, True
+            )
             self._federate = h.helicsCreateValueFederate(self.name, info)
         finally:
             h.helicsFederateInfoFree(info)

@@ -124,7 +124,8 @@ def _channel(i: Interface, causality: Causality) -> Channel:
         type=i.type,
         unit=i.unit,
         start=coerce(i.type, i.start) if i.start is not None else None,
-        description=i.description or f"HELICS {'publication' if causality is Causality.INPUT else 'subscription to'} {i.key}",
+        description=i.description
+        or f"HELICS {'publication' if causality is Causality.INPUT else 'subscription to'} {i.key}",
     )
 
 

@@ -1,9 +1,9 @@
 """``coupler-mosaik``: Coupler and mosaik, both ways.
 
-    coupler-mosaik simulator HOST:PORT       a Coupler participant as a mosaik simulator: what
-                                             mosaik's "cmd" starter runs (%(addr)s)
-    coupler-mosaik participant FILE.toml     a mosaik simulator as a Coupler participant,
-        [--port N] [--host H] [--socket P]   served over gRPC (prints "serving NAME at ADDRESS")
+coupler-mosaik simulator HOST:PORT       a Coupler participant as a mosaik simulator: what
+                                         mosaik's "cmd" starter runs (%(addr)s)
+coupler-mosaik participant FILE.toml     a mosaik simulator as a Coupler participant,
+    [--port N] [--host H] [--socket P]   served over gRPC (prints "serving NAME at ADDRESS")
 """
 
 from __future__ import annotations
@@ -53,7 +53,9 @@ def participant(args: argparse.Namespace) -> None:
     from coupler.settings import ParticipantSettings
     from coupler_mosaik.participant import MosaikParticipant
 
-    given = {k: v for k, v in vars(args).items() if v is not None and k not in ("command", "config")}
+    given = {
+        k: v for k, v in vars(args).items() if v is not None and k not in ("command", "config")
+    }
     settings = ParticipantSettings(**given)
     configure_logging(settings.log_level, json=settings.log_json)
     try:

@@ -138,7 +138,9 @@ class MosaikConfig(BaseModel):
         try:
             return cls.model_validate(tomllib.loads(path.read_text(encoding="utf-8")))
         except OSError as exc:
-            raise ScenarioError(f"cannot read mosaik participant file {path}: {exc.strerror}") from exc
+            raise ScenarioError(
+                f"cannot read mosaik participant file {path}: {exc.strerror}"
+            ) from exc
         except tomllib.TOMLDecodeError as exc:
             raise ScenarioError(f"{path}: not valid TOML: {exc}") from exc
         except PydanticValidationError as exc:

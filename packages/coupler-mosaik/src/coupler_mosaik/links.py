@@ -224,7 +224,7 @@ async def start_command(name: str, config: SimulatorConfig, progress: Progress) 
         host, port = server.sockets[0].getsockname()[:2]
         command = config.cmd % {"addr": f"{host}:{port}", "python": sys.executable}
         try:
-            process = subprocess.Popen(shlex.split(command))
+            process = subprocess.Popen(shlex.split(command))  # noqa: ASYNC220 - returns at once
         except OSError as exc:
             raise ScenarioError(f"{name}: cannot start {command!r}: {exc.strerror}") from exc
         try:

@@ -208,7 +208,11 @@ class MosaikParticipant(Participant):
             )
         values = data.get(self._eid, {})
         for c in self._of(Causality.OUTPUT):
-            raw = values.get(self._channels[c.name].attribute) if isinstance(values, Mapping) else None
+            raw = (
+                values.get(self._channels[c.name].attribute)
+                if isinstance(values, Mapping)
+                else None
+            )
             if raw is None:
                 if c.name in self._outputs:  # mosaik keeps the last value (persistent)
                     continue
@@ -310,7 +314,13 @@ class MosaikParticipant(Participant):
 
     def _starter(self) -> str:
         s = self.config.simulator
-        return f"python {s.python}" if s.python else f"cmd {s.cmd}" if s.cmd else f"connect {s.connect}"
+        return (
+            f"python {s.python}"
+            if s.python
+            else f"cmd {s.cmd}"
+            if s.cmd
+            else f"connect {s.connect}"
+        )
 
     async def _end(self, reason: str) -> None:
         """Stop the simulator of the run, if one runs (``reason``: for the log)."""

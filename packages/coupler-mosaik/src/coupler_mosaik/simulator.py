@@ -125,7 +125,9 @@ class CouplerSimulator(mosaik_api_v3.Simulator):  # type: ignore[misc]
                 f"create one (num=1) and start one simulator per participant address"
             )
         if model not in self.meta["models"]:
-            raise ValueError(f"{self._sid}: no model {model!r}; it offers {list(self.meta['models'])}")
+            raise ValueError(
+                f"{self._sid}: no model {model!r}; it offers {list(self.meta['models'])}"
+            )
         for name, raw in params.items():
             channel = d.channel(name)
             if channel is None or channel.causality is not Causality.PARAMETER:
@@ -255,4 +257,3 @@ async def _finish(remote: RemoteParticipant, *, started: bool) -> None:
             await remote.terminate("mosaik finalized the simulation")
     finally:
         await remote.close()
-

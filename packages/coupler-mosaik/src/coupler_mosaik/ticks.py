@@ -47,4 +47,6 @@ class Ticks:
 
     def tick(self, time: float, what: str = "time") -> int:
         """The tick of the communication point ``time``; ValueError when it falls between."""
-        return self.ticks(time - self.start, what=f"{what} {time!r} s, from the start {self.start!r} s,")
+        return self.ticks(
+            time - self.start, what=f"{what} {time!r} s, from the start {self.start!r} s,"
+        )

@@ -35,16 +35,15 @@ def from_mosaik(channel: Channel, raw: Any) -> Value:
             raw = raw.item()
         if channel.type is ValueType.REAL and isinstance(raw, int) and not isinstance(raw, bool):
             raw = float(raw)
-        if channel.type in (ValueType.INTEGER, ValueType.ENUMERATION) and isinstance(raw, float):
-            if raw.is_integer():
-                raw = int(raw)
+        integral = channel.type in (ValueType.INTEGER, ValueType.ENUMERATION)
+        if integral and isinstance(raw, float) and raw.is_integer():
+            raw = int(raw)
         if channel.type is ValueType.STRING and raw is not None and not isinstance(raw, str):
             raw = coerce(ValueType.STRING, raw)
         return check(channel, raw)
     except (binascii.Error, ValueError, TypeError) as exc:
         raise ChannelValueError(
-            f"channel '{channel.name}' expects {channel.type}, got {raw!r:.60} from mosaik "
-            f"({exc})",
+            f"channel '{channel.name}' expects {channel.type}, got {raw!r:.60} from mosaik ({exc})",
             channel=channel.name,
             expected=str(channel.type),
         ) from exc
