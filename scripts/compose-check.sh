@@ -12,6 +12,8 @@
 #      TrackBalises.last_balise_id / balises_passed sequence equal to the local run's
 #   8. with COMPOSE_CHECK_PERCEPTION=1: the perception variant from the containers
 #      (+ compose.perception.yaml, its first 60 s), scored: every balise passed was detected
+#   9. with COMPOSE_CHECK_LOCALISATION=1: the localisation variant from the containers
+#      (+ compose.localisation.yaml, its first 300 s), its integrity report in summary.json
 #
 # When the engine cannot be installed or started it prints "compose-check: SKIPPED: <why>"
 # and exits 0 so the rest of CI runs; any failure after that exits 1 with the service logs.
@@ -108,6 +110,50 @@ if report["balises_passed"] == 0 or report["recall"] < 1.0:
              f"{report['balises_passed']} balises passed")
 PY
   say "perception variant from the containers: recall 1.0"
+fi
+# --- 9. optional: the localisation variant from the containers, scored ----------------------
+if [[ ${COMPOSE_CHECK_LOCALISATION:-} == 1 ]]; then
+  stage localisation
+  compose down -v --remove-orphans >/dev/null 2>&1 || true
+  # its three services on the host's loopback too, and the orchestrator reaching them there
+  cat >"$OUT/localisation.loopback.yaml" <<'YAML'
+x-loopback: &loopback
+  network_mode: host
+  build: { network: host }
+services:
+  localisation: { <<: *loopback, environment: { LOCALISATION_HOST: 127.0.0.1 } }
+  odometer: { <<: *loopback, environment: { LOCALISATION_HOST: 127.0.0.1 } }
+  balise-transmission: { <<: *loopback, environment: { LOCALISATION_HOST: 127.0.0.1 } }
+  orchestrator:
+    environment:
+      LOCALISATION_HOST: 127.0.0.1
+      ODOMETER_HOST: 127.0.0.1
+      TRANSMISSION_HOST: 127.0.0.1
+YAML
+  RUN_ARGS="--stop-time ${COMPOSE_CHECK_LOCALISATION_STOP:-300}" \
+    loopback_compose "$OUT/compose.localisation.merged.yaml" compose.localisation.yaml \
+    "$OUT/localisation.loopback.yaml"
+  docker-compose -p "$PROJECT" -f "$OUT/compose.localisation.merged.yaml" build --force-rm \
+    localisation >/dev/null
+  mkdir -p "$OUT/localisation"
+  timeout "$RUN_TIMEOUT" docker-compose -p "$PROJECT" \
+    -f "$OUT/compose.localisation.merged.yaml" up --no-color --exit-code-from orchestrator \
+    >"$OUT/compose-localisation.log" 2>&1 || { tail -n 30 "$OUT/compose-localisation.log"; exit 1; }
+  orchestrator=$(docker ps -aq --filter "label=com.docker.compose.project=$PROJECT" \
+    --filter "label=com.docker.compose.service=orchestrator" | head -n1)
+  docker cp "$orchestrator:/results/." "$OUT/localisation/"
+  python3 - "$OUT/localisation/summary.json" <<'PY'
+import json, sys
+summary = json.load(open(sys.argv[1]))
+report = summary.get("reports", {}).get("localisation")
+if summary["status"] != "completed" or not report:
+    sys.exit(f"compose-check: localisation run {summary['status']}, report {report!r}")
+if not report.get("integrity", False):
+    sys.exit(f"compose-check: localisation integrity broken: {report}")
+print("compose-check: localisation report:", {k: v for k, v in report.items()
+      if not isinstance(v, (list, dict))})
+PY
+  say "localisation variant from the containers: completed, integrity kept"
 fi
 stage done
 say "PASSED"

@@ -316,7 +316,8 @@ async def test_the_runs_environment_reaches_the_simulator_at_initialize(
     mock: Mock, bridge: Bridge, sensors: Path
 ) -> None:
     """The OpenRails participant's parameters set the world of the run (POST /API/RESET with
-    an Environment); a run without them gets the world the simulator was started with."""
+    an Environment); a run without them (or with empty Strings, what an FMI master such as the
+    exported FMU gives them) gets the world the simulator was started with."""
     async with mock(sensors=sensors) as url, bridge(url, sensors=sensors) as remote:
 
         async def environment() -> dict[str, Any]:
@@ -336,7 +337,10 @@ async def test_the_runs_environment_reaches_the_simulator_at_initialize(
         )
         world = await environment()
         await remote.terminate()
-        await remote.initialize(RunSetup(run_id="f", start_time=0.0, step_size=0.2))
+        unset = {"season": "", "weather": "", "light": "", "conditions": ""}  # an FMI master's
+        await remote.initialize(
+            RunSetup(run_id="f", start_time=0.0, step_size=0.2, parameters=unset)
+        )
         plain = await environment()
         await remote.terminate()
         with pytest.raises(ParticipantError) as caught:

@@ -257,6 +257,7 @@ fmi3Status fmi3SetBinary(fmi3Instance c, const fmi3ValueReference vr[], size_t n
       return fmi3Error;
     }
     ch->bytes.assign(reinterpret_cast<const char*>(value[i]), sizes[i]);
+    ch->given = true;
   }
   return fmi3OK;
 }

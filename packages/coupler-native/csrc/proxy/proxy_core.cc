@@ -230,6 +230,7 @@ bool Proxy::load(const std::string& resources) {
       c.causality = std::atoi(f[4].c_str());
       c.unit = unescape(f[5]);
       if (f.size() >= 9) c.max_bytes = std::strtoull(f[8].c_str(), nullptr, 10);
+      if (f.size() >= 10) c.given = f[9] != "0";  // older exports: every parameter sent
       const std::string& kind = f[6];
       c.kind = kind == "Real" ? Kind::REAL
              : kind == "Integer" ? Kind::INTEGER
@@ -362,7 +363,7 @@ bool Proxy::initialize(double start_time, std::optional<double> stop_time) {
   request.set_lease_seconds(std::min(std::max(60.0, 4 * timeout_), kMaxLease));
   for (const auto& c : channels_) {
     if (c.kind == Kind::HIDDEN) continue;
-    if (c.causality == pb::CAUSALITY_PARAMETER) bind(request.add_parameters(), c);
+    if (c.causality == pb::CAUSALITY_PARAMETER && c.given) bind(request.add_parameters(), c);
     if (c.causality == pb::CAUSALITY_INPUT) bind(request.add_inputs(), c);
   }
   pb::InitializeResponse response;

@@ -39,6 +39,10 @@ struct Channel {
   int integer = 0;
   bool boolean = false;
   std::string bytes;  // String (UTF-8) and Binary values
+  // A parameter is sent with Initialize when the participant declared a start value for it or
+  // the FMI master set it; one it declared none for and nobody set keeps the participant's own
+  // default (the FMU's start, 0 or "", is no value the participant ever gave).
+  bool given = true;
 };
 
 // `error` is true for a failure (the caller answers fmiError), false for information.
@@ -167,6 +171,7 @@ bool write_values(Proxy& proxy, const unsigned vr[], size_t n, const T value[], 
       return proxy.error("no settable variable of this type with value reference " +
                           std::to_string(vr[i]));
     write(*ch, value[i]);
+    ch->given = true;
   }
   return true;
 }

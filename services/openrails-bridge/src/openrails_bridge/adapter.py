@@ -605,11 +605,12 @@ async def _together(*calls: Awaitable[Any]) -> list[Any]:
 
 def _environment(parameters: Mapping[str, Value]) -> dict[str, Any]:
     """The run's environment from the parameters under ``Environment.``; ``conditions`` (a
-    JSON object) is spread out, the named parameters win over it."""
+    JSON object) is spread out, the named parameters win over it. An empty String is unset
+    (what an FMI master -- the exported FMU -- gives a String parameter it has no value for)."""
     environment: dict[str, Any] = {
         field.removeprefix(ENVIRONMENT): value
         for field, value in parameters.items()
-        if field.startswith(ENVIRONMENT)
+        if field.startswith(ENVIRONMENT) and value != ""
     }
     extra = environment.pop("conditions", "")
     if not extra:

@@ -319,6 +319,9 @@ def _resources(
                     kind,
                     _escape(_start_text(channel)),
                     str(channel.max_bytes),
+                    # whether the participant declared a start: a parameter without one is
+                    # sent only when the FMI master sets it (its FMU start is no value of its)
+                    "1" if channel.start is not None else "0",
                 )
             )
         )
