@@ -293,7 +293,9 @@ def test_an_input_driven_twice_names_the_lines_of_its_connections(
     path = ssd(
         tmp_path,
         [
-            project_fmu("Source", "Source2", connector("ramp", "output"), connector("sine", "output")),
+            project_fmu(
+                "Source", "Source2", connector("ramp", "output"), connector("sine", "output")
+            ),
             project_fmu("Feed", "Feedthrough3", connector("real_in", "input")),
         ],
         [("Source.ramp", "Feed.real_in"), ("Source.sine", "Feed.real_in")],

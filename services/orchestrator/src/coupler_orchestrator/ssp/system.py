@@ -306,7 +306,10 @@ class SystemReader:
                 if unit is not None and unit not in self.units:
                     self.undefined.report(
                         UndefinedUnit(
-                            unit, where(self.display, typed), f"connector '{owner}.{name}'", self.units
+                            unit,
+                            where(self.display, typed),
+                            f"connector '{owner}.{name}'",
+                            self.units,
                         )
                     )
                     unit = None  # the connector stays, so nothing else fails for this cause
