@@ -25,6 +25,7 @@ import os
 import subprocess
 import sys
 import time
+from fractions import Fraction
 from pathlib import Path
 from typing import Any
 
@@ -76,6 +77,25 @@ def short_fleet(folder: Path, out: Path) -> Path:
         f"args = {json.dumps(args)}\n\n{services}"
     )
     return path
+
+
+def times_in(value: Any) -> list[float]:
+    """Every time in a decoded JSON value: the numbers of keys named ``time_s`` or ``..._at_s``."""
+    if isinstance(value, dict):
+        found = [v for k, v in value.items() if k == "time_s" or k.endswith("_at_s")]
+        return [float(v) for v in found if isinstance(v, int | float)] + [
+            t for v in value.values() for t in times_in(v)
+        ]
+    if isinstance(value, list):
+        return [t for v in value for t in times_in(v)]
+    return []
+
+
+def off_the_grid(times: list[float], start: float, step: float) -> list[float]:
+    """The times that are not the run's grid point ``start + k * step`` as the user wrote it
+    (the double nearest the exact decimal: 9.2, never 9.200000000000001)."""
+    t0, h = Fraction(repr(start)), Fraction(repr(step))
+    return [t for t in times if t != float(t0 + round((Fraction(t) - t0) / h) * h)]
 
 
 async def wait_for_map(url: str, process: subprocess.Popen[str], within: float = 180.0) -> None:
@@ -185,3 +205,27 @@ def test_the_perception_variant_end_to_end(tmp_path: Path) -> None:
     assert report["max_abs_error_m"] < 1.0
     for balise in report["balises"]:
         assert balise["first_detected_at_s"] < balise["passed_at_s"]
+
+    # every time a participant or the report says is on the run's grid, as written (issue 45
+    # item 4): the train states and detections (the camera frames' times) in results.csv, the
+    # report's JSON and its CSV tables
+    start, step = summary["start_time"], summary["step_size"]
+    with (out / "results.csv").open() as handle:
+        rows = list(csv.DictReader(handle))
+    said: list[float] = []
+    for column in ("OpenRails.train_state", "Perception.detections"):
+        said += times_in([json.loads(row[column]) for row in rows if row[column]])
+    assert len(said) >= 2 * len(rows) > 100 and off_the_grid(said, start, step) == []
+    said = times_in(report)
+    assert len(said) >= 10 and off_the_grid(said, start, step) == []
+    for table in out.glob("perception-*.csv"):
+        with table.open() as handle:
+            cells = [
+                text
+                for row in csv.DictReader(handle)
+                for name, text in row.items()
+                if text and (name == "time_s" or name.endswith("_at_s"))
+            ]
+        shown = [float(text) for text in cells]
+        assert off_the_grid(shown, start, step) == [], table.name
+        assert cells == [repr(t) for t in shown], table.name  # 9.2 as 9.2

@@ -17,6 +17,7 @@ import asyncio
 import json
 import subprocess
 import sys
+from fractions import Fraction
 from pathlib import Path
 from typing import Any
 
@@ -27,6 +28,7 @@ from aiohttp import web
 from coupler.channels import Causality, RunSetup, ValueType
 from coupler.errors import ParticipantError, ScenarioError
 from coupler.messages import decode_message
+from coupler.v1.railway_pb2 import TrainState
 from coupler.v1.sensors_pb2 import FrameLabels, Image, ObjectClass
 from coupler_railway.messages import FRAME_LABELS, IMAGE
 from openrails_bridge.__main__ import build
@@ -111,6 +113,32 @@ async def test_frames_arrive_unchanged_in_images(mock: Mock, bridge: Bridge, sen
     assert (front.intrinsics.cx, front.intrinsics.cy) == (399.5, 299.5)
     fields = decode_message(IMAGE, outputs[-1]["lidar"])
     assert fields["intrinsics"]["fy"] == pytest.approx(75 / 0.41421356, rel=1e-6)
+
+
+async def test_every_frame_and_train_state_carries_its_time_on_the_runs_grid(
+    mock: Mock, bridge: Bridge, sensors: Path
+) -> None:
+    """A stretch of 0.4 s steps from t0 = 0.2 as the orchestrator sends them (each start the
+    grid's own double): the Image, FrameLabels and TrainState of each step say its end as the
+    grid has it -- 0.6, never 0.2 + 0.4 = 0.6000000000000001 (issue 45 item 4)."""
+    grid = [float(Fraction(1, 5) + k * Fraction(2, 5)) for k in range(5)]  # 0.2 .. 1.8
+    config = {"sensors": sensors, "railml": TEST_LINE, "start_distance_m": 75.0}
+    async with mock(**config) as url, bridge(url, sensors=sensors) as remote:
+        await remote.initialize(
+            RunSetup(run_id="g", start_time=0.2, step_size=0.4, inputs={"throttle": 1.0})
+        )
+        outputs = [await remote.do_step(t, 0.4, {}) for t in grid[:-1]]
+        await remote.terminate()
+    drifting = [a + 0.4 for a in grid[:-1]]
+    assert drifting != grid[1:]  # binary sums leave the grid on this stretch
+    for end, out in zip(grid[1:], outputs, strict=True):
+        labels, state = FrameLabels(), TrainState()
+        labels.ParseFromString(out["front_labels"])
+        state.ParseFromString(out["train_state"])
+        times = [image(out["front"]).time_s, image(out["lidar"]).time_s]
+        times += [labels.time_s, state.time_s]
+        assert times == [end] * 4, (end, times)
+        assert all(len(repr(t)) <= 3 for t in times)  # 0.6, 1.4, ...: as the user wrote them
 
 
 async def test_a_sensor_openrails_does_not_have_fails_initialize_naming_it(

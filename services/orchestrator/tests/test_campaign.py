@@ -449,6 +449,11 @@ def test_reductions() -> None:
         "count_changes": 3,
     }
     assert reduce(Output(name="x", reduction="last", channel="A.b"), []) is None
+    # an Integer column's extremes are whole numbers as it has them (3, never 3.0)
+    counts = ["1", "3", "", "2"]
+    for name, expected in (("max", 3), ("min", 1)):
+        found_int = reduce(Output(name=name, reduction=name, channel="A.n"), counts)
+        assert (found_int, type(found_int)) == (expected, int)
 
 
 def test_report_values_are_read_off_the_summary() -> None:

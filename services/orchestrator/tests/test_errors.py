@@ -249,6 +249,66 @@ def test_unreachable_participant(coupler: Coupler, tmp_path: Path) -> None:
     assert "is the participant running and listening on that address?" in outcome.err
 
 
+def test_an_undefined_unit_is_one_error_line_naming_each_use(tmp_path: Path) -> None:
+    """One cause, one message: a unit missing from <Units> used to be followed by "component
+    'Train' could not be loaded" for each of its connections and a second error for a parameter
+    in that unit; now it is one line, with its file and line, naming every use.
+
+        Train.speed [km/h, undefined] ==> Driver.speed, Map.speed
+        Train.distance ==> Driver.distance, Map.distance;  Driver.throttle ==> Train.throttle
+        Driver.target_speed [m/s] = 60 km/h
+    """
+    path = SystemStructure(
+        "Line",
+        [
+            remote("Train", "grpc://127.0.0.1:1", Connector("speed", "output", "Real", "km/h"),
+                   Connector("distance", "output", "Real", "m"), connector("throttle", "input")),
+            remote("Driver", "grpc://127.0.0.1:1", Connector("speed", "input", "Real", "m/s"),
+                   Connector("distance", "input", "Real", "m"), connector("throttle", "output"),
+                   Connector("target_speed", "parameter", "Real", "m/s"),
+                   parameters={"target_speed": 60.0}),
+            remote("Map", "grpc://127.0.0.1:1", Connector("speed", "input", "Real", "m/s"),
+                   Connector("distance", "input", "Real", "m")),
+        ],
+        [("Train.speed", "Driver.speed"), ("Train.distance", "Driver.distance"),
+         ("Driver.throttle", "Train.throttle"), ("Train.speed", "Map.speed"),
+         ("Train.distance", "Map.distance")],
+        units={"m": {"m": 1}, "m/s": {"m": 1, "s": -1}},
+    ).write(tmp_path / "line.ssd")  # fmt: skip
+    text = path.read_text()
+    path.write_text(text.replace('<ssv:Real value="60.0"/>', '<ssv:Real value="60" unit="km/h"/>'))
+    for command in (["validate"], ["run", "--out", str(tmp_path / "out")]):
+        outcome = Coupler.process(*command, path, "--step", "0.5")
+        assert outcome.code == 1
+        assert outcome.err.splitlines() == [
+            "error: line.ssd line 10: connector 'Train.speed' uses unit 'km/h', which is not "
+            "defined in <Units> (units: m, m/s); define it; it is also used by parameter "
+            "'Driver.target_speed' (line.ssd line 24)"
+        ], outcome.err
+
+
+def test_an_input_driven_twice_names_the_lines_of_its_connections(
+    coupler: Coupler, tmp_path: Path
+) -> None:
+    path = ssd(
+        tmp_path,
+        [
+            project_fmu(
+                "Source", "Source2", connector("ramp", "output"), connector("sine", "output")
+            ),
+            project_fmu("Feed", "Feedthrough3", connector("real_in", "input")),
+        ],
+        [("Source.ramp", "Feed.real_in"), ("Source.sine", "Feed.real_in")],
+    )
+    assert_refused(
+        coupler,
+        path,
+        "bad.ssd line 21: input 'Feed.real_in' is driven by 2 connections (line 21 from "
+        "'Source.ramp', line 22 from 'Source.sine'); an input takes exactly one driver: remove "
+        "all but one",
+    )
+
+
 def test_validate_lists_every_problem(coupler: Coupler, tmp_path: Path) -> None:
     path = ssd(
         tmp_path,

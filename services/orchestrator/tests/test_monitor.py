@@ -9,6 +9,8 @@ from __future__ import annotations
 import asyncio
 import json
 import os
+import subprocess
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -109,9 +111,32 @@ async def test_a_late_joiner_gets_the_history(
     assert {"name": "Gain.y", "unit": "m/s"} in frame["layout"]["channels"]
     values = frame["values"]
     assert values["t"] == [k / 10 for k in range(31)]  # the grid as written: 0.3, not 0.30...04
-    assert set(values["series"]) == {"Gain.y", "Feed.real_out"}  # unknown names ignored
+    assert set(values["series"]) == {"Gain.y", "Feed.real_out"}
+    assert frame["unknown_channels"] == ["Nope.x"]  # for the page to say so
     assert set(frame["latency"]["series"]) == set(MEMBERS)
     assert values["series"]["Gain.y"] == Coupler.column(tmp_path, "Gain.y")
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not CHROMIUM.exists(), reason=NO_CHROMIUM)
+async def test_the_page_shows_times_on_the_grid_and_says_which_picked_channels_are_not_there(
+    fmus: dict[str, Path], gain_server: ParticipantServer, tmp_path: Path
+) -> None:
+    """``t = 2.3 / 2.3 s`` as the user wrote the grid (it showed ``2.30000 / 2.30000``), and a
+    ``?channels=`` name the run does not have is named on the page (it was ignored silently)."""
+    async with MonitorServer("127.0.0.1:0") as monitor:
+        outcome = await run(2.3, None, monitor, tmp_path)
+        async with chromium() as browser:
+            page = await browser.new_page()
+            await page.goto(f"{monitor.url}?channels=Gain.y,Nope.x")
+            await page.wait_for_function("window.monitor.values['Gain.y'] !== undefined")
+            shown = {i: await page.text_content(f"#{i}") for i in ("time", "stop", "notice")}
+    assert outcome.end.status == "completed"
+    assert (shown["time"], shown["stop"]) == ("2.3", "2.3")
+    assert shown["notice"] == (
+        "?channels= in this page's address names Nope.x: no channel of this run that can be "
+        "charted; pick from the list on the left."
+    )
 
 
 async def test_the_first_paint_waits_for_no_history(
@@ -222,6 +247,32 @@ async def test_at_most_16_pages_stream_at_once_and_the_17th_is_told_why() -> Non
         assert again.status == 200
         for reply in [*streams, again]:
             reply.close()
+
+
+def test_the_end_of_the_run_is_said_when_it_ends_not_after_the_monitor_lingers(
+    fmus: dict[str, Path], gain_server: ParticipantServer, tmp_path: Path
+) -> None:
+    """``--monitor-linger 600``: ``completed:`` and the results' paths come when the run ends,
+    then the page stays up (they came only after the 600 s)."""
+    command = [str(Path(sys.executable).with_name("coupler")), "run", str(DATA / "mixed.ssd"),
+               "--out", str(tmp_path), "--monitor", "127.0.0.1:0", "--monitor-linger", "600",
+               "--no-progress"]  # fmt: skip
+    with subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) as p:
+        try:
+            assert p.stdout is not None
+            said = [p.stdout.readline()]
+            while said[-1] and " stays up " not in said[-1]:
+                said.append(p.stdout.readline())
+        finally:
+            p.terminate()
+            p.wait(timeout=30)
+    assert said[0].startswith("monitor: http://127.0.0.1:")
+    assert said[1].startswith("completed: "), said
+    assert said[2:] == [
+        f"results: {tmp_path / 'results.csv'}\n",
+        f"summary: {tmp_path / 'summary.json'}\n",
+        f"{said[0].rstrip()} stays up 600 s\n",
+    ]
 
 
 def test_an_ipv6_monitor_url_is_written_with_brackets(

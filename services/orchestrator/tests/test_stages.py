@@ -128,8 +128,14 @@ async def test_problems_of_the_wiring_are_listed_together(tmp_path: Path) -> Non
     with pytest.raises(ValidationError) as info:
         check(scenario, await roster_of(scenario), OPTIONS)
     problems = "\n".join(info.value.problems)
-    assert "input 'Sink.a' is driven by 2 connections" in problems
-    assert "input 'Gain.u' is driven by 2 connections" in problems
+    assert (  # the connections' lines: one of them in the nested system
+        "bad.ssd line 79: input 'Sink.a' is driven by 2 connections (line 79 from "
+        "'Sub.Scale.out', line 147 from 'Source.position'); an input takes exactly one driver"
+    ) in problems
+    assert (
+        "bad.ssd line 106: input 'Gain.u' is driven by 2 connections (line 106 from "
+        "'Source.position', line 147 from 'Source.name')"
+    ) in problems
     assert "connector 'Gain.u' expects Real, but 'Source.name' is String" in problems
 
 

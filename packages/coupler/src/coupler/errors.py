@@ -51,14 +51,19 @@ class ScenarioError(CouplerError):
 
 
 class ValidationError(ScenarioError):
-    """Several problems found together, each a sentence naming its culprit and the fix."""
+    """Several problems found together, each a sentence naming its culprit and the fix; one
+    problem alone is one line (it names its file and line, or ``subject`` says the file)."""
 
     def __init__(self, problems: Iterable[str], *, subject: str = "scenario") -> None:
         self.problems = list(problems)
         self.subject = subject
+        if len(self.problems) == 1:
+            (only,) = self.problems
+            named = only.startswith((f"{subject}:", f"{subject} line "))
+            super().__init__(only if named else f"{subject}: {only}")
+            return
         lines = "\n".join(f"  - {p}" for p in self.problems)
-        count = len(self.problems)
-        super().__init__(f"{subject}: {count} problem{'' if count == 1 else 's'}\n{lines}")
+        super().__init__(f"{subject}: {len(self.problems)} problems\n{lines}")
 
 
 class PortInUse(ScenarioError):

@@ -306,6 +306,25 @@ def test_missing_fmu(tmp_path: Path) -> None:
         load_ssp(path)
 
 
+def test_a_component_that_cannot_load_is_one_problem_not_one_per_connection(
+    tmp_path: Path,
+) -> None:
+    path = write(
+        tmp_path,
+        [
+            fmu("A", "resources/missing.fmu", real("y", "output"), real("u", "input")),
+            grpc("B", real("u", "input"), real("y", "output")),
+        ],
+        [("A.y", "B.u"), ("B.y", "A.u")],
+    )
+    with pytest.raises(ValidationError) as info:
+        load_ssp(path)
+    assert len(info.value.problems) == 1, info.value.problems
+    assert str(info.value).startswith(
+        "scenario.ssd line 8: component 'A': FMU file 'resources/missing.fmu' does not exist"
+    )
+
+
 def test_unknown_connector(tmp_path: Path) -> None:
     path = write(
         tmp_path,

@@ -19,7 +19,11 @@ HELP = "print a participant's channels"
 
 
 def arguments(describe: argparse.ArgumentParser) -> None:
-    describe.add_argument("target", help="grpc://HOST:PORT, grpcs://HOST:PORT or an .fmu file")
+    describe.add_argument(
+        "target",
+        help="a running participant: grpc://HOST:PORT, grpcs://HOST:PORT or unix:///PATH (its "
+        "unix socket, as coupler fleet serves it); or an .fmu file",
+    )
     describe.add_argument(
         "--timeout",
         type=durations.argument(durations.MAX_TIMEOUT),

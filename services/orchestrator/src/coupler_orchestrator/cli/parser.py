@@ -64,6 +64,7 @@ def parser() -> argparse.ArgumentParser:
     top = argparse.ArgumentParser(
         prog="coupler", description="Co-simulation of FMUs and gRPC participants from an SSP file."
     )
+    top.add_argument("--version", action="version", version=_version())
     top.add_argument("--log-level", default="WARNING", help="DEBUG, INFO, WARNING (default)")
     top.add_argument(
         "--log-format",
@@ -82,6 +83,16 @@ def parser() -> argparse.ArgumentParser:
         module.arguments(command)
         command.set_defaults(execute=module.execute)
     return top
+
+
+def _version() -> str:
+    """``coupler --version``: the orchestrator's version and the participant SDK's."""
+    from importlib.metadata import version
+
+    return (
+        f"coupler {version('coupler-orchestrator')} (participant SDK: coupler "
+        f"{version('coupler')}; protocol coupler.v1)"
+    )
 
 
 def realtime_factor(text: str) -> float:
@@ -214,7 +225,8 @@ def out_options(command: argparse.ArgumentParser, default: str = "results/<scena
         "--force",
         action="store_true",
         help="--out DIR holds an earlier run's results: replace them (results.csv, "
-        "results.parquet, summary.json and recordings/ are removed first; nothing else)",
+        "results.parquet, summary.json, recordings/, the frames/ folder of camera channels "
+        "and kept-frames/, the frames a run kept, are removed first; nothing else)",
     )
 
 

@@ -28,6 +28,7 @@ if TYPE_CHECKING:
     from coupler_orchestrator.cli.supervisor import Beacon
     from coupler_orchestrator.options import RunOptions
     from coupler_orchestrator.outputs.monitor import MonitorServer
+    from coupler_orchestrator.runner import RunOutcome
 
 HELP = "run a scenario and record results"
 
@@ -140,6 +141,11 @@ async def run(args: argparse.Namespace, options: RunOptions, out: TextIO, sessio
             observers=observers,
             on_results=functools.partial(_results_in, session, watched),
         )
+        return _said(outcome, args, out)  # when the run ends: before the monitor lingers
+
+
+def _said(outcome: RunOutcome, args: argparse.Namespace, out: TextIO) -> int:
+    """How the run ended and where its results are; the exit code."""
     end = outcome.end
     print(
         f"{end.status}: {end.steps} steps to t={end.end_time:g} s in {end.wall_time:.3g} s",
@@ -157,11 +163,12 @@ async def run(args: argparse.Namespace, options: RunOptions, out: TextIO, sessio
         names = ", ".join(p.name for p in outcome.openmcx_files)
         print(f"openmcx results: {names} in {outcome.openmcx_files[0].parent}", file=out)
     if end.status == "terminated":
-        print(f"terminated early: {end.reason}", file=out)
+        print(f"terminated early: {end.reason}", file=out, flush=True)
         return EXIT_OK
     if end.status != "completed":
-        print(f"error: run {end.status}: {end.reason}", file=sys.stderr)
+        print(f"error: run {end.status}: {end.reason}", file=sys.stderr, flush=True)
         return EXIT_ERROR
+    out.flush()
     return EXIT_OK
 
 

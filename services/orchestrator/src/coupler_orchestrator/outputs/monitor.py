@@ -225,11 +225,14 @@ class MonitorState(Observer):
         self, since: tuple[float, float] | None, channels: Sequence[str]
     ) -> tuple[dict[str, Any], tuple[float, float]]:
         """What a stream sends: the header and, after the cursor ``since`` (None: from the
-        start, with the layout), the latency and picked channels' points; and the new cursor."""
+        start, with the layout and the picked names that are no chartable channel of the run),
+        the latency and picked channels' points; and the new cursor."""
         frame: dict[str, Any] = {"header": self.header()}
         info = self.info
         if since is None:
             frame["layout"] = self.layout()
+            if info is not None and (unknown := [n for n in channels if n not in self._kept]):
+                frame["unknown_channels"] = unknown  # the page says so: a typo, another run
         latency_after, values_after = since or (-math.inf, -math.inf)
         if info is None:
             return frame, (latency_after, values_after)

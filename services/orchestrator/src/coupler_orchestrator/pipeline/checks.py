@@ -26,7 +26,6 @@ import difflib
 import fnmatch
 import graphlib
 import math
-from collections import Counter
 from collections.abc import Callable, Mapping
 from functools import partial
 from typing import TypeVar
@@ -206,12 +205,15 @@ class _Checker:
             )
 
     def drivers(self) -> None:
-        driven = Counter(c.end for c in self.scenario.connections)
-        for name, count in driven.items():
-            if count > 1:
+        driving: dict[str, list[ssp.Connection]] = {}
+        for c in self.scenario.connections:
+            driving.setdefault(c.end, []).append(c)
+        for name, those in driving.items():
+            if len(those) > 1:
+                each = ", ".join(f"line {c.line} from '{c.start}'" for c in those)
                 self.problems.append(
-                    f"input '{name}' is driven by {count} connections; an input takes exactly "
-                    "one driver"
+                    f"{where(those[0])}: input '{name}' is driven by {len(those)} connections "
+                    f"({each}); an input takes exactly one driver: remove all but one"
                 )
 
     # -- each participant against its component --------------------------------------------

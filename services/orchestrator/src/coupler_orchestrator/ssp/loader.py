@@ -27,7 +27,7 @@ from .files import Documents
 from .model import Scenario, frozen_mapping
 from .parameters import apply_bindings, read_enumerations
 from .system import SystemReader
-from .units import read_units
+from .units import UndefinedUnits, read_units
 
 
 def load_ssp(
@@ -135,6 +135,7 @@ def _load(
     system = child(root, "System")
     if system is None:
         raise ScenarioError(f"{display} line {root.sourceline}: no <ssd:System>; add one")
+    undefined = UndefinedUnits(problems)
     reader = SystemReader(
         display,
         Documents(resource_dir, confined=confined, warnings=warnings),
@@ -143,12 +144,19 @@ def _load(
         env=os.environ if env is None else env,
         warnings=warnings,
         problems=problems,
+        undefined=undefined,
     )
     reader.walk(system, ())
     tree = reader.tree
     connections = tree.graph.flatten(tree.components, warnings, problems)
     components = apply_bindings(
-        tree.components, tree.systems, tree.bindings, units, warnings=warnings, problems=problems
+        tree.components,
+        tree.systems,
+        tree.bindings,
+        units,
+        warnings=warnings,
+        problems=problems,
+        undefined=undefined,
     )
     start, stop, task, results = None, None, None, None
     experiment = child(root, "DefaultExperiment")

@@ -23,7 +23,7 @@ from .model import (
     frozen_mapping,
 )
 from .transformations import read_transformation
-from .units import read_units, unit_converter
+from .units import UndefinedUnit, UndefinedUnits, read_units, unit_converter
 
 PARAMETER_SET = "application/x-ssp-parameter-set"
 PARAMETER_MAPPING = "application/x-ssp-parameter-mapping"
@@ -309,8 +309,10 @@ def apply_bindings(
     *,
     warnings: list[str],
     problems: list[str],
+    undefined: UndefinedUnits,
 ) -> tuple[Component, ...]:
-    """Components with their parameters; deeper bindings first, so higher levels win."""
+    """Components with their parameters; deeper bindings first, so higher levels win (a unit
+    that is not defined goes to ``undefined``: one problem per unit)."""
     values: dict[tuple[str, ...], dict[str, ParameterValue]] = {p: {} for p in components}
     for binding in sorted(bindings, key=lambda b: (-b.depth, b.order)):
         for parameter in binding.parameters:
@@ -320,6 +322,8 @@ def apply_bindings(
             path, name = target
             try:
                 values[path][name] = _fit(components[path], name, parameter, units)
+            except UndefinedUnit as exc:
+                undefined.report(exc)
             except ScenarioError as exc:
                 problems.append(str(exc))
     return tuple(replace(c, parameters=frozen_mapping(values[p])) for p, c in components.items())
@@ -379,7 +383,11 @@ def _fit(
         and not parameter.suppress_unit_conversion
     ):
         convert = unit_converter(
-            {**units, **parameter.units}, value.unit, connector.unit, what=what
+            {**units, **parameter.units},
+            value.unit,
+            connector.unit,
+            place=value.origin,
+            user=f"parameter '{component.name}.{name}'",
         )
         if convert is not None:
             return replace(value, value=convert(float(value.value)), unit=connector.unit)

@@ -46,7 +46,7 @@ from .model import (
 )
 from .parameters import Binding, read_binding
 from .transformations import read_transformation
-from .units import read_units
+from .units import UndefinedUnit, UndefinedUnits, read_units
 
 TYPES = {
     **{t.value: t for t in ValueType},
@@ -116,6 +116,7 @@ class SystemReader:
         env: Mapping[str, str],
         warnings: list[str],
         problems: list[str],
+        undefined: UndefinedUnits,
     ) -> None:
         self.display = display
         self.documents = documents
@@ -124,6 +125,7 @@ class SystemReader:
         self.env = env
         self.warnings = warnings
         self.problems = problems
+        self.undefined = undefined
         self.tree = Tree()
         self.elements = 0
         """Vector elements read so far (``openmcx.MAX_ELEMENTS`` at the most)."""
@@ -302,11 +304,15 @@ class SystemReader:
                 type_ = TYPES[tag]
                 unit = typed.get("unit")
                 if unit is not None and unit not in self.units:
-                    raise ScenarioError(
-                        f"{where(self.display, typed)}: connector '{owner}.{name}' uses unit "
-                        f"'{unit}', which is not defined in <Units> (units: "
-                        f"{', '.join(self.units) or 'none'}); define it"
+                    self.undefined.report(
+                        UndefinedUnit(
+                            unit,
+                            where(self.display, typed),
+                            f"connector '{owner}.{name}'",
+                            self.units,
+                        )
                     )
+                    unit = None  # the connector stays, so nothing else fails for this cause
                 if type_ is ValueType.ENUMERATION:
                     enumeration = typed.get("name")
                     if enumeration not in self.enumerations:
@@ -397,6 +403,12 @@ class SystemReader:
         refs: dict[str, tuple[tuple[str, ...], Element]],
     ) -> None:
         start_el, end_el = element.get("startElement"), element.get("endElement")
+        if any(
+            kinds.get(e) == "Component" and (*path, e) not in self.tree.components
+            for e in (start_el, end_el)
+            if e
+        ):
+            return  # a component that could not be loaded: its own problem says why, once
         start_c = required(element, "startConnector", self.display)
         end_c = required(element, "endConnector", self.display)
         start = f"{start_el}.{start_c}" if start_el else start_c
@@ -530,9 +542,7 @@ class SystemReader:
             "parameter": "sink",
         }
         if kind == "Component":
-            component = self.tree.components.get(full)
-            if component is None:  # already reported as a problem
-                raise ScenarioError(f"{what}: component '{flat}' could not be loaded (see above)")
+            component = self.tree.components[full]  # one that failed: no connection read
             c = component.connector(connector)
             if c is None:
                 raise ScenarioError(

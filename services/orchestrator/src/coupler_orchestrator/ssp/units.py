@@ -12,7 +12,7 @@ from __future__ import annotations
 import functools
 import math
 import re
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -92,6 +92,36 @@ class IncompatibleUnits(ScenarioError):
     """Two units of different dimension."""
 
 
+class UndefinedUnit(ScenarioError):
+    """A unit the SSD's ``<Units>`` do not define, used by ``user`` (``connector 'A.x'``) at
+    ``place`` (``file line N``)."""
+
+    def __init__(self, unit: str, place: str, user: str, known: Iterable[str]) -> None:
+        self.unit, self.place, self.user, self.known = unit, place, user, sorted(known)
+        super().__init__(
+            f"{place}: {user} uses unit '{unit}', which is not defined in <Units> (units: "
+            f"{', '.join(self.known) or 'none'}); define it"
+        )
+
+
+class UndefinedUnits:
+    """One problem per undefined unit, however many connectors and parameters use it (one
+    cause, one message): its first use, and where else it is used."""
+
+    def __init__(self, problems: list[str]) -> None:
+        self._problems = problems
+        self._seen: dict[str, tuple[int, UndefinedUnit, list[str]]] = {}
+
+    def report(self, error: UndefinedUnit) -> None:
+        if error.unit not in self._seen:
+            self._seen[error.unit] = (len(self._problems), error, [])
+            self._problems.append(str(error))
+            return
+        index, first, others = self._seen[error.unit]
+        others.append(f"{error.user} ({error.place})")
+        self._problems[index] = f"{first}; it is also used by {', '.join(others)}"
+
+
 def affine(source: BaseUnit, target: BaseUnit) -> Affine | None:
     """The conversion from ``source`` to ``target``; None when they are the same unit.
 
@@ -109,18 +139,17 @@ def affine(source: BaseUnit, target: BaseUnit) -> Affine | None:
 
 
 def unit_converter(
-    units: Mapping[str, Unit], source: str, target: str, *, what: str
+    units: Mapping[str, Unit], source: str, target: str, *, place: str, user: str
 ) -> Callable[[float], float] | None:
     """A function converting a value in SSD unit ``source`` to SSD unit ``target``; None when
-    nothing is to do. ``what`` names the culprit in error messages."""
+    nothing is to do. ``user`` (``parameter 'A.k'``) at ``place`` (``file line N``) names the
+    culprit in error messages."""
     if source == target:
         return None
     missing = [u for u in (source, target) if u not in units]
     if missing:
-        raise ScenarioError(
-            f"{what}: unit '{missing[0]}' is not defined in the SSD's <Units>; "
-            f"define it (known units: {', '.join(sorted(units)) or 'none'})"
-        )
+        raise UndefinedUnit(missing[0], place, user, units)
+    what = f"{place}: {user}"
     try:
         return affine(units[source].base_unit, units[target].base_unit)
     except IncompatibleUnits as exc:

@@ -20,6 +20,9 @@ window.monitor = view; // for tests and the curious
 
 function text(id, value) { document.getElementById(id).textContent = value; }
 function fmt(x, digits = 4) { return x === null || x === undefined ? "–" : Number(x).toPrecision(digits); }
+// a time of the run as the user wrote its grid (49.1, not 49.1000): the shortest decimal of the
+// double, as the server's JSON and results.csv write it
+function seconds(x) { return x === null || x === undefined ? "–" : String(x); }
 function duration(s) {
   if (s === null || s === undefined || !isFinite(s)) return "–";
   s = Math.round(s);
@@ -47,8 +50,8 @@ function showHeader(h) {
   status.className = `status ${h.status}`;
   const waiting = h.waiting_for ? Object.entries(h.waiting_for).map(([n, a]) => `waiting for ${n} at ${a}`).join("; ") : "";
   text("reason", h.reason || waiting);
-  text("time", fmt(h.time, 6));
-  text("stop", fmt(h.stop_time, 6));
+  text("time", seconds(h.time));
+  text("stop", seconds(h.stop_time));
   const share = Math.max(0, Math.min(1, h.progress || 0));
   document.getElementById("progress").style.width = `${share * 100}%`;
   text("percent", `${(share * 100).toFixed(1)} %`);
@@ -168,8 +171,15 @@ function onFrame(frame) {
   chartsReady.then(() => { draw(frame); refreshCameras(frame.header.time); }); // in order
 }
 
+function showUnknown(names) {
+  const notice = document.getElementById("notice");
+  notice.hidden = !names.length;
+  notice.textContent = names.length ? `?channels= in this page's address names ` +
+    `${names.join(", ")}: no channel of this run that can be charted; pick from the list on the left.` : "";
+}
+
 function draw(frame) {
-  if (frame.layout) { showLayout(frame.layout); resetValueCharts(); }
+  if (frame.layout) { showLayout(frame.layout); resetValueCharts(); showUnknown(frame.unknown_channels || []); }
   if (frame.latency && view.latency) {
     view.latencyData = append(view.latencyData, frame.latency.t, view.members.map((m) => frame.latency.series[m]));
     view.latency.setData(view.latencyData);

@@ -292,9 +292,11 @@ def reduce(output: Output, cells: Sequence[str]) -> Scalar | None:
         return sum(1 for a, b in itertools.pairwise(cells) if a != b)
     if output.reduction in ("first", "last"):
         return number_or_text(cells[0] if output.reduction == "first" else cells[-1])
-    numbers = [float(c) for c in cells if c != ""]
+    numbers = [(float(c), c) for c in cells if c != ""]
     if not numbers:
         return None
     if output.reduction == "mean":
-        return math.fsum(numbers) / len(numbers)
-    return max(numbers) if output.reduction == "max" else min(numbers)
+        return math.fsum(n for n, _ in numbers) / len(numbers)
+    # the cell as the column has it: an Integer's maximum is 3, not 3.0
+    extreme = max if output.reduction == "max" else min
+    return number_or_text(extreme(numbers, key=lambda pair: pair[0])[1])
