@@ -4,7 +4,8 @@ A file is a list of items; an item is a bare word or number, a quoted string, or
 ``Name ( items )``. The mock reads the route folder files (route, track database, track
 sections, paths, world, and the files OpenRails' viewer opens: :mod:`openrails_mock.content`)
 as OpenRails does: UTF-16 with a byte order mark or UTF-8 (a UTF-16 file without its byte
-order mark is refused, not read as nothing), any whitespace, ``//`` comments, ``comment``/``skip`` blocks ignored, names case-insensitive.
+order mark is refused, not read as nothing), any whitespace, ``//`` comments,
+``comment``/``skip`` blocks ignored, names case-insensitive.
 Every problem is a :class:`RouteError` naming the file and line.
 """
 

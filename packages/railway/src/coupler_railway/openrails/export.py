@@ -28,6 +28,8 @@ import numpy as np
 
 from coupler_railway.errors import RailMLError
 from coupler_railway.infrastructure import Infrastructure, Network, Station, Switch
+from coupler_railway.openrails import shapes
+from coupler_railway.openrails.ace import write_ace
 from coupler_railway.openrails.environment import (
     environment_entries,
     write_environments,
@@ -35,6 +37,8 @@ from coupler_railway.openrails.environment import (
 )
 from coupler_railway.openrails.fit import FitError, Section, fit_error, fit_sections
 from coupler_railway.openrails.stf import StfWriter, quote
+from coupler_railway.openrails.stock import write_stock
+from coupler_railway.openrails.terrain import TrackProfile, write_terrain
 from coupler_railway.openrails.world import WorldFrame, WorldPoint, float32, world_file_name
 from coupler_railway.railml import load_network
 
@@ -50,6 +54,8 @@ BALISE_SHAPE = "CouplerBalise.s"
 SWITCH_SHAPE = "CouplerSwitch.s"
 """The shape a junction's TrackObj names: a switch stand beside the trunk (the rails through a
 junction are the adjacent sections' dynamic track)."""
+LIGHT_TEXTURE = "ltex.ace"
+"""The signal lights' texture sigcfg.dat names (TEXTURES/, white)."""
 SWITCH_PATH_M = 25.0
 """Length of each path of a junction's track shape (or the adjacent section's, if shorter)."""
 ANIMATED = 0x00080000
@@ -84,6 +90,12 @@ class RouteReport:
     slope_offset_m: float
     """Largest along-track shift OpenRails' pitched sections add (sections on a gradient are
     laid along the slope, so their horizontal footprint is shorter by ``1 - cos(pitch)``)."""
+    altitude_m: float | None = None
+    """The railML altitude of the first line's start (None: heights start at 0 there)."""
+    terrain_tiles: int = 0
+    """Terrain tiles written (TILES/*.t)."""
+    consist: str = ""
+    """The consist written (TRAINS/CONSISTS/...)."""
 
 
 @dataclass
@@ -319,8 +331,6 @@ class _Builder:
                 self.slope_offset = max(self.slope_offset, section.length * shrink)
         self._place_items(line_segments)
         self.paths = self._plan_paths()
-        for number, node in enumerate((n for n in self.nodes if n.switch is not None), start=1):
-            node.shape = number
 
     def _junction(
         self, node: _Node, switch: Switch, line: int, line_segments: list[list[_Segment]]
@@ -338,6 +348,7 @@ class _Builder:
         )
         forward = math.cos(branch_heading - main_heading) > 0.0
         node.switch = switch
+        node.shape = sum(1 for n in self.nodes if n.switch is not None)  # numbered from 1
         trunk, straight = (before, after) if forward else (after, before)
         departing = main_heading if forward else main_heading + math.pi
 
@@ -460,6 +471,9 @@ class _Builder:
             self._write_world(folder, tile, objects)
         paths = self._write_paths(folder)
         self._write_signals(folder)
+        self._write_shapes(folder)
+        write_terrain(folder, list(world), self._profile())
+        stock = write_stock(folder)
         sections = [s for seg in self.segments for s in seg.sections]
         fits = [fit_error(self.lines[seg.line].model, seg.sections) for seg in self.segments]
         return RouteReport(
@@ -474,7 +488,37 @@ class _Builder:
             origin=self.frame.origin,
             fit=FitError(max(f.max_lateral_m for f in fits), max(f.max_along_m for f in fits)),
             slope_offset_m=self.slope_offset,
+            altitude_m=self.lines[0].altitude_m,
+            terrain_tiles=len(world),
+            consist=stock[0],
         )
+
+    def _write_shapes(self, folder: Path) -> None:
+        """The shapes the world files place (SHAPES/) and their textures (TEXTURES/), with
+        the signal lights' texture sigcfg.dat names."""
+        placed = {BALISE_SHAPE: shapes.balise(), SIGNAL_SHAPE: shapes.signal()}
+        if any(n.switch is not None for n in self.nodes):
+            placed[SWITCH_SHAPE] = shapes.switch_stand()
+        textures = set()
+        for name, shape in placed.items():
+            shapes.save_shape(folder / "SHAPES" / name, shape)
+            textures.update(shape.textures)
+        for texture in sorted(textures):
+            write_ace(folder / "TEXTURES" / texture, shapes.COLOURS[texture])
+        write_ace(folder / "TEXTURES" / LIGHT_TEXTURE, (255, 255, 255, 255))
+
+    def profile_points(self, line: int, spacing: float = 1.0) -> np.ndarray:
+        """``(east, north, height)`` on the world plane every ``spacing`` metres along a
+        line's B-spline, and at its end."""
+        model = self.lines[line].model
+        distances = np.append(np.arange(0.0, model.length, spacing), model.length)
+        local = model.local_xy(distances)
+        x0, z0 = self.frame.origin.absolute
+        heights = [self.elevation(line, float(d)) for d in distances]
+        return np.column_stack([local[:, 0] + x0, local[:, 1] + z0, heights])
+
+    def _profile(self) -> TrackProfile:
+        return TrackProfile(tuple(self.profile_points(i) for i in range(len(self.lines))))
 
     def _world_objects(self) -> dict[tuple[int, int], list[tuple[str, object]]]:
         """Every world object by tile, in UID order; assigns the UIDs the TDB refers to."""
@@ -820,7 +864,7 @@ class _Builder:
         """A minimal sigcfg.dat (OpenRails needs one) with the route's one signal type."""
         stf = StfWriter("JINX0g0t")
         stf.block("LightTextures", 1)
-        stf.line("LightTex", quote("ltex"), "ltex.ace", 0, 0, 1, 1)
+        stf.line("LightTex", quote("ltex"), LIGHT_TEXTURE, 0, 0, 1, 1)
         stf.end()
         stf.block("LightsTab", 2)
         stf.block("LightsTabEntry", quote("Red Light"))
