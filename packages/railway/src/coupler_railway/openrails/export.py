@@ -625,7 +625,7 @@ class _Builder:
         from 1, two per junction) and one two-path track shape per junction. The dynamic
         track's sections stay in the route's own tsection.dat (numbered from 40000)."""
         junctions = [n for n in self.nodes if n.switch is not None]
-        stf = StfWriter("JINX0T0t")
+        stf = StfWriter("JINX0F0t")  # the global file's type F (OpenRails does not check it)
         stf.block("TrackSections", 2 * len(junctions))
         for node in junctions:
             for route, (_, length, curvature) in enumerate(self.switch_paths(node)):

@@ -212,9 +212,7 @@ def _xyz(values: list[float]) -> str:
     return " ".join(number(v) for v in values)
 
 
-def _table(
-    stf: StfWriter, name: str, item: str, rows: Sequence[Sequence[float | int]]
-) -> None:
+def _table(stf: StfWriter, name: str, item: str, rows: Sequence[Sequence[float | int]]) -> None:
     stf.block(name, len(rows))
     for row in rows:
         stf.line(item, *row)
