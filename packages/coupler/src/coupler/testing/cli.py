@@ -38,4 +38,4 @@ def recorded(out_dir: Path) -> list[dict[str, str]]:
 
 def summary(out_dir: Path) -> dict[str, Any]:
     """A run's summary.json."""
-    return json.loads((out_dir / "summary.json").read_text())  # type: ignore[no-any-return]
+    return json.loads((out_dir / "summary.json").read_text())
