@@ -10,7 +10,12 @@ What is written and how it maps railML is described in docs/openrails-route.md. 
   around the line's first point; its gradient is carried by each section's pitch;
 - balises, signals and stations become track items, balises and signals also world objects;
 - a path (``PATHS/*.pat``) runs from every line end to every other line end it can reach
-  without reversing.
+  without reversing;
+- besides, what OpenRails opens at start and draws: the environments and track types
+  (:mod:`~coupler_railway.openrails.environment`), the junctions' track shapes
+  (``OpenRails/tsection.dat``), terrain (:mod:`~coupler_railway.openrails.terrain`), shapes
+  and textures (:mod:`~coupler_railway.openrails.shapes`, :mod:`~coupler_railway.openrails.ace`)
+  and a placeholder train (:mod:`~coupler_railway.openrails.stock`).
 """
 
 from __future__ import annotations
