@@ -512,11 +512,15 @@ class _Builder:
             write_ace(folder / "TEXTURES" / texture, shapes.COLOURS[texture])
         write_ace(folder / "TEXTURES" / LIGHT_TEXTURE, (255, 255, 255, 255))
 
-    def profile_points(self, line: int, spacing: float = 1.0) -> np.ndarray:
+    def profile_points(self, line: int, spacing: float = 5.0) -> np.ndarray:
         """``(east, north, height)`` on the world plane every ``spacing`` metres along a
-        line's B-spline, and at its end."""
+        line's B-spline, at every gradient change (so heights are linear between points) and
+        at its end."""
         model = self.lines[line].model
-        distances = np.append(np.arange(0.0, model.length, spacing), model.length)
+        changes = [d for d, _ in model.gradient_steps if 0.0 < d < model.length]
+        distances = np.unique(
+            np.concatenate([np.arange(0.0, model.length, spacing), changes, [model.length]])
+        )
         local = model.local_xy(distances)
         x0, z0 = self.frame.origin.absolute
         heights = [self.elevation(line, float(d)) for d in distances]
