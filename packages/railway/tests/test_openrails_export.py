@@ -258,6 +258,7 @@ def test_scenario_route_as_exported(scenario: Route) -> None:
     assert sorted(scenario.paths) == ["ocp_ABU-ocp_SZB", "ocp_SZB-ocp_ABU"]
 
 
+@pytest.mark.slow
 def test_round_trip_against_the_b_spline(scenario: Route, junction: Route) -> None:
     """Sample every exported section as OpenRails lays it and measure it against the railML
     B-spline at the same distance: across the track, and the length of the whole line."""

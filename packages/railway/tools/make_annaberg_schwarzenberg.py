@@ -78,8 +78,11 @@ def sub(parent: etree._Element, tag: str, **attributes: str) -> etree._Element:
     return etree.SubElement(parent, f"{{{NS}}}{tag}", attributes)
 
 
-def geo(parent: etree._Element, latitude: float, longitude: float) -> None:
-    sub(parent, "geoCoord", coord=f"{latitude:.8f} {longitude:.8f}")
+def geo(
+    parent: etree._Element, latitude: float, longitude: float, altitude: float | None = None
+) -> None:
+    height = "" if altitude is None else f" {altitude:.3f}"
+    sub(parent, "geoCoord", coord=f"{latitude:.8f} {longitude:.8f}{height}")
 
 
 def num(value: float) -> str:
@@ -123,7 +126,9 @@ def main() -> None:
         track = sub(tracks, "track", id=section.track_id, name=section.name)
         topo = sub(track, "trackTopology")
         begin = sub(topo, "trackBegin", id=f"{section.track_id}_b", pos="0", absPos=num(start))
-        geo(begin, shape.latitudes_deg[0], shape.longitudes_deg[0])
+        # the line's altitude at its start (railML's third coord value; the rest of the
+        # line's heights follow from the gradients)
+        geo(begin, shape.latitudes_deg[0], shape.longitudes_deg[0], a[4] if index == 0 else None)
         if index == 0:
             sub(begin, "bufferStop", id=f"{section.track_id}_stop")
         else:

@@ -48,8 +48,15 @@ def _export_openrails(args: argparse.Namespace) -> int:
         f"across, {report.fit.max_along_m * 1000:.2f} mm at equal distance; slope "
         f"foreshortening up to {report.slope_offset_m * 1000:.2f} mm"
     )
+    altitude = (
+        f"{report.altitude_m:.3f} m (railML)"
+        if report.altitude_m is not None
+        else "0 (railML gives no altitude)"
+    )
+    print(f"  height at RouteStart: {altitude}; terrain: {report.terrain_tiles} tiles")
     for path in report.paths:
         print(f"  path: {path}")
+    print(f"  consist: {report.consist} (placeholder stock)")
     return 0
 
 

@@ -153,6 +153,9 @@ class Infrastructure:
     """Switches on this line, sorted by distance (only in a :class:`Network`)."""
     platform_edges: tuple[PlatformEdge, ...] = ()
     """Sorted by where they begin along the line."""
+    altitude_m: float | None = None
+    """Altitude of the line's first point above sea level [m]: the third value of its first
+    trackBegin's geoCoord (``coord="lat lon altitude"``), None when railML gives none."""
 
 
 @dataclass(frozen=True, eq=False)

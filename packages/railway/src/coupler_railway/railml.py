@@ -173,6 +173,24 @@ class _Reader:
             )
         return values[0], values[1]
 
+    def altitude(self, element: etree._Element) -> float | None:
+        """The altitude [m] a geoCoord gives as its third value ("lat lon altitude"), if any."""
+        coords = _children(element, "geoCoord")
+        values = (coords[0].get("coord") or "").split() if coords else []
+        if len(values) < 3:
+            return None
+        try:
+            altitude = float(values[2])
+        except ValueError:
+            altitude = math.nan
+        if not math.isfinite(altitude):
+            raise self.error(
+                coords[0],
+                f"coord={coords[0].get('coord')!r} has {values[2]!r} as its altitude",
+                'write the altitude in metres as the third value: coord="50.5766 13.0104 545.0"',
+            )
+        return altitude
+
     # -- reading ----------------------------------------------------------------------------
 
     def read(self) -> Infrastructure:
@@ -251,9 +269,15 @@ class _Reader:
                     signals=self.read_signals(line.tracks, model),
                     platform_edges=self.read_platform_edges(line.tracks, model),
                     switches=tuple(sorted(switches[index], key=lambda w: w.distance_m)),
+                    altitude_m=self.start_altitude(line),
                 )
             )
         return Network(source=self.path, lines=tuple(lines), warnings=tuple(self.warnings))
+
+    def start_altitude(self, line: _Line) -> float | None:
+        """The altitude of a line's first point (its first trackBegin's geoCoord), if given."""
+        first = line.tracks[0].points[0]
+        return self.altitude(first.element) if first.pos == 0.0 else None
 
     def check_ids(self, root: etree._Element) -> None:
         seen: dict[str, etree._Element] = {}

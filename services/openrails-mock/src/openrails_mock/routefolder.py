@@ -3,7 +3,8 @@
     ROUTE/NAME.trk          the route file: FileName (the .tdb's stem) and RouteStart
     ROUTE/NAME.tdb          the track database: track nodes (vector, junction, end) and items
     ROUTE/tsection.dat      the route's track sections (OpenRails/tsection.dat, global
-                            format, is read first when it exists, as OpenRails does)
+                            format: track sections and track shapes, is read first when it
+                            exists, as OpenRails does)
     ROUTE/PATHS/*.pat       paths (read on demand, :mod:`openrails_mock.paths`)
     ROUTE/WORLD/w*.w        world files: the objects a ChangeObjectPosition command moves
 
@@ -34,6 +35,18 @@ class SectionShape:
     """0 for a straight."""
     angle: float
     """Signed turn in radians, positive to the right; 0 for a straight."""
+
+
+@dataclass(frozen=True)
+class TrackShape:
+    """A track shape of the global tsection.dat: a switch's (or a fixed track piece's) paths."""
+
+    index: int
+    file_name: str
+    paths: tuple[tuple[int, ...], ...]
+    """The track sections of each path (SectionIdx), in route order."""
+    main_route: int
+    """The route a junction of this shape is set to at start (OpenRails' MainRoute)."""
 
 
 @dataclass(frozen=True)
@@ -77,6 +90,8 @@ class TrackNode:
     """Junction and end nodes: (tile_x, tile_z, x, y, z) of their UiD."""
     line: int = 0
     """Line of the TrackNode in the .tdb, for error messages."""
+    shape: int | None = None
+    """A junction's track shape index (TrJunctionNode's second value)."""
 
     @property
     def length(self) -> float:
@@ -129,6 +144,8 @@ class RouteFolder:
     objects: dict[tuple[int, int, int], WorldObject]
     """Keyed by (tile_x, tile_z, uid)."""
     tdb_file: Path
+    track_shapes: dict[int, TrackShape] = field(default_factory=dict)
+    """OpenRails/tsection.dat's TrackShapes, by index."""
 
     @property
     def junctions(self) -> list[int]:
@@ -171,7 +188,7 @@ def load_route(folder: str | Path) -> RouteFolder:
         start_block.real(2, "x"),
         start_block.real(3, "z"),
     )
-    shapes = _load_sections(root)
+    shapes, track_shapes = _load_sections(root)
     tdb_file = _child(root, f"{stem}.tdb")
     if tdb_file is None:
         raise RouteError(
@@ -185,7 +202,7 @@ def load_route(folder: str | Path) -> RouteFolder:
     objects = _load_world(world) if world is not None else {}
     route_id = route.optional("RouteID")
     name = route_id.text(0, "the route id") if route_id is not None else stem
-    return RouteFolder(root, name, start, nodes, items, objects, tdb_file)
+    return RouteFolder(root, name, start, nodes, items, objects, tdb_file, track_shapes)
 
 
 MAX_SECTIONS = 1_000_000
@@ -196,12 +213,15 @@ MAX_SECTION_M = 10_000.0
 or one arc)."""
 
 
-def _load_sections(root: Path) -> dict[int, SectionShape]:
+def _load_sections(root: Path) -> tuple[dict[int, SectionShape], dict[int, TrackShape]]:
     shapes: dict[int, SectionShape] = {}
+    track_shapes: dict[int, TrackShape] = {}
     openrails = _child(root, "OpenRails")
     global_file = _child(openrails, "tsection.dat") if openrails is not None else None
     if global_file is not None:
-        for section in _sections(read_stf(global_file)):
+        global_root = read_stf(global_file)
+        track_shapes = _track_shapes(global_root)
+        for section in _sections(global_root):
             index = section.integer(0, "the section index")
             size, curve = section.optional("SectionSize"), section.optional("SectionCurve")
             if curve is not None:
@@ -221,7 +241,55 @@ def _load_sections(root: Path) -> dict[int, SectionShape]:
                 shapes[index] = _shape(section, index, a, 0.0, 0.0)
             else:
                 shapes[index] = _shape(section, index, b * abs(a), b, a)
-    return shapes
+    for shape in track_shapes.values():
+        for path in shape.paths:
+            missing = [i for i in path if i not in shapes]
+            if missing:
+                raise RouteError(
+                    global_file or root,
+                    None,
+                    f"track shape {shape.index} uses track section {missing[0]}, which no "
+                    "tsection.dat of the route defines",
+                    "export the route again, or add the section",
+                )
+    return shapes, track_shapes
+
+
+def _track_shapes(root: Block) -> dict[int, TrackShape]:
+    """The TrackShapes of a global tsection.dat: each shape's paths (NumPaths SectionIdx
+    blocks, ``SectionIdx ( n x y z angle sections... )``) and its MainRoute."""
+    found: dict[int, TrackShape] = {}
+    for table in root.blocks("TrackShapes"):
+        for block in table.blocks("TrackShape"):
+            index = block.integer(0, "the shape index")
+            paths = []
+            for path in block.blocks("SectionIdx"):
+                count = path.integer(0, "the number of sections")
+                if len(path.values) != 5 + count:
+                    raise path.error(
+                        f"SectionIdx declares {count} sections but holds {len(path.values) - 5}",
+                        "write SectionIdx ( n x y z angle section... ) with n sections",
+                    )
+                paths.append(tuple(path.integer(5 + k, "a section index") for k in range(count)))
+            declared = block.optional("NumPaths")
+            if declared is not None and declared.integer(0, "NumPaths") != len(paths):
+                raise block.error(
+                    f"TrackShape {index} declares {declared.integer(0, 'NumPaths')} paths but "
+                    f"holds {len(paths)}",
+                    "give one SectionIdx per path",
+                )
+            main = block.optional("MainRoute")
+            main_route = main.integer(0, "the main route") if main is not None else 0
+            if paths and not 0 <= main_route < len(paths):
+                raise block.error(
+                    f"TrackShape {index} has MainRoute {main_route} but {len(paths)} paths",
+                    "give a route of the shape, from 0",
+                )
+            name = block.optional("FileName")
+            found[index] = TrackShape(
+                index, name.text(0, "the shape file") if name else "", tuple(paths), main_route
+            )
+    return found
 
 
 def _sections(root: Block) -> list[Block]:
@@ -398,7 +466,10 @@ def _track_node(block: Block, shapes: dict[int, SectionShape]) -> TrackNode:
                 f"junction node {index} has {in_pins} in and {out_pins} out pins",
                 "a junction has TrPins ( 1 2 ...): its trunk, then its two routes",
             )
-        return TrackNode(index, "junction", pins, in_pins, position=position, line=block.line)
+        shape = block.block("TrJunctionNode").integer(1, "the junction's track shape")
+        return TrackNode(
+            index, "junction", pins, in_pins, position=position, line=block.line, shape=shape
+        )
     if block.optional("TrEndNode") is not None:
         if len(pins) != 1:
             raise pins_block.error(f"end node {index} has {len(pins)} pins", "give it one")

@@ -2,8 +2,10 @@
 
 A file is a list of items; an item is a bare word or number, a quoted string, or a block
 ``Name ( items )``. The mock reads the route folder files (route, track database, track
-sections, paths, world) as OpenRails does: UTF-16 with a byte order mark or UTF-8, any
-whitespace, ``//`` comments, ``comment``/``skip`` blocks ignored, names case-insensitive.
+sections, paths, world, and the files OpenRails' viewer opens: :mod:`openrails_mock.content`)
+as OpenRails does: UTF-16 with a byte order mark or UTF-8 (a UTF-16 file without its byte
+order mark is refused, not read as nothing), any whitespace, ``//`` comments,
+``comment``/``skip`` blocks ignored, names case-insensitive.
 Every problem is a :class:`RouteError` naming the file and line.
 """
 
@@ -125,8 +127,14 @@ def _decode(path: Path, data: bytes) -> str:
         return data[2:].decode("utf-16-be")
     if data.startswith(b"\xef\xbb\xbf"):
         return data[3:].decode("utf-8")
-    if data[:1] != b"\x00" and data[1:2] == b"\x00":  # UTF-16 LE without a byte order mark
-        return data.decode("utf-16-le")
+    if len(data) >= 2 and (data[0] == 0) != (data[1] == 0):  # UTF-16 without its mark
+        raise RouteError(
+            path,
+            1,
+            "is UTF-16 text without its byte order mark (FF FE): OpenRails reads such a file "
+            "as UTF-8 and finds nothing in it (its shape, terrain and world reader refuses it)",
+            "write it as MSTS does: UTF-16 little endian starting with FF FE",
+        )
     return data.decode("utf-8")
 
 

@@ -74,9 +74,15 @@ class TrackNetwork:
     def __init__(self, route: RouteFolder) -> None:
         self.route = route
         self.nodes = route.nodes
-        self.selected: dict[int, int] = {i: 0 for i in route.junctions}
-        """Junction node -> SelectedRoute (0 or 1)."""
+        self.selected: dict[int, int] = {i: self._main_route(i) for i in route.junctions}
+        """Junction node -> SelectedRoute (0 or 1): at start its track shape's MainRoute, as
+        OpenRails sets it (route 0 when the shape is missing: OpenRails warns "Missing
+        TrackShape" and takes route 0)."""
         self._starts = {i: _cumulative(n) for i, n in self.nodes.items() if n.kind == "vector"}
+
+    def _main_route(self, junction: int) -> int:
+        shape = self.route.track_shapes.get(self.nodes[junction].shape or -1)
+        return shape.main_route if shape is not None else 0
 
     def vector(self, index: int) -> TrackNode:
         node = self.nodes[index]

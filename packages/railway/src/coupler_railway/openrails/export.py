@@ -10,7 +10,12 @@ What is written and how it maps railML is described in docs/openrails-route.md. 
   around the line's first point; its gradient is carried by each section's pitch;
 - balises, signals and stations become track items, balises and signals also world objects;
 - a path (``PATHS/*.pat``) runs from every line end to every other line end it can reach
-  without reversing.
+  without reversing;
+- besides, what OpenRails opens at start and draws: the environments and track types
+  (:mod:`~coupler_railway.openrails.environment`), the junctions' track shapes
+  (``OpenRails/tsection.dat``), terrain (:mod:`~coupler_railway.openrails.terrain`), shapes
+  and textures (:mod:`~coupler_railway.openrails.shapes`, :mod:`~coupler_railway.openrails.ace`)
+  and a placeholder train (:mod:`~coupler_railway.openrails.stock`).
 """
 
 from __future__ import annotations
@@ -28,8 +33,17 @@ import numpy as np
 
 from coupler_railway.errors import RailMLError
 from coupler_railway.infrastructure import Infrastructure, Network, Station, Switch
+from coupler_railway.openrails import shapes
+from coupler_railway.openrails.ace import write_ace
+from coupler_railway.openrails.environment import (
+    environment_entries,
+    write_environments,
+    write_track_types,
+)
 from coupler_railway.openrails.fit import FitError, Section, fit_error, fit_sections
 from coupler_railway.openrails.stf import StfWriter, quote
+from coupler_railway.openrails.stock import write_stock
+from coupler_railway.openrails.terrain import TrackProfile, write_terrain
 from coupler_railway.openrails.world import WorldFrame, WorldPoint, float32, world_file_name
 from coupler_railway.railml import load_network
 
@@ -42,6 +56,13 @@ SIGNAL_TYPE = "CouplerMain"
 """The one signal type of the route's sigcfg.dat."""
 SIGNAL_SHAPE = "CouplerSignal.s"
 BALISE_SHAPE = "CouplerBalise.s"
+SWITCH_SHAPE = "CouplerSwitch.s"
+"""The shape a junction's TrackObj names: a switch stand beside the trunk (the rails through a
+junction are the adjacent sections' dynamic track)."""
+LIGHT_TEXTURE = "ltex.ace"
+"""The signal lights' texture sigcfg.dat names (TEXTURES/, white)."""
+SWITCH_PATH_M = 25.0
+"""Length of each path of a junction's track shape (or the adjacent section's, if shorter)."""
 ANIMATED = 0x00080000
 """StaticFlags bit of an object OpenRails keeps apart so it can be moved."""
 PLATFORM_LENGTH_M = 100.0
@@ -74,6 +95,12 @@ class RouteReport:
     slope_offset_m: float
     """Largest along-track shift OpenRails' pitched sections add (sections on a gradient are
     laid along the slope, so their horizontal footprint is shorter by ``1 - cos(pitch)``)."""
+    altitude_m: float | None = None
+    """The railML altitude of the first line's start (None: heights start at 0 there)."""
+    terrain_tiles: int = 0
+    """Terrain tiles written (TILES/*.t)."""
+    consist: str = ""
+    """The consist written (TRAINS/CONSISTS/...)."""
 
 
 @dataclass
@@ -104,6 +131,8 @@ class _Node:
     pins: list[tuple[int, int]] = field(default_factory=list)
     """(vector node, 1 if it starts here else 0): the trunk (or only pin) first."""
     switch: Switch | None = None
+    shape: int = 0
+    """A junction's track shape (OpenRails/tsection.dat TrackShapes), numbered from 1."""
 
 
 @dataclass(frozen=True)
@@ -184,11 +213,14 @@ class _Builder:
         self.item_uid: dict[int, tuple[int, int, int]] = {}
         self.section_index: dict[int, int] = {}
         """id(section) -> its number in tsection.dat (and its dynamic track's)."""
+        self.junction_uid: dict[int, tuple[int, int, int]] = {}
+        """junction node index -> (world tile x, z, UID) of its TrackObj."""
 
     # -- geometry helpers ----------------------------------------------------------------
 
     def elevation(self, line: int, distance: float) -> float:
-        """Height above the first line's start [m], integrated from the gradients."""
+        """Height [m]: the first line's altitude at its start (railML; 0 when it gives none)
+        plus the height integrated from the gradients."""
         return self.base_elevation[line] + self._climb(line, distance)
 
     def _climb(self, line: int, distance: float) -> float:
@@ -203,7 +235,8 @@ class _Builder:
     def _base_elevations(self) -> list[float]:
         """Each line's height at its start: the first line at 0, every other one continuing
         the height of the line it branches off (first switch found)."""
-        bases: list[float | None] = [0.0] + [None] * (len(self.lines) - 1)
+        bases: list[float | None] = [self.lines[0].altitude_m or 0.0]
+        bases += [None] * (len(self.lines) - 1)
         changed = True
         while changed:
             changed = False
@@ -320,6 +353,7 @@ class _Builder:
         )
         forward = math.cos(branch_heading - main_heading) > 0.0
         node.switch = switch
+        node.shape = sum(1 for n in self.nodes if n.switch is not None)  # numbered from 1
         trunk, straight = (before, after) if forward else (after, before)
         departing = main_heading if forward else main_heading + math.pi
 
@@ -433,12 +467,18 @@ class _Builder:
     def write(self, folder: Path) -> RouteReport:
         world = self._world_objects()
         self._write_trk(folder)
+        write_environments(folder)
+        write_track_types(folder)
         self._write_tsection(folder)
+        self._write_track_shapes(folder)
         self._write_tdb(folder, world)
         for tile, objects in world.items():
             self._write_world(folder, tile, objects)
         paths = self._write_paths(folder)
         self._write_signals(folder)
+        self._write_shapes(folder)
+        write_terrain(folder, list(world), self._profile())
+        stock = write_stock(folder)
         sections = [s for seg in self.segments for s in seg.sections]
         fits = [fit_error(self.lines[seg.line].model, seg.sections) for seg in self.segments]
         return RouteReport(
@@ -453,7 +493,41 @@ class _Builder:
             origin=self.frame.origin,
             fit=FitError(max(f.max_lateral_m for f in fits), max(f.max_along_m for f in fits)),
             slope_offset_m=self.slope_offset,
+            altitude_m=self.lines[0].altitude_m,
+            terrain_tiles=len(world),
+            consist=stock[0],
         )
+
+    def _write_shapes(self, folder: Path) -> None:
+        """The shapes the world files place (SHAPES/) and their textures (TEXTURES/), with
+        the signal lights' texture sigcfg.dat names."""
+        placed = {BALISE_SHAPE: shapes.balise(), SIGNAL_SHAPE: shapes.signal()}
+        if any(n.switch is not None for n in self.nodes):
+            placed[SWITCH_SHAPE] = shapes.switch_stand()
+        textures = set()
+        for name, shape in placed.items():
+            shapes.save_shape(folder / "SHAPES" / name, shape)
+            textures.update(shape.textures)
+        for texture in sorted(textures):
+            write_ace(folder / "TEXTURES" / texture, shapes.COLOURS[texture])
+        write_ace(folder / "TEXTURES" / LIGHT_TEXTURE, (255, 255, 255, 255))
+
+    def profile_points(self, line: int, spacing: float = 5.0) -> np.ndarray:
+        """``(east, north, height)`` on the world plane every ``spacing`` metres along a
+        line's B-spline, at every gradient change (so heights are linear between points) and
+        at its end."""
+        model = self.lines[line].model
+        changes = [d for d, _ in model.gradient_steps if 0.0 < d < model.length]
+        distances = np.unique(
+            np.concatenate([np.arange(0.0, model.length, spacing), changes, [model.length]])
+        )
+        local = model.local_xy(distances)
+        x0, z0 = self.frame.origin.absolute
+        heights = [self.elevation(line, float(d)) for d in distances]
+        return np.column_stack([local[:, 0] + x0, local[:, 1] + z0, heights])
+
+    def _profile(self) -> TrackProfile:
+        return TrackProfile(tuple(self.profile_points(i) for i in range(len(self.lines))))
 
     def _world_objects(self) -> dict[tuple[int, int], list[tuple[str, object]]]:
         """Every world object by tile, in UID order; assigns the UIDs the TDB refers to."""
@@ -474,6 +548,10 @@ class _Builder:
             if item.kind in ("balise", "signal"):
                 tile = (item.world.tile_x, item.world.tile_z)
                 self.item_uid[index] = add(tile, item.kind, index)
+        for node in self.nodes:
+            if node.switch is not None:
+                point = self.frame.world(node.east, node.north)
+                self.junction_uid[node.index] = add((point.tile_x, point.tile_z), "switch", node)
         for tile_x, tile_z in list(world):
             for dx, dz in itertools.product((-1, 0, 1), repeat=2):
                 world.setdefault((tile_x + dx, tile_z + dz), [])
@@ -506,15 +584,13 @@ class _Builder:
         ):
             stf.line(token, value)
         stf.block("Environment")
-        for season in ("Spring", "Summer", "Autumn", "Winter"):
-            for weather, env in (("Clear", "sun.env"), ("Rain", "rain.env"), ("Snow", "snow.env")):
-                stf.line(f"{season}{weather}", env)
+        for entry, env in environment_entries():
+            stf.line(entry, env)
         stf.end()
         stf.line("TerrainErrorScale", 1)
         origin = self.frame.origin
         stf.line("RouteStart", origin.tile_x, origin.tile_z, origin.x, origin.z)
         stf.line("MilepostUnitsKilometers")
-        stf.line("TempRestrictedSpeed", 0)
         stf.end()
         stf.save(folder / f"{self.name}.trk")
 
@@ -532,6 +608,59 @@ class _Builder:
         stf.end()
         stf.save(folder / "tsection.dat")
 
+    def switch_paths(self, node: _Node) -> list[tuple[float, float, float]]:
+        """A junction's two paths, route 0 (left) then route 1 (right): ``(angle, length,
+        curvature)``: the path's start direction from the junction's departing direction [deg,
+        clockwise], and the first stretch of the route's adjacent section as seen from the
+        junction (up to SWITCH_PATH_M; curvature positive to the right)."""
+        segments = {s.index: s for s in self.segments}
+        paths = []
+        for vector, starts_here in node.pins[1:]:
+            segment = segments[vector]
+            if starts_here:
+                section = segment.sections[0]
+                curvature, heading = section.curvature, section.heading
+            else:  # the route's section runs towards the junction: seen from it, reversed
+                section = segment.sections[-1]
+                curvature = -section.curvature
+                heading = section.heading + section.curvature * section.length + math.pi
+            angle = math.degrees(_heading(heading - node.heading))
+            paths.append((angle, min(SWITCH_PATH_M, section.length), curvature))
+        return paths
+
+    def _write_track_shapes(self, folder: Path) -> None:
+        """``OpenRails/tsection.dat`` in the global file's grammar, the file OpenRails reads
+        instead of its installation's: the track sections of the junctions' paths (numbered
+        from 1, two per junction) and one two-path track shape per junction. The dynamic
+        track's sections stay in the route's own tsection.dat (numbered from 40000)."""
+        junctions = [n for n in self.nodes if n.switch is not None]
+        stf = StfWriter("JINX0F0t")  # the global file's type F (OpenRails does not check it)
+        stf.block("TrackSections", 2 * len(junctions))
+        for node in junctions:
+            for route, (_, length, curvature) in enumerate(self.switch_paths(node)):
+                stf.block("TrackSection", 2 * node.shape - 1 + route)
+                if curvature == 0.0:
+                    stf.line("SectionSize", 1.5, float32(length))
+                else:
+                    radius = 1.0 / abs(curvature)
+                    stf.line("SectionSize", 1.5, 0)
+                    degrees = math.copysign(math.degrees(length / radius), curvature)
+                    stf.line("SectionCurve", float32(radius), float32(degrees))
+                stf.end()
+        stf.end()
+        stf.block("TrackShapes", len(junctions))
+        for node in junctions:
+            stf.block("TrackShape", node.shape)
+            stf.line("FileName", SWITCH_SHAPE)
+            stf.line("NumPaths", 2)
+            for route, (angle, _, _) in enumerate(self.switch_paths(node)):
+                stf.line("SectionIdx", 1, 0, 0, 0, float32(angle), 2 * node.shape - 1 + route)
+            stf.line("MainRoute", 0)  # SelectedRoute 0 (the left route) at start, as before
+            stf.line("ClearanceDist", 0)
+            stf.end()
+        stf.end()
+        stf.save(folder / "OpenRails" / "tsection.dat")
+
     def _track_section(self, section: Section) -> list[object]:
         """``SectionCurve ( c ) index a b`` of a route track section (or dynamic track)."""
         number = self.section_index[id(section)]
@@ -541,10 +670,13 @@ class _Builder:
         angle = float32(math.copysign(section.length / radius, section.curvature))
         return [_Raw("SectionCurve ( 1 )"), number, angle, radius]
 
+    def _pitch(self, segment: _Segment, section: Section) -> float:
+        """A section's pitch AX [rad]: ``-atan(gradient)``, negative climbs."""
+        slope = self.lines[segment.line].model.gradient(section.start + section.length / 2.0)
+        return -math.atan(slope / 1000.0)
+
     def _vector_section(self, segment: _Segment, section: Section) -> list[object]:
-        model = self.lines[segment.line].model
         point = self.frame.world(section.east, section.north)
-        slope = model.gradient(section.start + section.length / 2.0)
         wf_x, wf_z, uid = self.section_uid[id(section)]
         index = self.section_index[id(section)]
         return [
@@ -561,7 +693,7 @@ class _Builder:
             point.x,
             self.elevation(segment.line, section.start),
             point.z,
-            -math.atan(slope / 1000.0),
+            self._pitch(segment, section),
             _heading(section.heading),
             0.0,
         ]
@@ -598,7 +730,9 @@ class _Builder:
             wf_x, wf_z, uid = self.section_uid[id(section)]
             point = self.frame.world(node.east, node.north)
             if node.switch is not None:
-                stf.line("TrJunctionNode", 0, self.section_index[id(section)], 0)
+                # the junction's two-route track shape; its UiD names the TrackObj drawing it
+                stf.line("TrJunctionNode", 0, node.shape, 0)
+                wf_x, wf_z, uid = self.junction_uid[node.index]
             else:
                 stf.line("TrEndNode", 0)
             stf.line(
@@ -650,6 +784,9 @@ class _Builder:
             if kind == "dyntrack":
                 assert isinstance(thing, Section)
                 self._write_dyntrack(stf, uid, tile, thing)
+            elif kind == "switch":
+                assert isinstance(thing, _Node)
+                self._write_switch(stf, uid, thing)
             else:
                 assert isinstance(thing, int)
                 self._write_object(stf, uid, tile, kind, thing)
@@ -678,7 +815,26 @@ class _Builder:
         stf.line("StaticFlags", "00100000")
         point = self.frame.world(section.east, section.north)
         stf.line("Position", point.x, self.elevation(segment.line, section.start), point.z)
-        stf.line("QDirection", *_yaw_quaternion(section.heading))
+        # OpenRails draws dynamic track along the world object's orientation: the section's
+        # heading and its pitch (the vector section's AX), so the rails follow the gradient
+        stf.line("QDirection", *quaternion(section.heading, self._pitch(segment, section)))
+        stf.line("VDbId", NONE)
+        stf.end()
+
+    def _write_switch(self, stf: StfWriter, uid: int, node: _Node) -> None:
+        """A junction's TrackObj: its track shape, the junction it animates (JNodePosn), the
+        switch stand shape, placed at the junction facing the trunk's departing direction."""
+        point = self.frame.world(node.east, node.north)
+        stf.block("TrackObj")
+        stf.line("UiD", uid)
+        stf.line("SectionIdx", node.shape)
+        stf.line("Elevation", 0)
+        stf.line("JNodePosn", point.tile_x, point.tile_z, point.x, node.elevation, point.z)
+        stf.line("CollideFlags", 39)
+        stf.line("FileName", SWITCH_SHAPE)
+        stf.line("StaticFlags", "00100000")
+        stf.line("Position", point.x, node.elevation, point.z)
+        stf.line("QDirection", *quaternion(node.heading, 0.0))
         stf.line("VDbId", NONE)
         stf.end()
 
@@ -693,7 +849,7 @@ class _Builder:
             stf.line("FileName", BALISE_SHAPE)
             stf.line("StaticFlags", f"{ANIMATED:08x}")
             stf.line("Position", w.x, item.elevation, w.z)
-            stf.line("QDirection", *_yaw_quaternion(item.heading))
+            stf.line("QDirection", *quaternion(item.heading, 0.0))
             stf.line("VDbId", NONE)
             stf.end()
             return
@@ -703,7 +859,7 @@ class _Builder:
         stf.line("FileName", SIGNAL_SHAPE)
         stf.line("StaticFlags", "00000000")
         stf.line("Position", w.x, item.elevation, w.z)
-        stf.line("QDirection", *_yaw_quaternion(facing))
+        stf.line("QDirection", *quaternion(facing, 0.0))
         stf.line("VDbId", NONE)
         stf.line("SignalSubObj", "00000001")
         stf.block("SignalUnits", 1)
@@ -717,7 +873,7 @@ class _Builder:
         """A minimal sigcfg.dat (OpenRails needs one) with the route's one signal type."""
         stf = StfWriter("JINX0g0t")
         stf.block("LightTextures", 1)
-        stf.line("LightTex", quote("ltex"), "ltex.ace", 0, 0, 1, 1)
+        stf.line("LightTex", quote("ltex"), LIGHT_TEXTURE, 0, 0, 1, 1)
         stf.end()
         stf.block("LightsTab", 2)
         stf.block("LightsTabEntry", quote("Red Light"))
@@ -763,7 +919,7 @@ class _Builder:
         stf.end()
         stf.end()
         stf.end()
-        stf.block("ScriptFiles", 1)
+        stf.block("ScriptFiles")  # OpenRails' grammar: no count
         stf.line("ScriptFile", "sigscr.dat")
         stf.end()
         stf.save(folder / "sigcfg.dat")
@@ -930,6 +1086,10 @@ def _heading(radians: float) -> float:
     return (radians + math.pi) % (2.0 * math.pi) - math.pi
 
 
-def _yaw_quaternion(heading: float) -> tuple[float, float, float, float]:
-    """QDirection of an object turned ``heading`` clockwise from north about the vertical."""
-    return 0.0, math.sin(heading / 2.0), 0.0, math.cos(heading / 2.0)
+def quaternion(heading: float, pitch: float) -> tuple[float, float, float, float]:
+    """QDirection ``(x, y, z, w)`` of an object turned ``heading`` clockwise from north about
+    the vertical, then pitched by ``pitch`` about its own x axis (OpenRails' AX: negative
+    raises its front, so its forward axis is ``(sin h cos p, -sin p, cos h cos p)``)."""
+    sy, cy = math.sin(heading / 2.0), math.cos(heading / 2.0)
+    sx, cx = math.sin(pitch / 2.0), math.cos(pitch / 2.0)
+    return cy * sx, sy * cx, -sy * sx, cy * cx
