@@ -109,6 +109,13 @@ struct StepSocket {
 
   int send(const char* const* pieces, const size_t* sizes, int count) {
     if (ended || awaiting) return CS_FAILED;
+    if (answered_unasked()) {
+      fail(INTERNAL,
+           "an answer arrived on the step socket before its request was sent: the "
+           "participant answered a request twice (every later answer would belong to the "
+           "step before it)");
+      return CS_FAILED;
+    }
     size_t total = 0;
     for (int i = 0; i < count; ++i) total += sizes[i];
     if (total > max_send || total > UINT32_MAX) {
@@ -157,6 +164,26 @@ struct StepSocket {
     }
     return CS_OK;
   }
+  // Whether a step's answer came that no request asked for: one more answer frame buffered,
+  // or already arriving, after the last request's answer (its end frame, kind 1, is not one:
+  // the participant may end the loop between two steps).
+  bool answered_unasked() {
+    if (tail - head < HEADER) {
+      pollfd ready{fd, POLLIN, 0};
+      if (::poll(&ready, 1, 0) > 0 && (ready.revents & POLLIN)) {
+        if (head > 0) {
+          std::memmove(buffer.data(), buffer.data() + head, tail - head);
+          tail -= head;
+          head = 0;
+        }
+        if (buffer.size() < 64 * 1024) buffer.resize(64 * 1024);
+        ssize_t got = ::recv(fd, buffer.data() + tail, buffer.size() - tail, MSG_DONTWAIT);
+        if (got > 0) tail += static_cast<size_t>(got);
+      }
+    }
+    return tail - head >= HEADER && static_cast<uint8_t>(buffer[head + 4]) == STEP;
+  }
+
   std::string write_error;  // a request's write failed: the status when no end arrives
   int write_code = OK;
 

@@ -256,7 +256,7 @@ def test_a_pool_of_running_participants_serves_one_run_each(
             '[[variant]]\n"Gain.gain" = 1\n[[variant]]\n"Gain.gain" = 2\nstop_time = "abc"\n',
             "[variant]: variant 2 has stop_time = 'abc', which is not a number of seconds > 0",
         ),
-        ('[grid]\nstep = [0.1, 0]\n', "variant 2 has step = 0, which is not a number"),
+        ("[grid]\nstep = [0.1, 0]\n", "variant 2 has step = 0, which is not a number"),
     ],
 )
 def test_campaign_files_that_cannot_run_are_refused(

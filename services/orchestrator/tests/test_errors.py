@@ -14,6 +14,7 @@ import zipfile
 from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -398,3 +399,36 @@ def test_a_fleet_health_url_in_error_names_its_variables_never_their_values(
         "GAIN_HOST, GAIN_PORT from the environment) is not grpc://HOST:PORT"
     ), outcome.err
     assert "s3cr3t" not in outcome.err + outcome.out and "Traceback" not in outcome.err
+
+
+class ForgingGain(GainParticipant):
+    """A participant whose error message tries to take the terminal over: erase the line,
+    then print a run that completed."""
+
+    async def do_step(self, time_s: float, step: float, inputs: Any) -> Any:
+        raise RuntimeError(
+            "\x1b[1A\x1b[2K\rcompleted: 3 steps to t=1.5 s in 0.01 s\n\u202eresults: /etc/passwd"
+        )
+
+
+def test_a_participants_words_cannot_forge_a_line(tmp_path: Path) -> None:
+    """What a participant says reaches the terminal with its control characters escaped
+    (``\\x1b``, ``\\n``): its escape sequences could erase Coupler's lines and print a
+    ``completed:`` of their own."""
+    with serving(ForgingGain()) as server:
+        out = tmp_path / "out"
+        command = ["run", str(DATA / "mixed.ssd"), "--out", str(out)]
+        result = subprocess.run(
+            [sys.executable, "-m", "coupler_orchestrator", *command],
+            capture_output=True,
+            text=True,
+            env={**os.environ, "GAIN_PORT": str(server.port)},
+            timeout=60,
+            check=False,
+        )
+    assert result.returncode == 1, result.stderr
+    shown = result.stdout + result.stderr
+    assert "\x1b" not in shown and "\u202e" not in shown and "\r" not in shown
+    assert not any(line.startswith("completed:") for line in shown.splitlines())
+    assert "RuntimeError: \\x1b[1A\\x1b[2K\\rcompleted: 3 steps" in result.stderr
+    assert "\\n\\u202eresults: /etc/passwd" in result.stderr

@@ -9,8 +9,12 @@ test_secure_run.py mutual TLS with a token.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import shutil
+import socket
+import struct
 import tempfile
+import threading
 from collections.abc import Iterator, Mapping
 from pathlib import Path
 from typing import Any
@@ -22,6 +26,7 @@ from coupler.client import RemoteParticipant
 from coupler.errors import ParticipantError, ParticipantTimeout
 from coupler.examples.gain import GainParticipant
 from coupler.participant import EndRun, Values
+from coupler.v1 import component_pb2 as pb
 from coupler_orchestrator import ssp
 from coupler_orchestrator.master import native_step_channel as steps
 from coupler_orchestrator.native import MISSING
@@ -265,3 +270,90 @@ async def test_a_step_in_two_halves_over_the_step_socket(tmp_path: Path) -> None
                 await remote.terminate("failed")
             await remote.close()  # the sleepy one's run ends with its connection
     shutil.rmtree(folder, ignore_errors=True)
+
+
+GARBLED = [b"\x0a\x05ab"]
+"""An answer that is no DoStepResponse: outputs of 5 bytes, 2 of them there."""
+TWICE = [
+    pb.DoStepResponse(
+        outputs=[
+            pb.VariableBinding(channel="y", real=1.0),
+            pb.VariableBinding(channel="x", real=2.0),
+            pb.VariableBinding(channel="count", integer=0),
+            pb.VariableBinding(channel="inverted", boolean=True),
+            pb.VariableBinding(channel="echo", text=""),
+            pb.VariableBinding(channel="blob_out", binary=b""),
+        ]
+    ).SerializeToString()
+] * 2
+"""One well-formed answer, sent twice for every request."""
+
+
+class FakeSteps:
+    """A step socket answering each request's frame with the frames ``answers``."""
+
+    def __init__(self, path: Path, answers: list[bytes]) -> None:
+        self.answers = answers
+        self.server = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+        self.server.bind(str(path))
+        self.server.listen()
+        self.thread = threading.Thread(target=self._serve, daemon=True)
+        self.thread.start()
+
+    def _serve(self) -> None:
+        with contextlib.suppress(OSError):
+            connection, _ = self.server.accept()
+            with connection:
+                while header := connection.recv(5, socket.MSG_WAITALL):
+                    size, _ = struct.unpack("<IB", header)
+                    connection.recv(size, socket.MSG_WAITALL)
+                    connection.sendall(
+                        b"".join(struct.pack("<IB", len(a), 0) + a for a in self.answers)
+                    )
+
+    def close(self) -> None:
+        self.server.close()
+        self.thread.join(5)
+
+
+@pytest.mark.usefixtures("native")
+@pytest.mark.parametrize(
+    ("answers", "says"),
+    [
+        (GARBLED, "Gain.DoStep [INTERNAL]: its answer is not a DoStepResponse"),
+        (TWICE, "Gain.DoStep [INTERNAL]: an answer arrived on the step socket before its request"),
+    ],
+    ids=["not a DoStepResponse", "two answers to one request"],
+)
+def test_answers_the_step_socket_did_not_ask_for_fail_the_run(
+    coupler: Coupler,
+    ssd: Path,
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+    answers: list[bytes],
+    says: str,
+) -> None:
+    """A well-framed answer that is not a DoStepResponse (it ended with a DecodeError's
+    traceback in the run_failed line), or two answers to every request (every later row was
+    the step before's, and the run completed): the run fails at once, in one sentence."""
+    folder = Path(tempfile.mkdtemp(prefix="gs-", dir="/tmp"))  # a socket's path: 107 bytes
+    monkeypatch.setenv("GAIN_PORT", "1")  # the SSD's address; --address moves it
+    try:
+        with serving(GainParticipant("Gain"), unix_socket=folder / "gain.sock") as server:
+            assert server.step_socket is not None
+            server.step_socket.unlink()  # its path now leads to the fake one
+            fake = FakeSteps(server.step_socket, answers)
+            try:
+                outcome = coupler(
+                    "run", ssd, "--out", tmp_path / "o", "--step", "0.1",
+                    "--address", f"Gain={server.address}",
+                )  # fmt: skip
+            finally:
+                fake.close()
+    finally:
+        shutil.rmtree(folder, ignore_errors=True)
+    assert outcome.code == 1, outcome
+    summary = coupler.summary(tmp_path / "o")
+    assert summary["reason"].startswith(says), summary["reason"]
+    assert summary["steps"] <= 1
+    assert "Traceback" not in outcome.err

@@ -35,6 +35,7 @@ from coupler.errors import (
     ParticipantUnavailable,
     ScenarioError,
     ValueTooLarge,
+    foreign,
 )
 from coupler.participant import HEALTH_REASON, EndRun, Participant, Values
 from coupler.security import ClientSecurity
@@ -448,8 +449,9 @@ class RemoteParticipant(Participant):
 def translate(
     code: grpc.StatusCode, details: str | None, *, participant: str, call: str, address: str
 ) -> ParticipantError:
-    """The one place gRPC errors become Coupler errors."""
-    details = details or code.name
+    """The one place gRPC errors become Coupler errors (the participant's words escaped:
+    ``errors.foreign``)."""
+    details = foreign(details) if details else code.name
     if code in _UNAVAILABLE:
         details = tls_problem(details, address, None) or details
         return ParticipantUnavailable(

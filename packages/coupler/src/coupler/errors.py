@@ -17,7 +17,19 @@ are caught -- ``coupler.client`` for gRPC, ``coupler.fmu`` for FMI -- as ``raise
 
 from __future__ import annotations
 
+import re
 from collections.abc import Iterable, Sequence
+
+_UNPRINTABLE = re.compile(r"[\x00-\x1f\x7f-\x9f\u2028\u2029\u202a-\u202e\u2066-\u2069]")
+
+
+def foreign(text: str) -> str:
+    """Text from another program (a participant's status message, its reason to end a run, the
+    names and words of its Describe) as Coupler shows it: control characters -- an escape
+    sequence, a line break, a carriage return, a bidi override -- written as escapes (``\\x1b``,
+    ``\\n``), so that it can never move the cursor, recolour the terminal or fake a line of
+    Coupler's own (``completed: ...``); everything else as it was."""
+    return _UNPRINTABLE.sub(lambda found: found.group().encode("unicode_escape").decode(), text)
 
 
 class CouplerError(Exception):

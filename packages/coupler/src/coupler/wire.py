@@ -23,7 +23,7 @@ from coupler.channels import (
     Value,
     ValueType,
 )
-from coupler.errors import ChannelValueError, MessageTooLarge, ValueTooLarge
+from coupler.errors import ChannelValueError, MessageTooLarge, ValueTooLarge, foreign
 from coupler.v1 import component_pb2 as pb
 
 if TYPE_CHECKING:
@@ -494,21 +494,21 @@ def description_from_pb(response: pb.DescribeResponse) -> Description:
             )
         channels.append(
             Channel(
-                name=c.name,
+                name=foreign(c.name),
                 causality=_CAUSALITY_FROM_PB[c.causality],
                 type=_TYPE_FROM_PB[c.type],
-                unit=c.unit,
-                description=c.description,
-                message_type=c.message_type,
+                unit=foreign(c.unit),
+                description=foreign(c.description),
+                message_type=foreign(c.message_type),
                 max_bytes=c.max_bytes,
                 start=_untyped_value(c.start) if c.HasField("start") else None,
             )
         )
     caps = response.capabilities
     return Description(
-        name=response.name,
+        name=foreign(response.name),
         channels=tuple(channels),
-        implementation=response.implementation,
+        implementation=foreign(response.implementation),
         capabilities=Capabilities(
             streaming=caps.streaming,
             variable_step_size=caps.variable_step_size,
@@ -808,7 +808,7 @@ def termination_requested(response: pb.DoStepResponse) -> str | None:
     """The reason when the answer asks to end the run, else None."""
     if not response.terminate:
         return None
-    return response.terminate_reason or "the participant asked to end the run"
+    return foreign(response.terminate_reason) or "the participant asked to end the run"
 
 
 # --- Long Binary values, not copied more than needed ------------------------------------------

@@ -33,11 +33,12 @@ from typing import Any
 
 import grpc
 import structlog
+from google.protobuf.message import DecodeError
 
 from coupler import wire
 from coupler.channels import Value
 from coupler.client import RemoteParticipant, StepTransport, translate, uses_tls
-from coupler.errors import ParticipantError, ParticipantTimeout
+from coupler.errors import ParticipantError, ParticipantTimeout, foreign
 from coupler.participant import Values
 from coupler.security import read_secret
 from coupler.v1 import component_pb2 as pb
@@ -223,11 +224,27 @@ class NativeSteps(StepTransport):
         data = self._answered()
         if self._read is not None and (outputs := self._read(data)) is not None:
             return outputs  # the plain answer of every step, read in C
-        response, large = wire.step_answer(data)
+        try:
+            response, large = wire.step_answer(data)
+        except DecodeError as exc:
+            raise self._not_an_answer(exc) from None
         return self._remote.step_outputs(response, large)
 
     def _answer(self) -> pb.DoStepResponse:
-        return pb.DoStepResponse.FromString(self._answered())
+        try:
+            return pb.DoStepResponse.FromString(self._answered())
+        except DecodeError as exc:
+            raise self._not_an_answer(exc) from None
+
+    def _not_an_answer(self, exc: DecodeError) -> ParticipantError:
+        assert self._remote is not None
+        return ParticipantError(
+            f"its answer is not a DoStepResponse ({foreign(str(exc))}); the participant does "
+            "not speak the protocol (docs/protocol.md)",
+            participant=self._remote.name,
+            call="DoStep",
+            status="INTERNAL",
+        )
 
     def _answered(self) -> memoryview:
         """The serialized answer to the request sent (valid until the next receive)."""
