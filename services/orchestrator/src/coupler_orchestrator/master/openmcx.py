@@ -43,6 +43,12 @@ from coupler_orchestrator.model import Filtering, Link, Member, OpenMcx, Plan
 from coupler_orchestrator.observer import ComponentObserver, Observer
 
 
+def master_of(plan: Plan) -> type[Master]:
+    """The master that executes ``plan``: this one when the plan carries OpenMCx's additions
+    (``Plan.openmcx``), else Coupler's."""
+    return Master if plan.openmcx is None else OpenMcxMaster
+
+
 def filter_of(filtering: Filtering, compare: Comparison) -> Filter:
     """The filter a connection is read through."""
     if filtering.interpolation is None:
