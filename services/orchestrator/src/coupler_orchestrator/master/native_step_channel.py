@@ -43,7 +43,8 @@ from coupler.participant import Values
 from coupler.security import read_secret
 from coupler.v1 import component_pb2 as pb
 from coupler_orchestrator.native import ENVIRONMENT as ENVIRONMENT
-from coupler_orchestrator.native import NativeModule, switched_on, wanted
+from coupler_orchestrator.native import answers as answers
+from coupler_orchestrator.native import step_streams, switched_on, wanted
 
 _CODES = {code.value[0]: code for code in grpc.StatusCode}
 log = structlog.get_logger("coupler.master")
@@ -53,11 +54,8 @@ STEP_SOCKET_ENVIRONMENT = "COUPLER_STEP_SOCKET"
 STREAM = ("native step channel", "its StepStream over C++ gRPC")
 """How summary.json names a member stepped over its StepStream, and why."""
 
-library = NativeModule("_step_streams", "the native step channel")
+library = step_streams
 """``library()``: the native step channel (``ffi``, ``lib``), or None (why is said once)."""
-answers = NativeModule("_answers", "the step answers read in C")
-"""``answers()``: ``coupler_native._answers``, which reads an answer's outputs from its bytes
-as the codec decodes them (else None: protobuf and the codec read every answer)."""
 
 
 def enabled(asked: bool = True) -> bool:
