@@ -76,7 +76,7 @@ def why_python(participant: object, asked: bool) -> str:
         return "native steps are off (--no-native-steps or COUPLER_NATIVE_STEPS=0)"
     if library() is None:
         return str(library.problem)
-    if isinstance(participant, RemoteParticipant) and isinstance(participant.steps, NativeSteps):
+    if callable(getattr(participant, "split", None)):  # given this channel, which it did not take
         return "the participant offers no StepStream"
     return "not a gRPC participant (its steps are Python calls)"
 
