@@ -523,7 +523,10 @@ class Master:
         """Members in order; outputs of t_{k+m} are stored in the slot of the base step that
         ends at t_{k+m}, so successors see them then and no row shows a value from later."""
         for m, stepper in self._steppers:
-            if k % m.multiple == 0:
+            if k % m.multiple == 0 and stepper.here:
+                stepper.begin(self.plan.grid.time(k), m.step, self._inputs(m))
+                held[m.name] = self._finished(m, stepper, k)
+            elif k % m.multiple == 0:
                 held[m.name] = await self._whole(m, stepper, k)
             if (k + 1) % m.multiple == 0 and m.name in held:
                 self.store_outputs(m, held.pop(m.name), "DoStep", self.plan.grid.time(k + 1))

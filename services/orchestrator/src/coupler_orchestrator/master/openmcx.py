@@ -170,12 +170,10 @@ class OpenMcxMaster(Master):
         step = m.step / parts
         exact = grid.time(start)
         try:
-            with self.steppers[m.name].held(exact):  # one deadline for all its sub-steps
+            if parts == 1:
                 outputs = await self._call(m, exact, step, inputs)
-                at = begin
-                for i in range(1, parts):  # OpenMCx's Integrator reads its input at each
-                    at += step  # sub-step
-                    outputs = await self._call(m, exact + i * step, step, self._read(m, at))
+            else:
+                outputs = await self._sub_steps(m, exact, begin, step, parts, inputs)
         except EndRun as stop:
             self.finished.add(m.name)
             outputs = stop.outputs
@@ -213,11 +211,28 @@ class OpenMcxMaster(Master):
             values[link.input] = link.convert(raw) if link.convert else raw
         return values
 
+    async def _sub_steps(
+        self, m: Member, exact: float, begin: float, step: float, parts: int, inputs: Values
+    ) -> Values:
+        """OpenMCx's Integrator steps in ``parts`` sub-steps, reading its input at each, held to
+        one deadline for them all."""
+        with self.steppers[m.name].held(exact):
+            outputs = await self._call(m, exact, step, inputs)
+            at = begin
+            for i in range(1, parts):
+                at += step
+                outputs = await self._call(m, exact + i * step, step, self._read(m, at))
+        return outputs
+
     async def _call(self, m: Member, time: float, step: float, inputs: Values) -> Values:
         """One call of ``m``'s step, the way the master's steppers step it (on this thread,
         watched against its deadline, or awaited)."""
         stepper = self.steppers[m.name]
-        outputs = await stepper.whole(time, step, inputs)
+        if stepper.here:
+            stepper.begin(time, step, inputs)
+            outputs = stepper.finish()
+        else:
+            outputs = await stepper.whole(time, step, inputs)
         self.took(m, stepper.took)
         if self.abandoned:  # it came back after the watchdog had ended the run
             raise asyncio.CancelledError

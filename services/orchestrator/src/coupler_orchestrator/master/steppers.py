@@ -111,14 +111,7 @@ class Watched(Stepper):
         self._cause = cause
         """What a call past its deadline means."""
         self._holding = False
-
-    def _arm(self, time: float) -> None:
-        if not self._holding:
-            self._watchdog.arm(self._what, time, self._deadline, self._cause)
-
-    def _disarm(self) -> None:
-        if not self._holding:
-            self._watchdog.disarm()
+        """Inside ``held``: its calls are watched by the one arming of ``held``."""
 
     @contextlib.contextmanager
     def _held(self, time: float) -> Iterator[None]:
@@ -158,11 +151,13 @@ class InProcess(Watched):
     def finish(self) -> Values:
         time, step, inputs = self._call
         started = wallclock.perf_counter()
-        self._arm(time)
+        if not self._holding:
+            self._watchdog.arm(self._what, time, self._deadline, self._cause)
         try:
             return self._step_now(time, step, inputs)
         finally:
-            self._disarm()
+            if not self._holding:
+                self._watchdog.disarm()
             self.took = wallclock.perf_counter() - started
 
 
@@ -184,11 +179,13 @@ class InHalves(Watched):
         self._halves.send(time, step, inputs)
 
     def finish(self) -> Values:
-        self._arm(self._time)
+        if not self._holding:
+            self._watchdog.arm(self._what, self._time, self._deadline, self._cause)
         try:
             return self._halves.receive()
         finally:
-            self._disarm()
+            if not self._holding:
+                self._watchdog.disarm()
             self.took = wallclock.perf_counter() - self._sent
 
 
