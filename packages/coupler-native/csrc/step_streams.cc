@@ -269,9 +269,11 @@ struct StepSocket {
     return CS_FAILED;
   }
 
-  // Half-closes and waits up to `timeout` for the participant's end (or the connection's).
-  void close(double timeout) {
-    if (fd < 0) return;
+  // Half-closes and waits up to `timeout` for the participant's end (or the connection's);
+  // how many step answers came before it that no request asked for.
+  int close(double timeout) {
+    if (fd < 0) return 0;
+    int unasked = 0;
     if (!ended) {
       ::shutdown(fd, SHUT_WR);
       Deadline deadline = after(timeout);
@@ -281,10 +283,12 @@ struct StepSocket {
                                                              std::chrono::system_clock::now())
                                    .count(),
                                &data, &size) == CS_OK) {
+        unasked += 1;
       }
     }
     ::close(fd);
     fd = -1;
+    return unasked;
   }
 
   // A serialized StepSocketEnd { int32 code = 1; string message = 2; } read (this file has no
@@ -495,19 +499,29 @@ int cs_receive(cs_stream* s, double timeout, const char** data, size_t* size, in
 
 // Ends the stream, half-closing it and waiting up to `timeout` for the participant's status
 // (then cancelling it), and frees it. Safe in any state.
-void cs_close(cs_stream* s, double timeout) {
+int cs_close(cs_stream* s, double timeout) {
   if (s->socket) {
-    s->socket->close(timeout);
+    int unasked = s->socket->close(timeout);
     delete s;
-    return;
+    return unasked;
   }
   Deadline deadline = after(timeout);
+  int unasked = 0;
   if (s->call && !s->finished && !s->broken && !s->finishing && s->drain(deadline)) {
     s->pending += 1;
     s->call->WritesDone(tag(WRITE));
+    // what the participant still sends before its status is an answer nobody asked for
+    while (s->drain(deadline) && !s->broken) {
+      s->read_done = false;
+      s->pending += 1;
+      s->call->Read(&s->reply, tag(READ));
+      if (!s->drain(deadline) || s->broken || !s->read_done) break;
+      unasked += 1;
+    }
   }
   s->finish(deadline);
   delete s;
+  return unasked;
 }
 
 }  // extern "C"

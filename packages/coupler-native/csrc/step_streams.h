@@ -44,5 +44,8 @@ int cs_send(cs_stream *s, const char *const *pieces, const size_t *sizes, int co
 int cs_receive(cs_stream *s, double timeout, const char **data, size_t *size, int *code);
 
 /* Ends the stream, half-closing it and waiting up to `timeout` for the participant's status
- * (then cancelling it), and frees it. Safe in any state. */
-void cs_close(cs_stream *s, double timeout);
+ * (then cancelling it), and frees it. Safe in any state. Returns how many step answers came
+ * after the half-close that no request had asked for (0 from a participant that answers each
+ * request once: more means it answered a request twice and every later answer was read as the
+ * step after's). */
+int cs_close(cs_stream *s, double timeout);

@@ -26,7 +26,13 @@ import pytest
 from coupler.errors import ScenarioError
 from coupler.health import probe
 from coupler.testing import end_group, free_port, wait_until
-from coupler_orchestrator.tools.fleet import Fleet, FleetSpec, holders_of, port_is_free
+from coupler_orchestrator.tools.fleet import (
+    Fleet,
+    FleetError,
+    FleetSpec,
+    holders_of,
+    port_is_free,
+)
 
 DATA = Path(__file__).parent / "data"
 REPO = Path(__file__).resolve().parents[3]
@@ -345,3 +351,45 @@ def test_fleet_takes_stop_time_params_and_output_variables_like_run(
     doubled = [float(row.split(",")[1]) for row in rows[1:]]  # the SSD's gain is 3
     assert doubled == [2 * float(line.split(",")[y]) for line in lines[: len(doubled)]]
     assert any(v != 0 for v in doubled)
+
+
+@pytest.mark.parametrize(
+    ("change", "said"),
+    [
+        (('out = "out"', 'out = "out"\nunix_socket = false'),
+         "fleet.toml line 5: unknown key 'unix_socket' in [scenario]; its keys are ssp, out, "
+         "args, unix_sockets (docs/fleet.md)"),
+        (("health =", "healt ="),
+         "fleet.toml line 9: unknown key 'healt' in [[service]]; its keys are name, command, "
+         "health, ports, socket (docs/fleet.md)"),
+        (("[[service]]", '[url]\nmap = "http://127.0.0.1:8080/"\n\n[[service]]'),
+         "fleet.toml line 6: unknown table [url]; a fleet file has [scenario], [[service]] and "
+         "[urls] (docs/fleet.md)"),
+    ],
+)  # fmt: skip
+def test_a_key_the_fleet_file_may_not_have_is_refused_with_its_line(
+    fleet_dir: Path, change: tuple[str, str], said: str
+) -> None:
+    path = fleet_dir / "fleet.toml"
+    path.write_text(FLEET.replace(*change))
+    with pytest.raises(ScenarioError) as refused:
+        FleetSpec.load(path, root=fleet_dir)
+    assert str(refused.value) == f"{path.parent}/{said}"
+
+
+async def test_the_results_lock_goes_with_the_fleet(fleet_dir: Path) -> None:
+    """``out/.fleet.lock`` is held while a fleet is up (a second fleet is refused) and removed
+    when it stops; the next fleet locks afresh."""
+    spec = FleetSpec.load(fleet_dir / "fleet.toml", root=fleet_dir)
+    spec = FleetSpec(root=fleet_dir, ssp=spec.ssp, out=spec.out)  # no services: the lock alone
+    lock = spec.out / ".fleet.lock"
+    async with Fleet(spec, logs=fleet_dir / "logs"):
+        assert lock.read_text() == f"pid {os.getpid()}\n"
+        with pytest.raises(FleetError, match="is being written by another fleet"):
+            async with Fleet(spec, logs=fleet_dir / "logs"):
+                pass
+        assert lock.exists()
+    assert not lock.exists()
+    async with Fleet(spec, logs=fleet_dir / "logs"):
+        assert lock.exists()
+    assert sorted(p.name for p in spec.out.iterdir()) == []

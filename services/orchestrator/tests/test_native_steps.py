@@ -19,14 +19,18 @@ from collections.abc import Iterator, Mapping
 from pathlib import Path
 from typing import Any
 
+import grpc
 import pytest
+from grpc_health.v1 import health, health_pb2_grpc
 
+from coupler import wire
 from coupler.channels import RunSetup
 from coupler.client import RemoteParticipant
 from coupler.errors import ParticipantError, ParticipantTimeout
 from coupler.examples.gain import GainParticipant
 from coupler.participant import EndRun, Values
 from coupler.v1 import component_pb2 as pb
+from coupler.v1 import component_pb2_grpc as pb_grpc
 from coupler_orchestrator import ssp
 from coupler_orchestrator.master import native_step_channel as steps
 from coupler_orchestrator.native import MISSING
@@ -357,3 +361,72 @@ def test_answers_the_step_socket_did_not_ask_for_fail_the_run(
     assert summary["reason"].startswith(says), summary["reason"]
     assert summary["steps"] <= 1
     assert "Traceback" not in outcome.err
+
+
+class TwiceOverStepStream(pb_grpc.GRPCComponentServiceServicer):  # type: ignore[misc]
+    """The protocol written by hand, as another language would: the gain's Describe, and a
+    StepStream that answers every request twice."""
+
+    async def Describe(self, request: Any, context: Any) -> pb.DescribeResponse:
+        described = wire.description_to_pb(await GainParticipant("Gain").describe())
+        described.capabilities.streaming = True
+        return described
+
+    async def Initialize(self, request: Any, context: Any) -> pb.InitializeResponse:
+        return pb.InitializeResponse.FromString(TWICE[0])  # the same outputs (field 1)
+
+    async def StepStream(self, requests: Any, context: Any) -> Any:
+        async for _ in requests:
+            for answer in TWICE:
+                yield pb.DoStepResponse.FromString(answer)
+
+    async def Terminate(self, request: Any, context: Any) -> pb.TerminateResponse:
+        return pb.TerminateResponse()
+
+
+@contextlib.contextmanager
+def answering_twice() -> Iterator[int]:
+    """``TwiceOverStepStream`` on a real grpc.aio server (with the health service), in a
+    thread; its port."""
+    ready, port = threading.Event(), [0]
+    ends: list[tuple[asyncio.AbstractEventLoop, asyncio.Event]] = []
+
+    async def serve() -> None:
+        server = grpc.aio.server()
+        pb_grpc.add_GRPCComponentServiceServicer_to_server(TwiceOverStepStream(), server)
+        health_pb2_grpc.add_HealthServicer_to_server(health.aio.HealthServicer(), server)
+        port[0] = server.add_insecure_port("127.0.0.1:0")
+        await server.start()
+        ends.append((asyncio.get_running_loop(), asyncio.Event()))
+        ready.set()
+        await ends[0][1].wait()
+        await server.stop(0)
+
+    thread = threading.Thread(target=asyncio.run, args=(serve(),))
+    thread.start()
+    try:
+        ready.wait(10)
+        yield port[0]
+    finally:
+        if ends:
+            loop, end = ends[0]
+            loop.call_soon_threadsafe(end.set)
+        thread.join(10)
+
+
+@pytest.mark.parametrize("path", ["native", "grpc.aio"])
+def test_two_answers_to_one_request_on_a_step_stream_fail_the_run(
+    coupler: Coupler, ssd: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, path: str
+) -> None:
+    """Over a StepStream (gRPC), each step read the answer meant for the step before and the
+    run completed; the extra answers are found when the stream ends, and the run fails."""
+    if path == "native":
+        require_native(steps.library)
+    with answering_twice() as port:
+        monkeypatch.setenv("GAIN_PORT", str(port))
+        extra = [] if path == "native" else ["--no-native-steps"]
+        outcome = coupler("run", ssd, "--out", tmp_path / "o", "--step", "0.1", *extra)
+    assert outcome.code == 1, outcome
+    reason = coupler.summary(tmp_path / "o")["reason"]
+    assert "Gain.Terminate [ABORTED]: 200 step answers came after the run's last request" in reason
+    assert "answered a request twice" in reason and "after the run's last step" in reason

@@ -2,17 +2,21 @@
 
 coupler new participant Heater  -->  Heater/participant.py  (served as a process)
                                      Heater/Heater.ssd      (coupler run, a process)
+                                     Heater/fleet.toml      (coupler fleet, a process)
                                      Heater/README.md
 
 Heater (gRPC, gain 2, u bound to 0.5):  y = gain * u = 1,  x += y * h  (h = 0.1, to 1 s)
+Mini (--template minimal, k 2, u bound to 0.5):  y = k * u = 1
 """
 
 from __future__ import annotations
 
 import asyncio
 import csv
+import importlib.util
 import json
 import os
+import re
 import socket
 import subprocess
 import sys
@@ -41,7 +45,12 @@ def test_the_written_participant_runs_as_it_is(tmp_path: Path) -> None:
     made = coupler("new", "participant", "Heater", cwd=tmp_path)
     assert made.returncode == 0, made.stderr
     folder = tmp_path / "Heater"
-    assert sorted(p.name for p in folder.iterdir()) == ["Heater.ssd", "README.md", "participant.py"]
+    assert sorted(p.name for p in folder.iterdir()) == [
+        "Heater.ssd",
+        "README.md",
+        "fleet.toml",
+        "participant.py",
+    ]
     assert "coupler run Heater.ssd" in (folder / "README.md").read_text()
 
     port = free_port()
@@ -61,39 +70,42 @@ def test_the_written_participant_runs_as_it_is(tmp_path: Path) -> None:
         x += 1.0 * 0.1
 
 
-FLEET = """
-[scenario]
-ssp = "Heater/Heater.ssd"
-out = "results"
+@pytest.mark.slow
+@pytest.mark.parametrize("template", ["integrator", "minimal"])
+def test_the_written_participant_drops_into_a_fleet(tmp_path: Path, template: str) -> None:
+    """A fleet file with the participant as a ``[[service]]`` and nothing but the defaults:
+    ``coupler fleet`` serves it on a unix socket (it adds ``--socket PATH``, which the program
+    takes) and steps it over the step socket beside it. The fleet file is the one written with
+    it, as a user copies the service into theirs."""
+    made = coupler("new", "participant", "Mini", "--template", template, cwd=tmp_path)
+    assert made.returncode == 0, made.stderr
+    folder = tmp_path / "Mini"
+    fleet = (folder / "fleet.toml").read_text()
+    assert "socket" not in fleet.split("[[service]]")[1]  # the defaults: unix sockets on
+    ran = coupler("fleet", "fleet.toml", "--exit", cwd=folder, MINI_PORT=str(free_port()))
+    assert ran.returncode == 0, ran.stdout + ran.stderr
+    assert "participants on unix sockets in" in ran.stdout
+    assert re.search(r"^completed: 10 steps to t=1 s", ran.stdout, re.MULTILINE), ran.stdout
+    run = folder / "results" / "latest"
+    summary = json.loads((run / "summary.json").read_text())
+    assert summary["status"] == "completed"
+    if importlib.util.find_spec("coupler_native._step_streams") is not None:
+        stepped = summary["participants"]["Mini"]["step_path"]
+        assert stepped["path"] == "native step socket"
+        assert stepped["reason"].endswith("/Mini.sock.steps, without gRPC")
+    with (run / "results.csv").open() as results:
+        rows = list(csv.DictReader(results))
+    assert len(rows) == 11 and {r["Mini.y"] for r in rows} == {"1.0"}
 
-[[service]]
-name = "heater"
-command = ["python", "Heater/participant.py", "--port", "${HEATER_PORT:-50080}"]
-health = "grpc://127.0.0.1:${HEATER_PORT:-50080}"
-"""
 
-
-def test_the_written_participant_drops_into_a_fleet(tmp_path: Path) -> None:
-    """``coupler fleet`` serves it on a unix socket (``--socket``) and steps it over its step
-    socket, as every service of a fleet: the template takes every option a fleet passes
-    (``coupler.main``; it used to take only ``--port``: "unrecognized arguments: --socket")."""
+def test_the_written_participant_says_in_one_line_that_its_port_is_taken(
+    tmp_path: Path,
+) -> None:
     assert coupler("new", "participant", "Heater", cwd=tmp_path).returncode == 0
-    (tmp_path / "fleet.toml").write_text(FLEET, encoding="utf-8")
-    ran = coupler("fleet", "fleet.toml", "--exit", cwd=tmp_path, HEATER_PORT=str(free_port()))
-    assert ran.returncode == 0, ran.stderr
-    assert "completed: 10 steps to t=1 s" in ran.stdout
-    summary = json.loads((tmp_path / "results" / "latest" / "summary.json").read_text())
-    assert summary["participants"]["Heater"]["step_path"]["path"] == "native step socket"
-
-
-def test_a_busy_port_is_one_line(tmp_path: Path) -> None:
-    """The written participant on a port another process holds: exit 1 and one sentence naming
-    the port and its holder (it printed a traceback)."""
-    assert coupler("new", "participant", "Heater", cwd=tmp_path).returncode == 0
-    with socket.socket() as holder:
-        holder.bind(("127.0.0.1", 0))
-        holder.listen()
-        port = holder.getsockname()[1]
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
         served = subprocess.run(
             [sys.executable, "participant.py", "--port", str(port)],
             cwd=tmp_path / "Heater",
@@ -101,16 +113,19 @@ def test_a_busy_port_is_one_line(tmp_path: Path) -> None:
             text=True,
             timeout=60,
         )
-    assert served.returncode == 1, served.stderr
+    assert served.returncode == 1
     assert "Traceback" not in served.stderr
-    assert served.stderr.splitlines()[-1].startswith(
-        f"Heater: cannot serve the participant on 127.0.0.1:{port}: the port is in use by pid "
-    )
+    [line] = served.stderr.splitlines()
+    assert line.startswith(f"participant.py: cannot serve the participant on 127.0.0.1:{port}: ")
+    assert f"the port is in use by pid {os.getpid()} (" in line
 
 
-def test_the_written_program_is_clean(tmp_path: Path) -> None:
+@pytest.mark.parametrize("template", ["integrator", "minimal"])
+def test_the_written_program_is_clean(tmp_path: Path, template: str) -> None:
     """What the command writes passes the project's own lint and format rules."""
-    assert coupler("new", "participant", "cooler_2", "--dir", "c", cwd=tmp_path).returncode == 0
+    written = coupler("new", "participant", "cooler_2", "--dir", "c", "--template", template,
+                      cwd=tmp_path)  # fmt: skip
+    assert written.returncode == 0, written.stderr
     program = tmp_path / "c" / "participant.py"
     assert "class Cooler_2Participant(Participant):" in program.read_text()
     for check in (["check"], ["format", "--check"]):

@@ -1,7 +1,9 @@
 """Coupler's participant SDK: what a participant author installs.
 
 A participant implements ``Participant`` (or wraps a simulator with an ``Adapter``) and is
-served with ``serve``; ``RemoteParticipant`` talks to one; ``FmuParticipant`` runs an FMU
+served with ``serve`` (``serve_main``: a participant program's main, with every option
+``coupler fleet`` passes); ``step_end`` is the end of a step on the run's exact time grid;
+``RemoteParticipant`` talks to one; ``FmuParticipant`` runs an FMU
 (the ``fmu`` extra); ``coupler.testing`` serves one in a test. The names below are the public
 API (``__all__``; ``tests/test_exported_members.py`` keeps it). Each is imported when first
 used, so ``import coupler`` stays light (no gRPC until a name that needs it).
@@ -34,12 +36,13 @@ if TYPE_CHECKING:
         ValidationError,
     )
     from coupler.fmu import FmuParticipant
+    from coupler.grid import step_end
     from coupler.logs import configure_logging
     from coupler.messages import register
     from coupler.participant import EndRun, HealthReport, Participant, Values
     from coupler.security import ClientSecurity, ServerSecurity
     from coupler.server import ParticipantServer, run, serve
-    from coupler.settings import ParticipantSettings, SecuritySettings, main
+    from coupler.settings import ParticipantSettings, SecuritySettings, serve_main
 
 _HOMES = {
     "Adapter": "adapter",
@@ -73,10 +76,11 @@ _HOMES = {
     "ValueType": "channels",
     "Values": "participant",
     "configure_logging": "logs",
-    "main": "settings",
     "register": "messages",
     "run": "server",
     "serve": "server",
+    "serve_main": "settings",
+    "step_end": "grid",
 }
 """Each public name and the module of this package that defines it."""
 
@@ -112,10 +116,11 @@ __all__ = [
     "ValueType",
     "Values",
     "configure_logging",
-    "main",
     "register",
     "run",
     "serve",
+    "serve_main",
+    "step_end",
 ]
 
 

@@ -116,15 +116,18 @@ class RunSetup:
     run_id: str
     """Identifies the run in logs and results."""
     start_time: float
-    """Simulation start time [s]."""
+    """Simulation start time [s]: the time of the outputs ``initialize`` returns."""
     step_size: float
-    """Communication step size of this participant [s]."""
+    """Communication step size of this participant [s]: the ``step`` of its ``do_step`` calls
+    (its own deltaTime where the SSD gives it one, else the run's step)."""
     stop_time: float | None = None
     """Simulation stop time [s], when known."""
     parameters: Mapping[str, Value] = field(default_factory=dict)
-    """Parameter values by channel name."""
+    """Parameter values by channel name: those the SSD binds and ``--param`` sets, no others (the
+    participant uses its channels' start values for the rest)."""
     inputs: Mapping[str, Value] = field(default_factory=dict)
-    """Start values of inputs by channel name."""
+    """Start values of inputs by channel name: those the SSD binds, no others (the participant
+    uses its channels' start values for the rest until a connection drives them)."""
     lease: float = 0.0
     """The run's lease [s]: silence this long ends the run at the participant; 0 = its
     default. Applied by the participant runtime (``coupler.server``), not by participants."""

@@ -35,6 +35,7 @@ from coupler.errors import (
     ParticipantUnavailable,
     ScenarioError,
     ValueTooLarge,
+    answered_unasked,
     foreign,
 )
 from coupler.participant import HEALTH_REASON, EndRun, Participant, Values
@@ -388,12 +389,23 @@ class RemoteParticipant(Participant):
             if transported and self.steps is not None:
                 self.steps.close(timeout=1.0)
             if stream is not None:
-                # the run has ended either way; the stream's end only confirms it
-                with contextlib.suppress(
-                    grpc.aio.AioRpcError, TimeoutError, asyncio.InvalidStateError
-                ):
-                    await stream.done_writing()
-                    await asyncio.wait_for(stream.code(), self.call_timeout)
+                await self._end_stream(stream)
+
+    async def _end_stream(self, stream: grpc.aio.StreamStreamCall) -> None:
+        """Half-close a run's step stream and wait for its status: the run has ended either
+        way, the stream's end only confirms it -- unless answers come that no request asked
+        for (ABORTED: the participant answered a request twice)."""
+        unasked = 0
+        with contextlib.suppress(grpc.aio.AioRpcError, TimeoutError, asyncio.InvalidStateError):
+            await stream.done_writing()
+            async with asyncio.timeout(self.call_timeout):
+                while await stream.read() is not grpc.aio.EOF:
+                    unasked += 1
+                await stream.code()
+        if unasked:
+            raise ParticipantError(
+                answered_unasked(unasked), participant=self.name, call="Terminate", status="ABORTED"
+            )
 
     async def close(self) -> None:
         if self._transported and self.steps is not None:

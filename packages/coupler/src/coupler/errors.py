@@ -36,6 +36,16 @@ class CouplerError(Exception):
     """Base of every error Coupler raises on purpose."""
 
 
+def answered_unasked(count: int) -> str:
+    """Why a run whose step stream brought ``count`` answers after its last request cannot be
+    trusted (said by every transport that finds them)."""
+    return (
+        f"{count} step answer{'s' if count > 1 else ''} came after the run's last request, "
+        "which no request had asked for: the participant answered a request twice, so every "
+        "row after it holds the answer to the step before; the results cannot be trusted"
+    )
+
+
 class ScenarioError(CouplerError):
     """The scenario (SSP, wiring, configuration) is wrong; nothing has run."""
 

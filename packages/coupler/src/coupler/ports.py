@@ -296,6 +296,9 @@ def _shown(host: str) -> str:
 
 
 def _short(command: str, limit: int = 80) -> str:
+    """``command`` on one line (a ``python -c`` script's newlines as spaces), at most ``limit``
+    characters."""
+    command = " ".join(command.split())
     return command if len(command) <= limit else command[: limit - 3] + "..."
 
 

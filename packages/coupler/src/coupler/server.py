@@ -831,6 +831,11 @@ class ParticipantServer:
         self._step_socket: _StepSocket | None = None
 
     @property
+    def name(self) -> str:
+        """The participant's name once it is described (``start``), else ``""``."""
+        return self._name
+
+    @property
     def step_socket(self) -> Path | None:
         """Where the participant also serves its step loop without gRPC (``PATH.steps`` beside
         its unix socket ``PATH``, when it serves on one without TLS), or None."""
@@ -921,6 +926,7 @@ class ParticipantServer:
 
     async def stop(self, grace: float = 2.0) -> None:
         """NOT_SERVING, end the active run, stop the server, close the participant."""
+        served = self._server is not None  # else it never bound: its error says so, alone
         self._stopping = True
         self.health.reason = "the participant is shutting down"
         await self._set_health(health_pb2.HealthCheckResponse.NOT_SERVING)
@@ -937,7 +943,8 @@ class ParticipantServer:
         if self._health_server is not None:
             await self._health_server.stop(0)
         await self.participant.close()
-        log.info("participant_stopped", address=self.address)
+        if served:
+            log.info("participant_stopped", address=self.address)
 
     async def wait(self) -> None:
         if self._server is not None:

@@ -9,11 +9,12 @@ participants), never collides with the orchestrator's client settings (``COUPLER
 
 from __future__ import annotations
 
+import argparse
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
-from pydantic_settings import BaseSettings, SettingsConfigDict
+from pydantic_settings import BaseSettings, PydanticBaseSettingsSource, SettingsConfigDict
 
 from coupler.arguments import add_security_arguments, add_socket_argument
 from coupler.errors import CouplerError
@@ -24,11 +25,12 @@ if TYPE_CHECKING:
     from coupler.server import ParticipantServer
 
 __all__ = [
+    "CommandLineSettings",
     "ParticipantSettings",
     "SecuritySettings",
     "add_security_arguments",
     "add_socket_argument",
-    "main",
+    "serve_main",
 ]
 
 
@@ -106,42 +108,65 @@ class ParticipantSettings(SecuritySettings):
             raise SystemExit(f"{program}: {exc}") from exc
 
 
-def main(
+class CommandLineSettings(ParticipantSettings):
+    """``ParticipantSettings`` from the command line alone: no environment variable is read
+    (``serve_main``'s default, for a participant program that has no prefix of its own)."""
+
+    @classmethod
+    def settings_customise_sources(
+        cls,
+        settings_cls: type[BaseSettings],
+        init_settings: PydanticBaseSettingsSource,
+        env_settings: PydanticBaseSettingsSource,
+        dotenv_settings: PydanticBaseSettingsSource,
+        file_secret_settings: PydanticBaseSettingsSource,
+    ) -> tuple[PydanticBaseSettingsSource, ...]:
+        return (init_settings,)
+
+
+def serve_main(
     participant: Participant,
     *,
-    name: str | None = None,
-    port: int | None = None,
+    port: int = 50051,
+    description: str | None = None,
+    program: str | None = None,
     argv: Sequence[str] | None = None,
-    settings: type[ParticipantSettings] = ParticipantSettings,
+    settings: type[ParticipantSettings] = CommandLineSettings,
 ) -> None:
-    """A participant program's whole main: ``main(MyParticipant())`` under ``if __name__ ==
-    "__main__"``. It takes every option ``coupler fleet`` passes a participant (``--host``,
-    ``--port``, ``--socket`` -- and with it the step socket --, the TLS and token options,
-    ``--log-level``; each also from the environment, ``settings``' prefix), configures logging,
-    prints ``serving NAME at ADDRESS`` and serves until SIGTERM or Ctrl-C. A problem (a taken
-    port, a bad certificate) ends the process with one line, ``NAME: the problem``. ``port``:
-    the program's own default port (before ``settings``' default, 50051)."""
-    import argparse
+    """A participant program's main: read the options every Coupler participant takes, serve
+    ``participant`` as they say until SIGTERM or SIGINT.
 
-    from coupler.logs import configure_logging
-
-    shown = name or type(participant).__name__.removesuffix("Participant") or "participant"
-    parser = argparse.ArgumentParser(description=f"Serve {shown} over gRPC (docs/participants.md).")
-    parser.add_argument("--host", help="bind address (default 127.0.0.1)")
-    parser.add_argument(
-        "--port", type=int, help=f"gRPC port; 0 picks a free one (default {port or 50051})"
+    The options: ``--host``, ``--port`` (default ``port``; 0: any free one), ``--socket PATH``
+    (a unix socket instead of TCP, and the step socket beside it: what ``coupler fleet`` passes),
+    ``--log-level`` and the security options (``--tls-cert``, ``--tls-key``, ``--tls-client-ca``,
+    ``--token-file``, ``--insecure``, ``--reflection``, ``--health-port``; docs/security.md).
+    ``settings`` reads what the command line leaves unset (a service's subclass: its
+    environment variables). It prints ``serving NAME at ADDRESS`` once serving; a problem it
+    cannot serve through (a taken port, a bad certificate, ...) ends the process with one line,
+    ``PROGRAM: the problem``, and exit code 1, never a traceback.
+    """
+    parser = argparse.ArgumentParser(
+        prog=program,
+        description=description,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
     )
+    parser.add_argument("--host", help="address to bind (default: 127.0.0.1)")
+    parser.add_argument("--port", type=int, help=f"gRPC port, 0 = any free one (default: {port})")
     add_socket_argument(parser)
-    parser.add_argument("--log-level", dest="log_level", help="DEBUG, INFO, WARNING or ERROR")
+    parser.add_argument(
+        "--log-level", dest="log_level", help="DEBUG, INFO (default), WARNING or ERROR"
+    )
     add_security_arguments(parser)
     args = parser.parse_args(argv)
-    given = {k: v for k, v in vars(args).items() if v is not None}
-    if port is not None and "port" not in given:
-        given["port"] = port
+    given: dict[str, Any] = {k: v for k, v in vars(args).items() if v is not None}
     chosen = settings(**given)
+    if "port" not in chosen.model_fields_set:
+        chosen = chosen.model_copy(update={"port": port})
+    from coupler.logs import configure_logging
+
     configure_logging(chosen.log_level, json=chosen.log_json)
 
     def announce(server: ParticipantServer) -> None:
-        print(f"serving {shown} at {server.address}", flush=True)
+        print(f"serving {server.name} at {server.address}", flush=True)
 
-    chosen.serve(participant, program=shown, on_started=announce)
+    chosen.serve(participant, program=parser.prog, on_started=announce)

@@ -51,6 +51,7 @@ import structlog
 from coupler.adapter import Adapter
 from coupler.channels import RunSetup, Value
 from coupler.errors import ChannelValueError, ParticipantUnavailable, ScenarioError
+from coupler.grid import step_end
 from coupler.participant import HealthReport
 from coupler.v1.railway_pb2 import GeoPoint, TrainState
 from coupler_railway.messages import FRAME_LABELS_BYTES
@@ -189,12 +190,13 @@ class OpenRailsAdapter(Adapter):
             self._reverser = round(self._controls["DIRECTION"])
 
     async def advance(self, time: float, step: float) -> None:
+        end = step_end(time, step)  # on the run's decimal grid, as the orchestrator records it
         if self.settings.mode == "lockstep":
             for _ in range(self._steps(step)):
                 self._train = await self._post_lockstep()
             assert self._train is not None  # a step is one post or more
             self._map, self._frames = await _together(
-                self._map_of(self._train), self._fetch_frames(time + step)
+                self._map_of(self._train), self._fetch_frames(end)
             )
             self._stale = False
         else:
@@ -202,10 +204,10 @@ class OpenRailsAdapter(Adapter):
                 "POST", "/API/CABCONTROLS", body=[self._control(t) for t in self._controls]
             )
             self.client.check(answer, "POST", "/API/CABCONTROLS")
-            wall_end = self._wall_start + (time + step - self._sim_start) / self.settings.speedup
+            wall_end = self._wall_start + (end - self._sim_start) / self.settings.speedup
             await asyncio.sleep(max(0.0, wall_end - wallclock.monotonic()))
             await self._poll()
-        self._time = time + step
+        self._time = end
 
     async def get_state(self) -> Mapping[str, Any]:
         if self._stale or self._train is None or self._map is None:

@@ -18,10 +18,10 @@ import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from enum import StrEnum
-from fractions import Fraction
 from typing import TYPE_CHECKING, Protocol
 
 from coupler.channels import Channel, Description, Value
+from coupler.grid import decimal_of
 
 if TYPE_CHECKING:
     from coupler.participant import Participant
@@ -111,12 +111,6 @@ class TimeGrid:
         if last >= exact or self._scale >= exact:
             return None
         return float(self._origin), float(self._stride), float(self._scale)
-
-
-def decimal_of(value: float) -> Fraction:
-    """The decimal a user wrote for ``value``, exactly: the shortest text that reads back to
-    this double (``repr``) — the text given, for any value of up to 15 significant digits."""
-    return Fraction(repr(value))
 
 
 @dataclass(frozen=True, kw_only=True)

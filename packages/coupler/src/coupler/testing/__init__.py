@@ -13,6 +13,8 @@
   (passed, failed, timed out, interrupted) with everything it started, and waited for.
 - ``SystemStructure`` with ``fmu(...)`` and ``remote(...)`` components: a small SSD written for
   ``coupler run`` (``coupler.testing.ssd``).
+- ``run_coupler(*argv)``: the ``coupler`` command as a process of its own; ``recorded(out)`` and
+  ``summary(out)``: what the run wrote (``coupler.testing.cli``).
 
 No pytest needed: these are context managers and functions a test of any framework can use.
 """
@@ -33,6 +35,7 @@ from typing import TYPE_CHECKING, Any, TypeVar
 from coupler.errors import CouplerError
 from coupler.participant import Participant
 from coupler.server import ParticipantServer
+from coupler.testing.cli import recorded, run_coupler, summary
 from coupler.testing.ssd import (
     Annotation,
     Binding,
@@ -62,9 +65,12 @@ __all__ = [
     "free_port",
     "free_ports",
     "process_group",
+    "recorded",
     "remote",
+    "run_coupler",
     "served",
     "served_in_thread",
+    "summary",
     "wait_until",
     "wait_until_serving",
 ]

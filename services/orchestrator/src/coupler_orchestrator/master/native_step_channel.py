@@ -38,7 +38,7 @@ from google.protobuf.message import DecodeError
 from coupler import wire
 from coupler.channels import Value
 from coupler.client import RemoteParticipant, StepTransport, translate, uses_tls
-from coupler.errors import ParticipantError, ParticipantTimeout, foreign
+from coupler.errors import ParticipantError, ParticipantTimeout, answered_unasked, foreign
 from coupler.participant import Values
 from coupler.security import read_secret
 from coupler.v1 import component_pb2 as pb
@@ -275,11 +275,18 @@ class NativeSteps(StepTransport):
 
     def close(self, *, timeout: float) -> None:
         """Half-close the stream and wait briefly for its status: the run has ended either
-        way, the stream's end only confirms it."""
+        way, the stream's end only confirms it -- unless answers came that no request asked
+        for (ABORTED: the participant answered a request twice)."""
         stream, self._native = self._native, None
-        if stream is not None:
-            self._lib.cs_close(stream, timeout)
         self._sent = []
+        if stream is not None and (unasked := self._lib.cs_close(stream, timeout)) > 0:
+            assert self._remote is not None
+            raise ParticipantError(
+                answered_unasked(unasked),
+                participant=self._remote.name,
+                call="Terminate",
+                status="ABORTED",
+            )
 
 
 def transport(asked: bool = True, step_socket: bool = True) -> Callable[[], StepTransport | None]:

@@ -1,6 +1,7 @@
 """A scenario's fleet as local processes: each service its own process, on this host.
 
-A fleet file (TOML) names the scenario and the services::
+A fleet file (TOML; every key in docs/fleet.md, ``SCENARIO_KEYS`` and ``SERVICE_KEYS``) names the
+scenario and the services::
 
     [scenario]
     ssp = "scenarios/railway/SystemStructure.ssd"
@@ -73,6 +74,14 @@ _PORT_OPTION = re.compile(r"^--[a-z-]*port$")
 _VARIABLE = re.compile(r"\$\{([A-Za-z_][A-Za-z0-9_]*)(?::-[^}]*)?\}")
 
 
+SCENARIO_KEYS = ("ssp", "out", "args", "unix_sockets")
+"""The keys of a fleet file's ``[scenario]`` (docs/fleet.md); another is refused, naming it."""
+SERVICE_KEYS = ("name", "command", "health", "ports", "socket")
+"""The keys of a ``[[service]]``."""
+TABLES = ("scenario", "service", "urls")
+"""A fleet file's tables."""
+
+
 class FleetError(CouplerError):
     """A service of the fleet did not start or did not become healthy."""
 
@@ -139,7 +148,9 @@ class FleetSpec:
         """Read a fleet file; ``${VAR:-default}`` from ``env`` (default: the environment)."""
         env = os.environ if env is None else env
         try:
-            data = tomllib.loads(path.read_text(encoding="utf-8"))
+            text = path.read_text(encoding="utf-8")
+            data = tomllib.loads(text)
+            _refuse_unknown(path, text, data)
             scenario = data["scenario"]
             root = root or Path.cwd()
             ssp = root / scenario["ssp"]
@@ -163,9 +174,42 @@ class FleetSpec:
             raise ScenarioError(f"cannot read fleet file {path}: {exc.strerror}") from exc
         except (tomllib.TOMLDecodeError, KeyError, TypeError, ValueError) as exc:
             raise ScenarioError(
-                f"{path}: not a fleet file ({type(exc).__name__}: {exc}); see "
-                f"coupler_orchestrator.tools.fleet for the format"
+                f"{path}: not a fleet file ({type(exc).__name__}: {exc}); see docs/fleet.md for "
+                f"the format"
             ) from exc
+
+
+def _refuse_unknown(path: Path, text: str, data: Mapping[str, Any]) -> None:
+    """ScenarioError naming the first table or key a fleet file may not have (a typo such as
+    ``unix_socket`` would otherwise be ignored), with its line."""
+    known: list[tuple[str, Mapping[str, Any], tuple[str, ...]]] = [("", data, TABLES)]
+    if isinstance(data.get("scenario"), Mapping):
+        known.append(("[scenario]", data["scenario"], SCENARIO_KEYS))
+    services = data.get("service", ())
+    if isinstance(services, list):
+        known += [("[[service]]", s, SERVICE_KEYS) for s in services if isinstance(s, Mapping)]
+    for where, table, keys in known:
+        for key in table:
+            if key in keys:
+                continue
+            if not where:
+                raise ScenarioError(
+                    f"{path} line {_line_of(text, key)}: unknown table [{key}]; a fleet file "
+                    f"has [scenario], [[service]] and [urls] (docs/fleet.md)"
+                )
+            raise ScenarioError(
+                f"{path} line {_line_of(text, key)}: unknown key '{key}' in {where}; its keys "
+                f"are {', '.join(keys)} (docs/fleet.md)"
+            )
+
+
+def _line_of(text: str, key: str) -> int:
+    """The first line of ``text`` that sets ``key`` or opens a table of that name (1 if none)."""
+    pattern = re.compile(rf"^\s*(\[+\s*{re.escape(key)}\s*\]+|\"?{re.escape(key)}\"?\s*=)")
+    for number, line in enumerate(text.splitlines(), 1):
+        if pattern.match(line):
+            return number
+    return 1
 
 
 def _service(path: Path, raw: Mapping[str, Any], env: Mapping[str, str]) -> ServiceSpec:
@@ -351,20 +395,27 @@ class Fleet:
 
     def _lock_results(self) -> None:
         """Hold ``out/.fleet.lock`` while the fleet lives, so two fleets never write one
-        results directory; the lock goes with the process, however it ends."""
+        results directory; the lock goes with the process, however it ends, and the file with
+        the fleet when it stops (``stop``). A lock taken on a file that its owner removed
+        meanwhile is no lock: then the file is opened again."""
         self.spec.out.mkdir(parents=True, exist_ok=True)
         path = self.spec.out / ".fleet.lock"
-        lock = path.open("a+", encoding="utf-8")
-        try:
-            fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except OSError:
-            lock.seek(0)
-            owner = lock.read().strip() or "another process"
+        while True:
+            lock = path.open("a+", encoding="utf-8")
+            try:
+                fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except OSError:
+                lock.seek(0)
+                owner = lock.read().strip() or "another process"
+                lock.close()
+                raise FleetError(
+                    f"{self.spec.out} is being written by another fleet ({owner}); stop it, or "
+                    f"give this one its own results directory with --out"
+                ) from None
+            with contextlib.suppress(OSError):
+                if os.stat(path).st_ino == os.fstat(lock.fileno()).st_ino:
+                    break
             lock.close()
-            raise FleetError(
-                f"{self.spec.out} is being written by another fleet ({owner}); stop it, or "
-                f"give this one its own results directory with --out"
-            ) from None
         lock.truncate(0)
         lock.write(f"pid {os.getpid()}\n")
         lock.flush()
@@ -455,6 +506,8 @@ class Fleet:
             self.sockets = None
             self.addresses.clear()
         if self._lock is not None:
+            with contextlib.suppress(OSError):  # removed while held: no one else holds it
+                os.unlink(self._lock.name)
             self._lock.close()
             self._lock = None
 
