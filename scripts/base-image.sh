@@ -1,11 +1,11 @@
 #!/usr/bin/env bash
-# Local stand-ins for the two registry images the Dockerfiles start from, for machines that
+# Local stand-ins for the two registry images services/Dockerfile starts from, for machines that
 # reach no container registry:
 #
 #   python:3.11-slim            Debian bookworm (minbase) + python3 3.11, from debootstrap
-#   ghcr.io/astral-sh/uv:VER    the host's uv binary at /uv (VER = the Dockerfiles' default)
+#   ghcr.io/astral-sh/uv:VER    the host's uv binary at /uv (VER = services/Dockerfile's default)
 #
-# Tagged with the names the Dockerfiles use, so they build unchanged (a local image is used
+# Tagged with the names services/Dockerfile uses, so it builds unchanged (a local image is used
 # before any pull). Each is skipped when `docker image inspect` already finds it; the
 # debootstrap tarball is cached in $COUPLER_CACHE (default ~/.cache/coupler).
 #
@@ -20,8 +20,8 @@ SUITE=${SUITE:-bookworm}
 MIRROR=${DEBIAN_MIRROR:-http://deb.debian.org/debian}
 CACHE=${COUPLER_CACHE:-${HOME:-/root}/.cache/coupler}
 TARBALL="$CACHE/rootfs-$SUITE-python3.tar"
-# The uv image the Dockerfiles name by default (ARG UV_IMAGE=...).
-UV_TAG=${UV_TAG:-$(sed -n 's/^ARG UV_IMAGE=//p' services/orchestrator/Dockerfile | head -n1)}
+# The uv image services/Dockerfile names by default (ARG UV_IMAGE=...).
+UV_TAG=${UV_TAG:-$(sed -n 's/^ARG UV_IMAGE=//p' services/Dockerfile | head -n1)}
 
 say() { echo "base-image: $*"; }
 have() { [[ -z ${FORCE:-} ]] && "$DOCKER" image inspect "$1" >/dev/null 2>&1; }
@@ -67,7 +67,7 @@ base_image() {
 
 uv_image() {
   if [[ -z $UV_TAG ]]; then
-    say "no 'ARG UV_IMAGE=' in services/orchestrator/Dockerfile" >&2
+    say "no 'ARG UV_IMAGE=' in services/Dockerfile" >&2
     return 1
   fi
   if have "$UV_TAG"; then
@@ -82,7 +82,7 @@ uv_image() {
   want=${UV_TAG##*:}
   got=$("$uv" --version | awk '{print $2}')
   if [[ $got != "$want" || $(head -c 4 "$uv" | tr -d '\0') != $'\x7fELF' ]]; then
-    say "host uv is $got ($uv), the Dockerfiles want $want: installing uv==$want into build/uv"
+    say "host uv is $got ($uv), services/Dockerfile wants $want: installing uv==$want into build/uv"
     python3 -m venv build/uv && build/uv/bin/pip install --quiet "uv==$want"
     uv=$(readlink -f build/uv/bin/uv)
   fi

@@ -7,7 +7,7 @@
 #      the wheel holds no build helper: those are coupler-tools') serves, and the workspace's
 #      `coupler run` drives it: the values it answered are right
 #   3. engine (scripts/lib), the local base image (scripts/base-image.sh) and the orchestrator
-#      image built from it (services/orchestrator/Dockerfile: installs coupler-native's wheel)
+#      image built from it (services/Dockerfile, SERVICE=orchestrator: installs coupler-native's wheel)
 #   4. in a container of that image, where no compiler and no system gRPC may be found:
 #      `coupler run -v` of the benchmark's in-process FMU chain steps in C (the native FMU
 #      step) and of a remote gain participant over the native step channel, as summary.json
@@ -93,7 +93,8 @@ build_ca
 
 stage image
 bash scripts/base-image.sh
-docker build --quiet -f services/orchestrator/Dockerfile --build-arg CA_CERTS="$CA_CERTS" \
+docker build --quiet -f services/Dockerfile --build-arg SERVICE=orchestrator \
+  --build-arg CA_CERTS="$CA_CERTS" \
   -t "$IMAGE" . >/dev/null
 docker image ls --format '{{.Repository}}:{{.Tag}} {{.Size}}' "$IMAGE"
 

@@ -95,7 +95,7 @@ engine_up() {
 }
 
 # The CA bundle for image builds behind a TLS-intercepting proxy: the build stage only (see the
-# Dockerfiles); the images never contain it. ${CHECK_CA}: a bundle, "none", or the host's.
+# Dockerfile); the images never contain it. ${CHECK_CA}: a bundle, "none", or the host's.
 build_ca() {
   local ca=${CHECK_CA:-${SSL_CERT_FILE:-/etc/ssl/certs/ca-certificates.crt}}
   if [[ $ca != none && -f $ca ]]; then

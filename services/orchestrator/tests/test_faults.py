@@ -648,19 +648,25 @@ def test_an_isolated_fmu_that_hangs_fails_within_the_deadline(
 
 
 @pytest.mark.usefixtures("fmu_path")
+@pytest.mark.parametrize("semantics", ["coupler", "openmcx"])
 def test_an_fmu_hanging_in_process_ends_the_run_at_its_deadline(
-    faulty_ssd: Path, tmp_path: Path
+    faulty_ssd: Path, tmp_path: Path, semantics: str
 ) -> None:
     """The FMU blocks the orchestrator's thread: the watchdog ends the run from its own thread,
-    results written, and the process exits (the only way to leave a thread stuck in C)."""
+    results written, and the process exits (the only way to leave a thread stuck in C) — with
+    OpenMCx's semantics (its master) as with Coupler's: both step it with the same stepper."""
     out = tmp_path / "o"
     started = time.monotonic()
-    run = orchestrator(faulty_ssd, out, *RUN, "--call-timeout", "1", "--param", "Faulty.hang_at=1")
+    dialect = ["--openmcx"] if semantics == "openmcx" else []
+    run = orchestrator(
+        faulty_ssd, out, *RUN, *dialect, "--call-timeout", "1", "--param", "Faulty.hang_at=1"
+    )
     _, err = run.communicate(timeout=30)
     assert time.monotonic() - started < 20
     assert run.returncode == 1, err
     result = summary(out)
     assert result["status"] == "failed"
+    assert result["semantics"] == semantics
     assert "Faulty.DoStep [DEADLINE_EXCEEDED]: no answer within 1 s" in result["reason"]
     assert "the FMU hangs in-process" in result["reason"]
     assert len(assert_rows_kept(out)) == 11

@@ -23,6 +23,7 @@ from coupler_orchestrator.model import Algorithm, Candidate, Roster
 from coupler_orchestrator.options import RunOptions
 from coupler_orchestrator.pipeline.checks import check
 from coupler_orchestrator.pipeline.ordering import execution_order
+from coupler_orchestrator.pipeline.semantics import COUPLER
 from coupler_orchestrator.pipeline.wiring import converter, wire
 from coupler_orchestrator.ssp.units import affine, from_symbol
 
@@ -89,7 +90,7 @@ OPTIONS = RunOptions(stop_time=1.0, step_size=0.05, algorithm=Algorithm.JACOBI)
 
 
 async def test_converters_widen_convert_and_transform(scenario: ssp.Scenario) -> None:
-    checked = check(scenario, await roster_of(scenario), OPTIONS)
+    checked = check(scenario, await roster_of(scenario), OPTIONS, COUPLER)
     by = {(r.connection.start, r.connection.end): r for r in checked.routes}
     position = converter(by[("Source.position", "Gain.u")])
     assert position is not None and position(1.5) == pytest.approx(1500.0)  # km -> m
@@ -126,7 +127,7 @@ async def test_problems_of_the_wiring_are_listed_together(tmp_path: Path) -> Non
         (tmp_path / name).write_bytes((DATA / name).read_bytes())
     scenario = ssp.load_ssp(path, env={"SCALE_HOST": "scale"})
     with pytest.raises(ValidationError) as info:
-        check(scenario, await roster_of(scenario), OPTIONS)
+        check(scenario, await roster_of(scenario), OPTIONS, COUPLER)
     problems = "\n".join(info.value.problems)
     assert (  # the connections' lines: one of them in the nested system
         "bad.ssd line 79: input 'Sink.a' is driven by 2 connections (line 79 from "
@@ -141,7 +142,7 @@ async def test_problems_of_the_wiring_are_listed_together(tmp_path: Path) -> Non
 
 async def test_gauss_seidel_order_follows_the_links(scenario: ssp.Scenario) -> None:
     options = RunOptions(stop_time=1.0, step_size=0.05, algorithm=Algorithm.GAUSS_SEIDEL)
-    checked = check(scenario, await roster_of(scenario), options)
+    checked = check(scenario, await roster_of(scenario), options, COUPLER)
     order = execution_order([m.name for m in checked.members], wire(checked), checked.algorithm)
     assert order.index("Source") < order.index("Gain") < order.index("Sub.Scale")
     assert order.index("Sub.Scale") < order.index("Sink")

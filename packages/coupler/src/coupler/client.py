@@ -100,6 +100,11 @@ class StepTransport(ABC):
         """End this run's steps: after Terminate, waiting up to ``timeout`` seconds for the
         end's status; at once (``timeout`` 0) when the participant is closed."""
 
+    def split(self) -> Any | None:
+        """This run's steps in two halves on the caller's thread (an object with ``send`` and
+        ``receive``), when the transport carries them and can; None: through ``step``."""
+        return None
+
 
 class RemoteParticipant(Participant):
     """A participant reached over gRPC.
@@ -330,6 +335,11 @@ class RemoteParticipant(Participant):
         if reason is not None:
             raise EndRun(reason, outputs)
         return outputs
+
+    def split(self) -> Any | None:
+        """Its steps in two halves on the caller's thread, when its transport can (the
+        orchestrator's native step channel: ``StepTransport.split``); None: ``do_step``."""
+        return self.steps.split() if self.steps is not None else None
 
     async def do_step(self, time: float, step: float, inputs: Mapping[str, Value]) -> Values:
         request = self.step_request(time, step, inputs)

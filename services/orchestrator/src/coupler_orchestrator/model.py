@@ -3,6 +3,7 @@
 Nothing here does anything: each stage reads what the one before made and makes the next
 (docs/orchestrator.md, "How a run flows"):
 
+    (its dialect) -> Semantics   (how the stages read it where a dialect differs: chosen once)
     participants -> Roster of Candidates   (2: each component's participant, described)
     checks       -> Checked: TimeGrid, Members, Routes   (3: what passed every check)
     wiring       -> Links   (4: one converter per connection)
@@ -14,10 +15,10 @@ It imports nothing heavy at run time, so that the command line can name the choi
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from enum import StrEnum
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Protocol
 
 from coupler.channels import Channel, Description, Value
 from coupler.grid import decimal_of
@@ -26,7 +27,6 @@ if TYPE_CHECKING:
     from coupler.participant import Participant
     from coupler_orchestrator import ssp
     from coupler_orchestrator.observer import RunEnd
-    from coupler_orchestrator.ssp.units import Affine, OpenMcxUnits
 
 
 class Algorithm(StrEnum):
@@ -144,7 +144,7 @@ class Route:
     """The output (as the participant declares it) that drives the connection."""
     target: Channel
     """The input it drives."""
-    conversion: Affine | OpenMcxUnits | None = None
+    conversion: Conversion | None = None
     """Unit conversion from the source's unit to the target's; None when there is none."""
     source_enum: ssp.Enumeration | None = None
     """The SSD enumeration of the start connector (Enumeration connectors)."""
@@ -166,14 +166,58 @@ class Checked:
     """Results record every ``record_every``-th communication point (``--output-interval``)."""
     warnings: tuple[str, ...]
     """The scenario's warnings and the checks' own (units nobody understands)."""
-    openmcx: bool = False
-    """The run has OpenMCx's semantics (the scenario asks for them, or the options do)."""
+    semantics: Semantics
+    """How the run reads the scenario (Coupler's, or a dialect's: OpenMCx's)."""
     cut: frozenset[str] = frozenset()
-    """OpenMCx: the connections cut to break algebraic loops, by driven input
-    (``Component.connector``)."""
+    """The connections the semantics cut to break algebraic loops, by driven input
+    (``Component.connector``): the target reads the source's value of the step before."""
 
 
 Converter = Callable[[Value], Value]
+Conversion = Callable[[float], float]
+"""A unit conversion (``ssp.units``)."""
+
+
+class Semantics(Protocol):
+    """How the stages read a scenario where a dialect reads it otherwise than Coupler does:
+    one object, chosen once before the checks (``pipeline.openmcx.semantics_of``). The generic
+    stages ask it and never name a dialect; Coupler's own is ``pipeline.semantics.COUPLER``,
+    OpenMCx's translates its annotations (``pipeline.openmcx``)."""
+
+    name: str
+    """What summary.json calls it (``semantics``)."""
+    checks_units: bool
+    """Each SSD connector's unit is compared with its participant's, and a connection converts
+    by SSP's unit algebra (refusing units of another dimension); False: ``conversion`` does."""
+    whole_run: bool
+    """A member's deltaTime must divide the run; False: it may step past the stop time."""
+
+    def conversion(
+        self, scenario: ssp.Scenario, start: ssp.Connector | None, end: ssp.Connector | None
+    ) -> Conversion | None:
+        """A connection's unit conversion when ``checks_units`` is False."""
+        ...
+
+    def start_inputs(self, scenario: ssp.Scenario, component: ssp.Component) -> dict[str, Value]:
+        """Start values the scenario gives inputs of ``component`` beyond its bindings."""
+        ...
+
+    def entering(self, connector: ssp.Connector) -> Converter | None:
+        """What the input ``connector`` does to a value entering it; None: nothing."""
+        ...
+
+    def cut_loops(self, scenario: ssp.Scenario, algorithm: Algorithm) -> frozenset[str]:
+        """The connections cut to break loops (``Checked.cut``); ValidationError naming every
+        loop the algorithm cannot order."""
+        ...
+
+    def order(self, checked: Checked, links: Sequence[Link]) -> tuple[str, ...]:
+        """The members' names in the order they initialize and step."""
+        ...
+
+    def additions(self, checked: Checked, links: tuple[Link, ...]) -> OpenMcx | None:
+        """What the semantics add to the plan (``Plan.openmcx``); None: nothing."""
+        ...
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -268,4 +312,5 @@ class Plan:
     native: bool = False
     """Step in-process FMUs in C when the plan allows it (``master.native_fmu_step``)."""
     openmcx: OpenMcx | None = None
-    """Run with OpenMCx's semantics (``master.openmcx``); None: Coupler's."""
+    """What OpenMCx's semantics add (``Semantics.additions``), run by ``master.openmcx``; None:
+    Coupler's."""

@@ -1,4 +1,6 @@
-"""The native code of coupler-native, imported from the installed package on first use.
+"""The native code of coupler-native, imported from the installed package on first use: the one
+module of the orchestrator that imports ``coupler_native`` (an import-linter contract says so);
+the rest asks for ``fmu_steps``, ``step_streams``, ``answers``, ``rows`` or ``proxy_binaries``.
 
 ``packages/coupler-native`` compiles the native FMU step (C), the native step channel (C++
 gRPC) and the proxy FMU's binaries when its wheel is built; nothing is compiled on the user's
@@ -9,9 +11,11 @@ platform it has no wheel for) every run steps through Python with the same resul
 
 from __future__ import annotations
 
-import importlib
 import os
 import sys
+from collections.abc import Callable
+from pathlib import Path
+from types import ModuleType
 from typing import Any
 
 import structlog
@@ -39,6 +43,39 @@ MISSING = (
 )
 
 
+def _fmu_steps() -> ModuleType:
+    from coupler_native import _fmu_steps
+
+    return _fmu_steps
+
+
+def _step_streams() -> ModuleType:
+    from coupler_native import _step_streams
+
+    return _step_streams
+
+
+def _answers() -> ModuleType:
+    from coupler_native import _answers
+
+    return _answers
+
+
+def _rows() -> ModuleType:
+    from coupler_native import _rows
+
+    return _rows
+
+
+_IMPORTS: dict[str, Callable[[], ModuleType]] = {
+    "_fmu_steps": _fmu_steps,
+    "_step_streams": _step_streams,
+    "_answers": _answers,
+    "_rows": _rows,
+}
+"""How each compiled module is imported (statically, so the import-linter sees every one)."""
+
+
 class NativeModule:
     """A module of coupler-native (``coupler_native.<name>``), imported on the first call; the
     call then gives it, or None when it cannot be had, said once: quietly (logged) when
@@ -48,6 +85,7 @@ class NativeModule:
     def __init__(self, name: str, what: str) -> None:
         self.name = f"coupler_native.{name}"
         self.what = what
+        self._import = _IMPORTS[name]
         self._loaded: Any = None
         self.problem: str | None = None
         """Why it cannot be had (None while it can, or before the first call)."""
@@ -56,7 +94,7 @@ class NativeModule:
         if self._loaded is not None or self.problem is not None:
             return self._loaded
         try:
-            self._loaded = importlib.import_module(self.name)
+            self._loaded = self._import()
         except ImportError as exc:
             if isinstance(exc, ModuleNotFoundError) and exc.name == "coupler_native":
                 self.problem = MISSING
@@ -67,6 +105,30 @@ class NativeModule:
         return self._loaded
 
 
+fmu_steps = NativeModule("_fmu_steps", "the native FMU step")
+"""``fmu_steps()``: the native FMU step (``ffi``, ``lib``), or None (why is said once)."""
+step_streams = NativeModule("_step_streams", "the native step channel")
+"""``step_streams()``: the native step channel (``ffi``, ``lib``), or None (why is said once)."""
+answers = NativeModule("_answers", "the step answers read in C")
+"""``answers()``: ``coupler_native._answers``, which reads an answer's outputs from its bytes
+as the codec decodes them (else None: protobuf and the codec read every answer)."""
 rows = NativeModule("_rows", "the native CSV row")
 """``rows()``: ``coupler_native._rows`` (``RowFormat`` makes results.csv's lines, ``RowRead``
 reads the native FMU step's row from its arrays), or None (why is said once)."""
+
+
+def proxy_binaries() -> tuple[Path | None, str]:
+    """The folder of the proxy FMU's binaries (``CouplerProxy.so`` and the libraries it loads),
+    as the installed coupler-native package holds it, or None and why it cannot be had."""
+    try:
+        import coupler_native
+    except ModuleNotFoundError:
+        return None, (
+            "coupler export-fmu copies the proxy FMU's binaries from the coupler-native "
+            "package, which is not installed (its wheel is built for Linux x86_64; in the "
+            "repository: make setup)"
+        )
+    folder: Path = coupler_native.PROXY
+    if not (folder / coupler_native.PROXY_BINARY).is_file():
+        return None, f"{folder} holds no {coupler_native.PROXY_BINARY}: reinstall coupler-native"
+    return folder, ""

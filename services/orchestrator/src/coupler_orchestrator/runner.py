@@ -1,5 +1,5 @@
-"""One scenario end to end: load -> participants -> checks -> wiring -> plan -> master ->
-results. The CLI calls this; ``validate`` stops after the checks.
+"""One scenario end to end: load -> (its semantics) -> participants -> checks -> wiring -> plan
+-> master -> results. The CLI calls this; ``validate`` stops after the checks.
 
 Every path cleans up: participants are closed and an extracted archive is removed, also when
 loading, checking or running fails or the run is interrupted.
@@ -22,18 +22,18 @@ from coupler.channels import Description
 from coupler.errors import ScenarioError
 from coupler_orchestrator import ssp
 from coupler_orchestrator.master import native_step_channel
-from coupler_orchestrator.master.loop import Master
-from coupler_orchestrator.master.openmcx import OpenMcxMaster
+from coupler_orchestrator.master.openmcx import master_of
 from coupler_orchestrator.model import Checked, Plan
 from coupler_orchestrator.observer import Observer, RunEnd
 from coupler_orchestrator.options import RunOptions
 from coupler_orchestrator.outputs.csv import CsvRecorder, Selection
 from coupler_orchestrator.outputs.files import check_writable, claim, default_base, new_run_folder
 from coupler_orchestrator.outputs.kept_frames import KeptFrames
-from coupler_orchestrator.outputs.openmcx import OpenMcxResults
+from coupler_orchestrator.outputs.openmcx import openmcx_results
 from coupler_orchestrator.outputs.parquet import ParquetRecorder, parquet_available
 from coupler_orchestrator.outputs.summary import SummaryWriter, coupler_version
 from coupler_orchestrator.pipeline.checks import check
+from coupler_orchestrator.pipeline.openmcx import semantics_of
 from coupler_orchestrator.pipeline.participants import opened
 from coupler_orchestrator.pipeline.plan import build_plan
 from coupler_orchestrator.pipeline.wiring import wire
@@ -99,7 +99,7 @@ async def validate_scenario(path: Path, options: RunOptions) -> Validation:
     """Every check of ``run`` without running; ValidationError lists every problem."""
     budget = Budget.of(options.unpack_limit)
     async with loaded(path, budget) as scenario, opened(scenario, options, budget) as roster:
-        checked = check(scenario, roster, options)
+        checked = check(scenario, roster, options, semantics_of(scenario, options))
     return Validation(scenario=scenario, warnings=checked.warnings)
 
 
@@ -137,7 +137,7 @@ async def run_scenario(
             )
         steps = native_step_channel.transport(options.native_steps, options.step_socket)
         async with opened(scenario, options, budget, steps=steps) as roster:
-            checked = check(scenario, roster, options)
+            checked = check(scenario, roster, options, semantics_of(scenario, options))
             plan = build_plan(checked, wire(checked), options)
             if out_dir is None:  # made once the run is sure to start: no empty folders
                 out_dir = new_run_folder(base, options.run_id)
@@ -159,19 +159,17 @@ async def run_scenario(
             if options.parquet:
                 recorders.append(ParquetRecorder(out_dir / "results.parquet", selection))
             recorders.extend(recordings)
-            openmcx = OpenMcxResults(out_dir, scenario) if options.openmcx_results else None
-            if openmcx is not None:
-                recorders.append(openmcx)
+            files = openmcx_results(out_dir, scenario, options)
+            recorders.extend(files)
             recorders.extend(observers)
-            master = Master if plan.openmcx is None else OpenMcxMaster
-            end = await master(plan, recorders).run()
+            end = await master_of(plan)(plan, recorders).run()
     return RunOutcome(
         end=end,
         summary=summary.summary,
         results_csv=csv_path,
         summary_json=summary_path,
         recordings=tuple(r.path for r in recordings),
-        openmcx_files=tuple(openmcx.paths) if openmcx else (),
+        openmcx_files=tuple(path for f in files for path in f.paths),
     )
 
 
@@ -198,7 +196,7 @@ def _extra(checked: Checked, descriptions: dict[str, Any]) -> dict[str, Any]:
         "coupler_version": coupler_version(),
         "ssp": {"path": str(scenario.source), "sha256": scenario.sha256},
         "implementations": {n: d.implementation for n, d in descriptions.items()},
-        "semantics": "openmcx" if checked.openmcx else "coupler",
+        "semantics": checked.semantics.name,
         "warnings": list(checked.warnings),
         "parameters": {
             f"{member.name}.{name}": value

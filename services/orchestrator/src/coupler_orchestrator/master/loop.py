@@ -5,13 +5,14 @@ to, step the members that are due, store their outputs, record. Jacobi steps all
 concurrently on the outputs of the previous communication point; Gauss-Seidel steps them one
 after another in the plan's order, each seeing what its predecessors just produced.
 
-How each member steps is chosen once (``steppers``): members that compute in this process
-(in-process FMUs) step on this thread without awaiting — while the remote members' steps are
-in flight — under the eye of a ``Watchdog`` that ends the run when such a step outlives its
-deadline. Remote members on the native step channel are sent their requests first and
-answered last, on this thread too; the others are awaited. A run of in-process FMUs only is stepped
-in C (``native_fmu_step``), with the same meaning: unpaced, several base steps per call, the
-observers told of them together (``Observer.stepped_batch``); else one base step per call.
+How each member steps is an object chosen once (``steppers``); the loops only begin and finish
+steps. Members that compute in this process (in-process FMUs) step on this thread without
+awaiting — while the remote members' steps are in flight — under the eye of a ``Watchdog`` that
+ends the run when such a step outlives its deadline. Remote members on the native step channel
+are sent their requests first and answered last, on this thread too; the others are awaited. A
+run of in-process FMUs only is stepped in C (``native_fmu_step``), with the same meaning:
+unpaced, several base steps per call, the observers told of them together
+(``Observer.stepped_batch``); else one base step per call.
 t_k is the double nearest to the exact decimal t_0 + k*h (``TimeGrid.time``); each member
 steps from t_k by exactly its configured step (its deltaTime, else h), never by a difference
 of two communication points.
@@ -33,18 +34,14 @@ import structlog
 from coupler.channels import RunSetup, Value
 from coupler.errors import CouplerError, ParticipantError, ParticipantTimeout, ValueTooLarge
 from coupler.participant import EndRun, Values
-from coupler_orchestrator.master import native_fmu_step, native_step_channel
-from coupler_orchestrator.master.steppers import Split, StepNow, stepper_of
+from coupler_orchestrator.master import native_fmu_step
+from coupler_orchestrator.master.steppers import Stepper, steppers_of
 from coupler_orchestrator.master.watchdog import Watchdog
 from coupler_orchestrator.model import Algorithm, Converter, Member, Plan
 from coupler_orchestrator.observer import Column, Observer, RunEnd, RunInfo, StepPath, Steps
 
 log = structlog.get_logger("coupler.master")
 
-NATIVE_STUCK = (
-    "the native step channel did not come back from its own deadline (the run had reached "
-    "t={time:g} s); run with --no-native-steps and report it"
-)
 YIELD_EVERY = 0.02
 """Longest stretch [s] the step loop keeps the event loop to itself when no step awaits (only
 in-process and native members): an interrupt, the live monitor and the progress line get
@@ -57,6 +54,7 @@ DUE_PATTERNS = 1024
 """At most this many distinct sets of due members are kept (members with large, coprime
 multiples make more; those are worked out step by step)."""
 Key = tuple[str, str]
+Due = tuple[Member, Stepper]
 
 
 def _failed_recording(end: RunEnd, problem: str) -> RunEnd:
@@ -147,12 +145,10 @@ class Master:
             m.name: {c.name: (m.name, c.name) for c in m.outputs} for m in plan.order
         }
         """Each member's outputs' keys in ``store``, made once."""
-        self._do_step = {m.name: f"{m.name}.DoStep" for m in plan.order}
-        """What the watchdog calls each member's step."""
         self._period = math.lcm(*(m.multiple for m in plan.order)) if plan.order else 1
-        self._due: dict[int, tuple[list[Member], list[Member], list[Member]]] = {}
-        """Jacobi's members due at step k (by k modulo the multiples' period): in-process,
-        split and awaited ones."""
+        self._due: dict[int, tuple[list[Due], list[Due]]] = {}
+        """Jacobi's members due at step k (by k modulo the multiples' period): those whose
+        steps finish on this thread, and the awaited ones."""
         self._slot = {m.name: i for i, m in enumerate(plan.members)}
         self._timing: list[float | None] = [None] * len(plan.members)
         self.store: dict[Key, Value] = {}
@@ -162,14 +158,11 @@ class Master:
         """Why a participant asked to end the run, once one did."""
         self._request = ("", "")
         """Who asked to end the run, and the reason given."""
-        self._local: dict[str, StepNow] = {}
-        """Members stepping on this thread (after Initialize), by name."""
-        self._overrun: dict[str, str] = {}
-        """What a step of a member in ``_local`` past its deadline means."""
-        self._split: dict[str, Split] = {}
-        """Members stepping in two halves on this thread (after Initialize), by name."""
-        self._sent: dict[str, float] = {}
-        """When each split member's request under way was sent [perf_counter]."""
+        self._steppers: list[Due] = []
+        """Each member and how it steps, in plan order (after Initialize, ``steppers``)."""
+        self.steppers: dict[str, Stepper] = {}
+        """How each member steps, by name (after Initialize; none under the native FMU
+        batch)."""
         self._kernel: native_fmu_step.Kernel | None = None
         """Steps every member in C, when the plan allows it (after Initialize)."""
         self._paths: dict[str, StepPath] = {}
@@ -212,8 +205,8 @@ class Master:
         try:
             for observer in self.observers:
                 observer.started(self.info)
-            await self._initialize(initialized)
-            self._watch_local_members()
+            await self.initialize(initialized)
+            self._choose_steppers()
             self._record(grid.start)
             yielded = wallclock.perf_counter()
             batches = self._kernel is not None and self._kernel.logs and not plan.realtime_factor
@@ -222,7 +215,7 @@ class Master:
                 if batches:
                     k = self._native_steps(k, grid.steps - k)
                 else:
-                    await self._advance(k)
+                    await self.advance(k)
                     k += 1
                     self.completed_steps = k
                     self._record(grid.time(k))
@@ -234,7 +227,7 @@ class Master:
                 elif wallclock.perf_counter() - yielded > YIELD_EVERY:
                     await _let_others_run()
                     yielded = wallclock.perf_counter()
-            await self._wind_up()
+            await self.wind_up()
         except CouplerError as exc:
             status, reason = "failed", f"{exc} (the run had reached t={self._time_reached():g} s)"
             # an expected end, said by the outcome (the command line prints it once): info
@@ -267,7 +260,7 @@ class Master:
             end = self._finish(end)
         return end
 
-    async def _advance(self, k: int) -> None:
+    async def advance(self, k: int) -> None:
         """Base step k: from t_k to t_{k+1}, by the plan's algorithm."""
         if self._kernel is not None:
             self._native_step(k)
@@ -276,9 +269,23 @@ class Master:
         else:
             await self._gauss_seidel_step(k, self._held)
 
-    async def _wind_up(self) -> None:
+    async def wind_up(self) -> None:
         """After the last step, before the members are terminated (a run that ends
         ``completed`` or ``terminated``); nothing to do in Coupler's semantics."""
+
+    def end_run(self, by: str, reason: str) -> None:
+        """End the run after this base step, ``terminated``: ``by`` asked, for ``reason``."""
+        self._ended = reason
+        self._request = (by, reason)
+
+    def took(self, m: Member, seconds: float) -> None:
+        """A step of ``m`` took ``seconds`` (its latency at this communication point)."""
+        self._timing[self._slot[m.name]] = seconds
+
+    @property
+    def abandoned(self) -> bool:
+        """The watchdog ended the run from its thread: this thread must not go on."""
+        return self._abandoned
 
     def _requested(self, status: str) -> dict[str, str]:
         if status != "terminated":
@@ -315,7 +322,9 @@ class Master:
         )
         return end
 
-    async def _initialize(self, initialized: list[Member]) -> None:
+    async def initialize(self, initialized: list[Member]) -> None:
+        """Initialize every member (each added to ``initialized`` as its call is made), and
+        store their first outputs."""
         grid = self.plan.grid
 
         async def init(m: Member) -> Values:
@@ -345,44 +354,21 @@ class Master:
         for m, result in zip(members, results, strict=True):
             if isinstance(result, BaseException):
                 raise result
-            self._store(m, result, "Initialize", grid.start)
+            self.store_outputs(m, result, "Initialize", grid.start)
 
-    def _watch_local_members(self) -> None:
-        """Find the members that step on this thread and watch them while they do; prepare
-        the native FMU step when the plan allows it (``native_fmu_step``)."""
-        for m in self.plan.order:
-            stepper = stepper_of(m.participant)
-            if stepper.now is not None:
-                self._local[m.name] = stepper.now
-                self._overrun[m.name] = stepper.overrun
-            elif stepper.split is not None:
-                self._split[m.name] = stepper.split
-        if self._local or self._split:
-            self._watchdog = Watchdog(self._abandon)
-            self._watchdog.start()
-        self._kernel, why = native_fmu_step.prepare(self.plan)
-        self._paths = self._step_paths(why)
+    def _choose_steppers(self) -> None:
+        """How each member steps (``steppers.steppers_of``), chosen once after Initialize; the
+        watchdog watches the steps taken on this thread (and the native FMU batch's calls)."""
+        watchdog = Watchdog(self._abandon)
+        self.steppers, self._kernel, self._paths = steppers_of(self.plan, watchdog)
+        self._steppers = [(m, self.steppers[m.name]) for m in self.plan.order if self.steppers]
+        if self._kernel is not None or any(s.here for _, s in self._steppers):
+            self._watchdog = watchdog
+            watchdog.start()
         if self._kernel is not None:
-            assert self._watchdog is not None
-            self._watchdog.follow(self._kernel.under_way)
+            watchdog.follow(self._kernel.under_way)
             for m, keys in self._store_keys.items():  # the Initialize answers
                 self._kernel.place(m, {c: self.store[key] for c, key in keys.items()})
-
-    def _step_paths(self, kernel_reason: str) -> dict[str, StepPath]:
-        """How each member steps: all in C (the native FMU step), over the native step
-        channel (its StepStream or its step socket), or in Python; and why."""
-        if self._kernel is not None:
-            return {m.name: StepPath("native FMU step", kernel_reason) for m in self.plan.order}
-        paths = {}
-        for m in self.plan.order:
-            if m.name in self._split:
-                paths[m.name] = StepPath(*self._split[m.name].described)
-            elif m.name in self._local:
-                paths[m.name] = StepPath("Python", f"in-process; not in C: {kernel_reason}")
-            else:
-                why = native_step_channel.why_python(m.participant, self.plan.native)
-                paths[m.name] = StepPath("Python", why)
-        return paths
 
     def _abandon(self, status: str, reason: str) -> None:
         """End the run from the watchdog's thread: this thread is stuck in a participant
@@ -430,54 +416,24 @@ class Master:
             self._request = (m.name, end.reason)
         return end.outputs
 
-    async def _step(self, m: Member, k: int) -> Values:
-        """One step of a member that is awaited (a remote participant)."""
-        time = self.plan.grid.time(k)
-        inputs = self._inputs(m)
-        started = wallclock.perf_counter()
+    def _finished(self, m: Member, stepper: Stepper, k: int) -> Values:
+        """The outputs of the step of ``m`` begun at step k (its latency noted)."""
         try:
-            outputs = await m.participant.do_step(time, m.step, inputs)
+            outputs = stepper.finish()
         except EndRun as end:
             outputs = self._ask_to_end(m, k, end)
-        self._timing[self._slot[m.name]] = wallclock.perf_counter() - started
-        return outputs
-
-    def _step_here(self, m: Member, stepper: StepNow, k: int) -> Values:
-        """One step of a member computing on this thread, watched against its deadline."""
-        time = self.plan.grid.time(k)
-        inputs = self._inputs(m)
-        watchdog = self._watchdog
-        assert watchdog is not None
-        started = wallclock.perf_counter()
-        watchdog.arm(self._do_step[m.name], time, m.deadline, self._overrun[m.name])
-        try:
-            outputs = stepper(time, m.step, inputs)
-        except EndRun as end:
-            outputs = self._ask_to_end(m, k, end)
-        finally:
-            watchdog.disarm()
-        self._timing[self._slot[m.name]] = wallclock.perf_counter() - started
+        self._timing[self._slot[m.name]] = stepper.took
         if self._abandoned:  # it came back after the watchdog had ended the run
             raise asyncio.CancelledError
         return outputs
 
-    def _send(self, m: Member, k: int) -> None:
-        """The first half of a split member's step: its request on the way."""
-        self._sent[m.name] = wallclock.perf_counter()
-        self._split[m.name].send(self.plan.grid.time(k), m.step, self._inputs(m))
-
-    def _receive(self, m: Member, k: int) -> Values:
-        """The second half: its answer, waited for on this thread (watched)."""
-        watchdog = self._watchdog
-        assert watchdog is not None
-        watchdog.arm(self._do_step[m.name], self.plan.grid.time(k), m.deadline + 10, NATIVE_STUCK)
+    async def _whole(self, m: Member, stepper: Stepper, k: int) -> Values:
+        """A whole step of ``m`` from t_k (begun and finished at once)."""
         try:
-            outputs = self._split[m.name].receive()
+            outputs = await stepper.whole(self.plan.grid.time(k), m.step, self._inputs(m))
         except EndRun as end:
             outputs = self._ask_to_end(m, k, end)
-        finally:
-            watchdog.disarm()
-        self._timing[self._slot[m.name]] = wallclock.perf_counter() - self._sent[m.name]
+        self._timing[self._slot[m.name]] = stepper.took
         if self._abandoned:
             raise asyncio.CancelledError
         return outputs
@@ -526,46 +482,39 @@ class Master:
         self._timing = native.timing[:]
 
     async def _jacobi_step(self, k: int, pending: dict[int, list[tuple[Member, Values]]]) -> None:
-        """Every due member on the outputs of t_k: the remote ones in flight while the local
-        ones compute here; everyone's outputs stored for the time they reach."""
-        local, split, remote = self._due_at(k)
-        if len(remote) == 1 and not local and not split:
-            pending[k + remote[0].multiple].append((remote[0], await self._step(remote[0], k)))
+        """Every due member on the outputs of t_k: the awaited ones in flight while the others
+        compute or wait here; everyone's outputs stored for the time they reach."""
+        here, awaited = self._due_at(k)
+        if len(awaited) == 1 and not here:  # one awaited member alone: awaited at once
+            m, stepper = awaited[0]
+            pending[k + m.multiple].append((m, await self._whole(m, stepper, k)))
         else:
-            for m in split:
-                self._send(m, k)
-            flying = [asyncio.ensure_future(self._step(m, k)) for m in remote]
+            time = self.plan.grid.time(k)
+            for m, stepper in (*here, *awaited):
+                stepper.begin(time, m.step, self._inputs(m))
+            flying = [s.landing for _, s in awaited if s.landing is not None]
             if flying:
                 await asyncio.sleep(0)  # let the requests leave before computing here
             try:
-                for m in local:
-                    pending[k + m.multiple].append((m, self._step_here(m, self._local[m.name], k)))
-                for m in split:
-                    pending[k + m.multiple].append((m, self._receive(m, k)))
+                for m, stepper in here:
+                    pending[k + m.multiple].append((m, self._finished(m, stepper, k)))
             finally:
-                results = await asyncio.gather(*flying, return_exceptions=True) if flying else []
-            for m, result in zip(remote, results, strict=True):
-                if isinstance(result, BaseException):
-                    raise result
-                pending[k + m.multiple].append((m, result))
+                if flying:
+                    await asyncio.wait(flying)
+            for m, stepper in awaited:
+                pending[k + m.multiple].append((m, self._finished(m, stepper, k)))
         for m, outputs in pending.pop(k + 1, []):
-            self._store(m, outputs, "DoStep", self.plan.grid.time(k + 1))
+            self.store_outputs(m, outputs, "DoStep", self.plan.grid.time(k + 1))
 
-    def _due_at(self, k: int) -> tuple[list[Member], list[Member], list[Member]]:
-        """The members due at step ``k``: in-process, split and awaited ones (in plan order)."""
+    def _due_at(self, k: int) -> tuple[list[Due], list[Due]]:
+        """The members due at step ``k`` and their steppers (in plan order): those whose steps
+        finish on this thread, and the awaited ones."""
         phase = k % self._period
         due = self._due.get(phase)
         if due is None:
-            local: list[Member] = []
-            split: list[Member] = []
-            remote: list[Member] = []
-            for m in self.plan.order:
-                if k % m.multiple == 0:
-                    if m.name in self._local:
-                        local.append(m)
-                    else:
-                        (split if m.name in self._split else remote).append(m)
-            due = (local, split, remote)
+            here = [(m, s) for m, s in self._steppers if k % m.multiple == 0 and s.here]
+            awaited = [(m, s) for m, s in self._steppers if k % m.multiple == 0 and not s.here]
+            due = (here, awaited)
             if len(self._due) < DUE_PATTERNS:
                 self._due[phase] = due
         return due
@@ -573,29 +522,29 @@ class Master:
     async def _gauss_seidel_step(self, k: int, held: dict[str, Values]) -> None:
         """Members in order; outputs of t_{k+m} are stored in the slot of the base step that
         ends at t_{k+m}, so successors see them then and no row shows a value from later."""
-        for m in self.plan.order:
-            if k % m.multiple == 0:
-                stepper = self._local.get(m.name)
-                if stepper is not None:
-                    held[m.name] = self._step_here(m, stepper, k)
-                elif m.name in self._split:
-                    self._send(m, k)
-                    held[m.name] = self._receive(m, k)
-                else:
-                    held[m.name] = await self._step(m, k)
+        for m, stepper in self._steppers:
+            if k % m.multiple == 0 and stepper.here:
+                stepper.begin(self.plan.grid.time(k), m.step, self._inputs(m))
+                held[m.name] = self._finished(m, stepper, k)
+            elif k % m.multiple == 0:
+                held[m.name] = await self._whole(m, stepper, k)
             if (k + 1) % m.multiple == 0 and m.name in held:
-                self._store(m, held.pop(m.name), "DoStep", self.plan.grid.time(k + 1))
+                self.store_outputs(m, held.pop(m.name), "DoStep", self.plan.grid.time(k + 1))
 
-    def _store(self, m: Member, outputs: Values, call: str, time: float) -> None:
+    def store_outputs(self, m: Member, outputs: Values, call: str, time: float) -> None:
         """Keep a member's outputs; every output it describes must be there, and no other."""
-        if outputs.keys() != self._output_names[m.name]:
-            raise self._refused(m, outputs, call, time)
+        self.check_answer(m, outputs, call, time)
         maxima = self._maxima[m.name]
         if maxima:  # a remote member's were checked as they arrived; an in-process one's here
             _within(m.name, call, outputs, maxima)
         store, keys = self.store, self._store_keys[m.name]
         for channel, value in outputs.items():
             store[keys[channel]] = value
+
+    def check_answer(self, m: Member, outputs: Values, call: str, time: float) -> None:
+        """ParticipantError unless ``outputs`` are every output ``m`` describes, and no other."""
+        if outputs.keys() != self._output_names[m.name]:
+            raise self._refused(m, outputs, call, time)
 
     def _refused(self, m: Member, outputs: Values, call: str, time: float) -> ParticipantError:
         """Why ``outputs`` are not the outputs ``m`` describes."""

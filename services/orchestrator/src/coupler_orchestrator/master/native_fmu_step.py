@@ -34,7 +34,7 @@ from coupler.fmu import FmuParticipant
 from coupler.fmu.calls import CONVERT, Group
 from coupler_orchestrator.master.watchdog import IN_PROCESS, Armed
 from coupler_orchestrator.model import Algorithm, Member, Plan
-from coupler_orchestrator.native import NativeModule, rows
+from coupler_orchestrator.native import fmu_steps, rows
 
 log = structlog.get_logger("coupler.kernel")
 
@@ -43,7 +43,7 @@ BATCH = 512
 """Most base steps one call into C takes (``Kernel.steps``): the rows its log holds."""
 OFF = "native steps are off (--no-native-steps or COUPLER_NATIVE_STEPS=0)"
 
-library = NativeModule("_fmu_steps", "the native FMU step")
+library = fmu_steps
 """``library()``: the native FMU step (``ffi``, ``lib``), or None (why is said once)."""
 
 

@@ -43,7 +43,8 @@ from coupler.participant import Values
 from coupler.security import read_secret
 from coupler.v1 import component_pb2 as pb
 from coupler_orchestrator.native import ENVIRONMENT as ENVIRONMENT
-from coupler_orchestrator.native import NativeModule, switched_on, wanted
+from coupler_orchestrator.native import answers as answers
+from coupler_orchestrator.native import step_streams, switched_on, wanted
 
 _CODES = {code.value[0]: code for code in grpc.StatusCode}
 log = structlog.get_logger("coupler.master")
@@ -53,11 +54,8 @@ STEP_SOCKET_ENVIRONMENT = "COUPLER_STEP_SOCKET"
 STREAM = ("native step channel", "its StepStream over C++ gRPC")
 """How summary.json names a member stepped over its StepStream, and why."""
 
-library = NativeModule("_step_streams", "the native step channel")
+library = step_streams
 """``library()``: the native step channel (``ffi``, ``lib``), or None (why is said once)."""
-answers = NativeModule("_answers", "the step answers read in C")
-"""``answers()``: ``coupler_native._answers``, which reads an answer's outputs from its bytes
-as the codec decodes them (else None: protobuf and the codec read every answer)."""
 
 
 def enabled(asked: bool = True) -> bool:
@@ -78,7 +76,7 @@ def why_python(participant: object, asked: bool) -> str:
         return "native steps are off (--no-native-steps or COUPLER_NATIVE_STEPS=0)"
     if library() is None:
         return str(library.problem)
-    if isinstance(participant, RemoteParticipant) and isinstance(participant.steps, NativeSteps):
+    if callable(getattr(participant, "split", None)):  # given this channel, which it did not take
         return "the participant offers no StepStream"
     return "not a gRPC participant (its steps are Python calls)"
 

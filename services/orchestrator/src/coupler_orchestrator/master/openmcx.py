@@ -25,7 +25,6 @@ exact (t_0 + k h); docs/openmcx.md says what that changes.
 from __future__ import annotations
 
 import asyncio
-import time as wallclock
 from collections import defaultdict
 from collections.abc import Sequence
 
@@ -41,6 +40,12 @@ from coupler_orchestrator.master.filters import (
 from coupler_orchestrator.master.loop import Master
 from coupler_orchestrator.model import Filtering, Link, Member, OpenMcx, Plan
 from coupler_orchestrator.observer import ComponentObserver, Observer
+
+
+def master_of(plan: Plan) -> type[Master]:
+    """The master that executes ``plan``: this one when the plan carries OpenMCx's additions
+    (``Plan.openmcx``), else Coupler's."""
+    return Master if plan.openmcx is None else OpenMcxMaster
 
 
 def filter_of(filtering: Filtering, compare: Comparison) -> Filter:
@@ -83,7 +88,7 @@ class OpenMcxMaster(Master):
 
     # -- initialization ----------------------------------------------------------------------
 
-    async def _initialize(self, initialized: list[Member]) -> None:
+    async def initialize(self, initialized: list[Member]) -> None:
         grid = self.plan.grid
         for m in self.order:
             inputs: Values = dict(m.start_inputs)
@@ -114,7 +119,7 @@ class OpenMcxMaster(Master):
                     status="DEADLINE_EXCEEDED",
                 ) from exc
             self._reached(m, outputs, "Initialize", grid.start)
-            self._store(m, self.latest[m.name], "Initialize", grid.start)
+            self.store_outputs(m, self.latest[m.name], "Initialize", grid.start)
         for links in self.out_of.values():
             for link, f in links:
                 f.write(grid.start, self.latest[link.source][link.output])
@@ -122,7 +127,7 @@ class OpenMcxMaster(Master):
 
     # -- a synchronization step --------------------------------------------------------------
 
-    async def _advance(self, k: int) -> None:
+    async def advance(self, k: int) -> None:
         for f in self.filters:
             f.begin()
         finished = len(self.finished)
@@ -137,7 +142,7 @@ class OpenMcxMaster(Master):
         for m in self.plan.members:
             queue = self.ahead.get(m.name)
             while queue and queue[0][0] <= k + 1:
-                self._store(m, queue.pop(0)[1], "DoStep", self.plan.grid.time(k + 1))
+                self.store_outputs(m, queue.pop(0)[1], "DoStep", self.plan.grid.time(k + 1))
         if len(self.finished) > finished:
             self._end_if_done()
 
@@ -148,9 +153,7 @@ class OpenMcxMaster(Master):
             return
         names = ", ".join(m.name for m in self.order if m.name in self.finished)
         rule = "first_component" if self.spec.first_component else "end_time, every member"
-        reason = f"{names} finished (OpenMCx endType {rule})"
-        self._ended = reason
-        self._request = (names, reason)
+        self.end_run(names, f"{names} finished (OpenMCx endType {rule})")
 
     async def _step_member(self, m: Member) -> None:
         """One step of ``m`` from its own time by its own step."""
@@ -166,21 +169,14 @@ class OpenMcxMaster(Master):
         parts = self.spec.sub_steps.get(m.name, 1)
         step = m.step / parts
         exact = grid.time(start)
-        watchdog = self._watchdog if m.name in self._local else None
-        if watchdog is not None:  # one deadline for the member's step, all its sub-steps
-            watchdog.arm(self._do_step[m.name], exact, m.deadline, self._overrun[m.name])
         try:
-            outputs = await self._call(m, exact, step, inputs)
-            at = begin
-            for i in range(1, parts):  # OpenMCx's Integrator reads its input at each sub-step
-                at += step
-                outputs = await self._call(m, exact + i * step, step, self._read(m, at))
+            if parts == 1:
+                outputs = await self._call(m, exact, step, inputs)
+            else:
+                outputs = await self._sub_steps(m, exact, begin, step, parts, inputs)
         except EndRun as stop:
             self.finished.add(m.name)
             outputs = stop.outputs
-        finally:
-            if watchdog is not None:
-                watchdog.disarm()
         self.reached[m.name] = start + m.multiple
         self.clock[m.name] = end
         self._reached(m, outputs, "DoStep", end)
@@ -189,8 +185,7 @@ class OpenMcxMaster(Master):
     def _reached(self, m: Member, outputs: Values, call: str, time: float) -> None:
         """``m``'s outputs at ``time``: through its output ports, written to its connections,
         told to the component observers."""
-        if outputs.keys() != self._output_names[m.name]:
-            raise self._refused(m, outputs, call, time)
+        self.check_answer(m, outputs, call, time)
         ports = self.spec.outputs.get(m.name)
         if ports:
             outputs = {n: (ports[n](v) if n in ports else v) for n, v in outputs.items()}
@@ -216,25 +211,36 @@ class OpenMcxMaster(Master):
             values[link.input] = link.convert(raw) if link.convert else raw
         return values
 
+    async def _sub_steps(
+        self, m: Member, exact: float, begin: float, step: float, parts: int, inputs: Values
+    ) -> Values:
+        """OpenMCx's Integrator steps in ``parts`` sub-steps, reading its input at each, held to
+        one deadline for them all."""
+        with self.steppers[m.name].held(exact):
+            outputs = await self._call(m, exact, step, inputs)
+            at = begin
+            for i in range(1, parts):
+                at += step
+                outputs = await self._call(m, exact + i * step, step, self._read(m, at))
+        return outputs
+
     async def _call(self, m: Member, time: float, step: float, inputs: Values) -> Values:
-        """One call of ``m``'s step, on this thread (watched by ``_step_member``) or awaited."""
-        started = wallclock.perf_counter()
-        stepper = self._local.get(m.name)
-        if stepper is not None:
-            outputs = stepper(time, step, inputs)
-            if self._abandoned:
-                raise asyncio.CancelledError
-        elif m.name in self._split:
-            self._split[m.name].send(time, step, inputs)
-            outputs = self._split[m.name].receive()
+        """One call of ``m``'s step, the way the master's steppers step it (on this thread,
+        watched against its deadline, or awaited)."""
+        stepper = self.steppers[m.name]
+        if stepper.here:
+            stepper.begin(time, step, inputs)
+            outputs = stepper.finish()
         else:
-            outputs = await m.participant.do_step(time, step, inputs)
-        self._timing[self._slot[m.name]] = wallclock.perf_counter() - started
+            outputs = await stepper.whole(time, step, inputs)
+        self.took(m, stepper.took)
+        if self.abandoned:  # it came back after the watchdog had ended the run
+            raise asyncio.CancelledError
         return outputs
 
     # -- the end -----------------------------------------------------------------------------
 
-    async def _wind_up(self) -> None:
+    async def wind_up(self) -> None:
         """OpenMCx's finish: every member reads its inputs once more, at its own time."""
         for f in self.filters:
             f.begin()

@@ -28,6 +28,7 @@ from coupler.channels import Value, ValueType
 from coupler.errors import CouplerError
 from coupler_orchestrator import ssp
 from coupler_orchestrator.observer import ComponentObserver, RunEnd, RunInfo
+from coupler_orchestrator.options import RunOptions
 
 _ENCODED = set("\\\"<>|!#$&'()*+,/:;=?@[]%")
 
@@ -87,6 +88,14 @@ class _File:
         file, self.file = self.file, None
         if file is not None:
             file.close()
+
+
+def openmcx_results(
+    directory: Path, scenario: ssp.Scenario, options: RunOptions
+) -> list[OpenMcxResults]:
+    """The writer of OpenMCx's result files into ``directory`` when the options ask for them
+    (``--openmcx-results``); none else."""
+    return [OpenMcxResults(directory, scenario)] if options.openmcx_results else []
 
 
 class OpenMcxResults(ComponentObserver):

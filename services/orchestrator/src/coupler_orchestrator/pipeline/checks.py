@@ -16,15 +16,19 @@ are refused, units nobody understands are warned about; transformations fit thei
 time grid is finite and reachable by whole steps; step multiples and fixed step sizes fit;
 ``--param`` values and parameter bindings name parameters or inputs and fit their types; no
 output declares larger values than the input it drives accepts (``max_bytes``; declared maxima
-together over ``--max-message-size`` are warned about); and for Gauss-Seidel every loop (a
-component feeding itself included) is broken by a decoupled connection.
+together over ``--max-message-size`` are warned about); and every loop is one the algorithm
+can order (Gauss-Seidel: broken by a decoupled connection, a component feeding itself
+included).
+
+Where a dialect reads the SSD otherwise (OpenMCx: units, loops, port defaults, a member
+stepping past the stop time), the checks ask the run's ``Semantics``, chosen before them; they
+never name a dialect.
 """
 
 from __future__ import annotations
 
 import difflib
 import fnmatch
-import graphlib
 import math
 from collections.abc import Callable, Mapping
 from functools import partial
@@ -39,23 +43,17 @@ from coupler_orchestrator.model import (
     Algorithm,
     Candidate,
     Checked,
+    Conversion,
     Member,
     Roster,
     Route,
+    Semantics,
     TimeGrid,
 )
 from coupler_orchestrator.options import RunOptions
-from coupler_orchestrator.pipeline import dependencies
 from coupler_orchestrator.pipeline.participants import where
 from coupler_orchestrator.pipeline.replay import ReplayParticipant
-from coupler_orchestrator.ssp.openmcx import port_input
-from coupler_orchestrator.ssp.units import (
-    Affine,
-    IncompatibleUnits,
-    OpenMcxUnits,
-    affine,
-    from_symbol,
-)
+from coupler_orchestrator.ssp.units import Affine, IncompatibleUnits, affine, from_symbol
 
 T = TypeVar("T")
 MAX_STEPS = 10**10
@@ -79,21 +77,25 @@ _TRANSFORMED = {
 }
 
 
-def check(scenario: ssp.Scenario, roster: Roster, options: RunOptions) -> Checked:
-    """Every check; ValidationError listing every problem, earlier stages' problems first."""
-    checker = _Checker(scenario, roster, options)
+def check(
+    scenario: ssp.Scenario, roster: Roster, options: RunOptions, semantics: Semantics
+) -> Checked:
+    """Every check, reading the scenario with ``semantics``; ValidationError listing every
+    problem, earlier stages' problems first."""
+    checker = _Checker(scenario, roster, options, semantics)
     return checker.run()
 
 
 class _Checker:
-    def __init__(self, scenario: ssp.Scenario, roster: Roster, options: RunOptions) -> None:
+    def __init__(
+        self, scenario: ssp.Scenario, roster: Roster, options: RunOptions, semantics: Semantics
+    ) -> None:
         self.scenario = scenario
         self.roster = roster
         self.options = options
+        self.semantics = semantics
         self.problems: list[str] = list(roster.problems)
         self.warnings: list[str] = list(scenario.warnings)
-        self.openmcx = bool(scenario.openmcx) or options.openmcx
-        """Whether the run has OpenMCx's semantics (docs/openmcx.md)."""
 
     def run(self) -> Checked:
         scenario = self.scenario
@@ -116,11 +118,7 @@ class _Checker:
                 if member is not None:
                     members.append(member)
         algorithm = self.options.algorithm or algorithm_of(scenario)
-        cut: frozenset[str] = frozenset()
-        if self.openmcx:
-            cut = self.openmcx_loops()
-        elif algorithm is Algorithm.GAUSS_SEIDEL:
-            self.loops()
+        cut = self.guard(lambda: self.semantics.cut_loops(scenario, algorithm)) or frozenset()
         record_every = self.recording(members, grid)
         if self.problems or grid is None:
             raise ValidationError(self.problems, subject=scenario.source.name)
@@ -132,7 +130,7 @@ class _Checker:
             routes=tuple(routes),
             record_every=record_every,
             warnings=tuple(dict.fromkeys(self.warnings)),
-            openmcx=self.openmcx,
+            semantics=self.semantics,
             cut=cut,
         )
 
@@ -226,7 +224,7 @@ class _Checker:
             channel_of(component, c.end_connector)
             for c in self.scenario.connections
             if c.end_element == component.name
-        } | {c.channel for c in component.connectors if c.port and c.port.default is not None}
+        } | set(self.semantics.start_inputs(self.scenario, component))
         for channel in description.of(Causality.INPUT):
             if (
                 channel.name not in given
@@ -262,7 +260,12 @@ class _Checker:
                 f"{what} expects {connector.type}, but the participant declares {channel.type}; "
                 f"declare the connector <ssc:{channel.type}/>"
             )
-        if connector.unit and channel.unit and connector.unit != channel.unit and not self.openmcx:
+        if (
+            self.semantics.checks_units
+            and connector.unit
+            and channel.unit
+            and connector.unit != channel.unit
+        ):
             declared = self.scenario.units[connector.unit].base_unit
             own = candidate.units.get(channel.unit) or from_symbol(channel.unit)
             if own is None:
@@ -298,13 +301,13 @@ class _Checker:
         end = self.scenario.connector(c.end_element, c.end_connector)
         ok = self.types(c, what, source.type, target.type)
         self.sizes(c, what, source, target)
-        conversion: Affine | OpenMcxUnits | None = None
+        conversion: Conversion | None = None
         if c.suppress_unit_conversion:
             pass
-        elif self.openmcx:
-            conversion = openmcx_units(self.scenario, start, end)
-        else:
+        elif self.semantics.checks_units:
             conversion = self.units(c, what, start, end, source, target)
+        else:
+            conversion = self.semantics.conversion(self.scenario, start, end)
         if not ok:
             return None
         return Route(
@@ -505,11 +508,11 @@ class _Checker:
                 continue
             target = parameters if channel.causality is Causality.PARAMETER else start_inputs
             target[name] = typed
-        start_inputs |= self.defaults(component)
+        start_inputs |= self.semantics.start_inputs(self.scenario, component)
         multiple, step = 1, 0.0
         if grid is not None:
             try:
-                multiple = multiple_of(component, grid, whole_run=not self.openmcx)
+                multiple = multiple_of(component, grid, whole_run=self.semantics.whole_run)
                 step = grid.step if component.delta_time is None else component.delta_time
                 self.fixed_step(component, description, step)
                 if isinstance(candidate.participant, ReplayParticipant):
@@ -533,18 +536,6 @@ class _Checker:
             start_inputs=start_inputs,
         )
 
-    def defaults(self, component: ssp.Component) -> dict[str, Value]:
-        """OpenMCx port defaults of the inputs nothing drives, through the port's scale,
-        offset, min and max: the start values of those inputs."""
-        driven = {
-            c.end_connector for c in self.scenario.connections if c.end_element == component.name
-        }
-        return {
-            c.channel: port_input(c)(c.port.default)
-            for c in component.connectors
-            if c.kind == "input" and c.name not in driven and c.port and c.port.default is not None
-        }
-
     def fixed_step(self, component: ssp.Component, description: Description, step: float) -> None:
         fixed = description.capabilities.fixed_step_size
         if not fits_fixed_step(step, fixed):
@@ -552,53 +543,6 @@ class _Checker:
                 f"{where(component)}: participant '{component.name}' steps in whole multiples "
                 f"of {fixed:g} s, but its communication step is {step:g} s; choose --step "
                 f"(or its deltaTime) as a multiple of {fixed:g} s"
-            )
-
-    # -- OpenMCx's loops --------------------------------------------------------------------
-
-    def openmcx_loops(self) -> frozenset[str]:
-        """The connections OpenMCx cuts to break algebraic loops (by driven input); a loop
-        nothing may be cut in is a problem."""
-        names = [c.name for c in self.scenario.components]
-        sequence = {c.name: c.trigger_sequence for c in self.scenario.components}
-        try:
-            return dependencies.cut_loops(names, openmcx_edges(self.scenario), sequence)
-        except dependencies.Uncuttable as exc:
-            self.problems.append(
-                f"the loop {exc} cannot be broken: every connection of it is marked "
-                "<mc:Never/> (or from a component with a lower triggerSequence); let one be "
-                "decoupled (<mc:IfNeeded/>, the default, or <mc:Always/>)"
-            )
-            return frozenset()
-
-    # -- Gauss-Seidel ------------------------------------------------------------------------
-
-    def loops(self) -> None:
-        """Every loop of non-decoupled connections, a component feeding itself included."""
-        predecessors: dict[str, set[str]] = {c.name: set() for c in self.scenario.components}
-        for c in self.scenario.connections:
-            if c.decoupled:
-                continue
-            if c.start_element == c.end_element:
-                self.problems.append(
-                    f"{where(c)}: component '{c.start_element}' feeds itself "
-                    f"({c.start} -> {c.end}), a loop Gauss-Seidel cannot order: mark the "
-                    f'connection decoupled (annotation org.coupler.connection decoupled="true" '
-                    f"or OpenMCx decoupling), or run with --algorithm jacobi"
-                )
-            elif c.end_element in predecessors:
-                predecessors[c.end_element].add(c.start_element)
-        try:
-            graphlib.TopologicalSorter(predecessors).prepare()
-        except graphlib.CycleError as exc:
-            cycle = list(exc.args[1])[:-1]
-            order = [c.name for c in self.scenario.components]
-            first = min(range(len(cycle)), key=lambda i: order.index(cycle[i]))
-            loop = [*cycle[first:], *cycle[:first], cycle[first]]
-            self.problems.append(
-                f"Gauss-Seidel cannot order the loop {' -> '.join(loop)}: mark one connection of "
-                f'it decoupled (annotation org.coupler.connection decoupled="true" or OpenMCx '
-                f"decoupling), or run with --algorithm jacobi"
             )
 
 
@@ -662,8 +606,8 @@ def grid_of(scenario: ssp.Scenario, options: RunOptions) -> TimeGrid:
 
 
 def multiple_of(component: ssp.Component, grid: TimeGrid, *, whole_run: bool = True) -> int:
-    """The component's step multiple m (its deltaTime = m h), checked against the run (with
-    OpenMCx's semantics a component may step past the stop time: ``whole_run=False``)."""
+    """The component's step multiple m (its deltaTime = m h), checked against the run (where the
+    run's semantics let a component step past the stop time: ``whole_run=False``)."""
     delta = component.delta_time
     if delta is None:
         return 1
@@ -690,29 +634,3 @@ def channel_of(component: ssp.Component, connector: str) -> str:
     ``nameInModel``, else its name)."""
     found = component.connector(connector)
     return found.channel if found is not None else connector
-
-
-def openmcx_units(
-    scenario: ssp.Scenario, start: ssp.Connector | None, end: ssp.Connector | None
-) -> OpenMcxUnits | None:
-    """OpenMCx's unit conversion: between the units the SSD gives both connectors (its
-    ``<Units>`` only, no dimension check); none when either has no unit or both the same."""
-    if start is None or end is None or not start.unit or not end.unit or start.unit == end.unit:
-        return None
-    return OpenMcxUnits(
-        source=scenario.units[start.unit].base_unit, target=scenario.units[end.unit].base_unit
-    )
-
-
-def openmcx_edges(scenario: ssp.Scenario) -> list[dependencies.Edge]:
-    """Every connection as OpenMCx's ordering sees it (``IfNeeded`` unless it says else)."""
-    return [
-        dependencies.Edge(
-            key=c.end,
-            source=c.start_element,
-            target=c.end_element,
-            decouple="always" if c.decoupled else (c.decouple_type or "if_needed"),
-            priority=c.decouple_priority or 0,
-        )
-        for c in scenario.connections
-    ]

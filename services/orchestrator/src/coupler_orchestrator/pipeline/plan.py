@@ -8,18 +8,14 @@ from coupler.errors import ScenarioError
 from coupler_orchestrator.model import Checked, Link, Plan
 from coupler_orchestrator.native import wanted
 from coupler_orchestrator.options import RunOptions
-from coupler_orchestrator.pipeline.openmcx import openmcx_of
-from coupler_orchestrator.pipeline.ordering import execution_order
 
 
 def build_plan(checked: Checked, links: tuple[Link, ...], options: RunOptions) -> Plan:
-    """The plan of a checked scenario and its links."""
+    """The plan of a checked scenario and its links: the members in the order the run's
+    semantics step them, and what those semantics add."""
     by_name = {m.name: m for m in checked.members}
-    openmcx = openmcx_of(checked, links)
-    if openmcx is not None:
-        order = openmcx.order
-    else:
-        order = execution_order(list(by_name), links, checked.algorithm)
+    order = checked.semantics.order(checked, links)
+    additions = checked.semantics.additions(checked, links)
     return Plan(
         members=checked.members,
         order=tuple(by_name[n] for n in order),
@@ -32,8 +28,8 @@ def build_plan(checked: Checked, links: tuple[Link, ...], options: RunOptions) -
         realtime_factor=options.realtime_factor or None,
         on_abandoned=options.on_abandoned,
         progress=options.progress,
-        native=wanted(options.native_steps) and openmcx is None,
-        openmcx=openmcx,
+        native=wanted(options.native_steps) and additions is None,
+        openmcx=additions,
     )
 
 

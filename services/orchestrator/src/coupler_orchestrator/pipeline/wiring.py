@@ -3,9 +3,10 @@ master routes values through.
 
 Applied to every value that travels a connection, in this order: Integer -> Real widening (the
 only implicit type change), the unit conversion ``checks`` established (SSP BaseUnit algebra, or
-OpenMCx's), the connection's transformation, then what the target's OpenMCx port does to what
-enters it (scale, offset, min, max). A connection with nothing to do gets no converter at all.
-Links join the participants' channels (an SSD connector's OpenMCx ``nameInModel``).
+the run's semantics'), the connection's transformation, then what the target input does to what
+enters it by the run's semantics (an OpenMCx port: scale, offset, min, max). A connection with
+nothing to do gets no converter at all. Links join the participants' channels (an SSD
+connector's OpenMCx ``nameInModel``).
 """
 
 from __future__ import annotations
@@ -13,7 +14,6 @@ from __future__ import annotations
 from coupler.channels import Value, ValueType
 from coupler_orchestrator import ssp
 from coupler_orchestrator.model import Checked, Converter, Link, Route
-from coupler_orchestrator.ssp.openmcx import port_input
 
 
 def wire(checked: Checked) -> tuple[Link, ...]:
@@ -44,8 +44,9 @@ def converter(route: Route, checked: Checked | None = None) -> Converter | None:
         steps.append(transformation_function(transformation, route))
     c = route.connection
     end = checked.scenario.connector(c.end_element, c.end_connector) if checked else None
-    if end is not None and end.port is not None and end.port.transforms:
-        steps.append(port_input(end))
+    entering = checked.semantics.entering(end) if checked and end else None
+    if entering is not None:
+        steps.append(entering)
     if not steps:
         return None
     if len(steps) == 1:

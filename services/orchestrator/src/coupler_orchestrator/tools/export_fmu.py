@@ -33,6 +33,7 @@ from coupler.client import RemoteParticipant, parse_address
 from coupler.errors import CouplerError
 from coupler.security import ClientSecurity
 from coupler.values import MAX_MESSAGE_BYTES
+from coupler_orchestrator import native
 from coupler_tools.fmubuild import write_archive
 
 __all__ = [
@@ -93,19 +94,9 @@ def fingerprint(description: Description) -> str:
 def proxy_binaries() -> Path:
     """The folder of the proxy FMU's binaries (``CouplerProxy.so`` and the libraries it loads),
     as the installed coupler-native package holds it; ProxyMissing without it."""
-    try:
-        import coupler_native
-    except ModuleNotFoundError as exc:
-        raise ProxyMissing(
-            "coupler export-fmu copies the proxy FMU's binaries from the coupler-native "
-            "package, which is not installed (its wheel is built for Linux x86_64; in the "
-            "repository: make setup)"
-        ) from exc
-    folder = coupler_native.PROXY
-    if not (folder / coupler_native.PROXY_BINARY).is_file():
-        raise ProxyMissing(
-            f"{folder} holds no {coupler_native.PROXY_BINARY}: reinstall coupler-native"
-        )
+    folder, why = native.proxy_binaries()
+    if folder is None:
+        raise ProxyMissing(why)
     return folder
 
 

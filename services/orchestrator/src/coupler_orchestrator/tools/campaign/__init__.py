@@ -59,33 +59,32 @@ run's files, so the workers need the project at the same path (a checkout or the
 shared file system.
 
 
-The package's modules, in the order a campaign goes: ``spec`` (the file read, refused with the
+The package's modules: ``model`` (the types all the others speak), then in the order a campaign
+goes: ``spec`` (the file read, refused with the
 section and the fix), ``variants`` (the sections that make variants), ``checks`` (the
 expressions of [checks]), ``worker`` (one run, as a worker executes it), ``execution`` (every
 run, here or on a Dask cluster, skipping what completed before), ``table`` (campaign.csv and
 the terminal's table), ``progress`` (what the terminal shows while it runs).
 """
 
-from coupler_orchestrator.tools.campaign.execution import CampaignResult, run_campaign
-from coupler_orchestrator.tools.campaign.progress import CampaignProgress
-from coupler_orchestrator.tools.campaign.spec import (
+from coupler_orchestrator.tools.campaign.execution import run_campaign
+from coupler_orchestrator.tools.campaign.model import (
     CampaignError,
+    CampaignResult,
     CampaignSpec,
     Check,
     Derive,
-    Output,
-    ScenarioSpec,
-)
-from coupler_orchestrator.tools.campaign.table import format_table, table_rows, write_table
-from coupler_orchestrator.tools.campaign.variants import Scalar, variant_key
-from coupler_orchestrator.tools.campaign.worker import (
     Finished,
+    Output,
     RunJob,
     RunReport,
-    execute,
-    read_columns,
-    reduce,
+    Scalar,
+    ScenarioSpec,
 )
+from coupler_orchestrator.tools.campaign.progress import CampaignProgress
+from coupler_orchestrator.tools.campaign.table import format_table, table_rows, write_table
+from coupler_orchestrator.tools.campaign.variants import variant_key
+from coupler_orchestrator.tools.campaign.worker import execute, read_columns, reduce
 
 __all__ = [
     "CampaignError",

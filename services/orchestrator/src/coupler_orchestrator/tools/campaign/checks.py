@@ -9,7 +9,7 @@ from collections.abc import Callable, Mapping, Sequence
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
-    from coupler_orchestrator.tools.campaign.spec import Check
+    from coupler_orchestrator.tools.campaign.model import Check
 
 
 class ExpressionError(ValueError):

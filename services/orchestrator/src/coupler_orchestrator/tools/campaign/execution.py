@@ -12,39 +12,23 @@ import os
 import shutil
 import tempfile
 from collections.abc import Awaitable, Callable
-from dataclasses import asdict, dataclass, replace
+from dataclasses import asdict, replace
 from pathlib import Path
 from typing import Any
 
 from coupler_orchestrator.outputs.files import write_json
-from coupler_orchestrator.tools.campaign.progress import CampaignProgress
-from coupler_orchestrator.tools.campaign.spec import CampaignError, CampaignSpec
-from coupler_orchestrator.tools.campaign.table import write_table
-from coupler_orchestrator.tools.campaign.variants import variant_key
-from coupler_orchestrator.tools.campaign.worker import (
+from coupler_orchestrator.tools.campaign.model import (
     COMPLETED,
+    CampaignError,
+    CampaignResult,
+    CampaignSpec,
     RunJob,
     RunReport,
-    execute,
-    run_job,
 )
-
-
-@dataclass(frozen=True, kw_only=True)
-class CampaignResult:
-    """A finished (or interrupted) campaign."""
-
-    reports: tuple[RunReport, ...]
-    """One per variant that ran or was skipped, in variant order."""
-    table_csv: Path
-    table_parquet: Path | None
-    skipped: int
-    """Runs taken from an earlier campaign run."""
-
-    @property
-    def failed(self) -> list[RunReport]:
-        return [r for r in self.reports if r.status not in COMPLETED]
-
+from coupler_orchestrator.tools.campaign.progress import CampaignProgress
+from coupler_orchestrator.tools.campaign.table import write_table
+from coupler_orchestrator.tools.campaign.variants import variant_key
+from coupler_orchestrator.tools.campaign.worker import execute, run_job
 
 Executor = Callable[[RunJob], Awaitable[RunReport]]
 

@@ -6,7 +6,7 @@ import time
 from typing import IO
 
 from coupler_orchestrator.outputs.progress import duration
-from coupler_orchestrator.tools.campaign.worker import COMPLETED, RunJob, RunReport
+from coupler_orchestrator.tools.campaign.model import COMPLETED, RunJob, RunReport
 
 
 class CampaignProgress:

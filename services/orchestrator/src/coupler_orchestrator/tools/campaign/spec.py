@@ -7,103 +7,35 @@ from __future__ import annotations
 import importlib
 import tomllib
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from coupler.errors import ScenarioError
 from coupler_orchestrator.tools.campaign import variants
 from coupler_orchestrator.tools.campaign.checks import Expression, ExpressionError
-from coupler_orchestrator.tools.campaign.variants import Scalar, Variants
+from coupler_orchestrator.tools.campaign.model import (
+    REDUCTIONS,
+    CampaignError,
+    CampaignSpec,
+    Check,
+    Derive,
+    Listed,
+    Output,
+    ScenarioSpec,
+    Variants,
+)
 from coupler_orchestrator.tools.fleet import FleetSpec
 
-REDUCTIONS = ("max", "min", "first", "last", "mean", "count_changes")
 
-
-class CampaignError(ScenarioError):
-    """A campaign file that cannot be run as written."""
-
-
-@dataclass(frozen=True, kw_only=True)
-class Output:
-    """A campaign table column read off a run's results.csv, or its summary.json's reports."""
-
-    name: str
-    reduction: str
-    """One of REDUCTIONS."""
-    channel: str
-    """``Component.connector`` (a results.csv column), or ``reports.<report>.<key>...`` (a
-    value of summary.json's reports: ``reports.perception.recall``)."""
-
-
-@dataclass(frozen=True, kw_only=True)
-class Derive:
-    """Columns computed by ``function(finished, **options)`` from a finished run."""
-
-    function: str
-    """``package.module:function``."""
-    options: dict[str, Scalar] = field(default_factory=dict)
-
-
-@dataclass(frozen=True, kw_only=True)
-class Check:
-    """A true/false column: an expression over outputs, derived values and parameters."""
-
-    name: str
-    expression: str
-
-
-@dataclass(frozen=True, kw_only=True)
-class ScenarioSpec:
-    """What every run of the campaign runs."""
-
-    root: Path
-    """Directory commands run in and relative paths start from."""
-    ssp: Path
-    fleet: Path | None = None
-    """Services to start per run; None: the SSD's participants are running (or a pool)."""
-    stop_time: float | None = None
-    args: tuple[str, ...] = ()
-    """Extra ``coupler run`` options of every run."""
-    timeout: float = 3600.0
-    """[s] a run may take, services' start included."""
-    health_timeout: float = 60.0
-    """[s] a service may take to become healthy."""
-
-
-@dataclass(frozen=True, kw_only=True)
-class CampaignSpec:
-    """A campaign file."""
-
-    source: Path
-    scenario: ScenarioSpec
-    out: Path
-    variants: Variants
-    """Made as they are asked for; at most ``variants.MAXIMUM``. A sequence of variants (a
-    slice of another campaign's) is taken as they are."""
-    outputs: tuple[Output, ...] = ()
-    derive: tuple[Derive, ...] = ()
-    """Functions computing more columns from a finished run (:class:`Finished`)."""
-    checks: tuple[Check, ...] = ()
-    pool: tuple[dict[str, str], ...] = ()
-    """Environments naming running participants (``GAIN_PORT``...), one run each at a time."""
-
-    def __post_init__(self) -> None:
-        if not isinstance(self.variants, Variants):
-            made = Variants([variants.Listed(tuple(dict(v) for v in self.variants))])
-            object.__setattr__(self, "variants", made)
-
-    @classmethod
-    def load(cls, path: Path, *, root: Path | None = None) -> CampaignSpec:
-        """Read a campaign file; relative paths are taken from ``root`` (default: the working
-        directory), the [table] file from the campaign file's folder."""
-        try:
-            data = tomllib.loads(path.read_text(encoding="utf-8"))
-        except OSError as exc:
-            raise CampaignError(f"cannot read campaign file {path}: {exc.strerror}") from exc
-        except tomllib.TOMLDecodeError as exc:
-            raise CampaignError(f"{path}: not TOML: {exc}") from exc
-        return _Reader(path, root or Path.cwd()).read(data)
+def read(path: Path, *, root: Path | None = None) -> CampaignSpec:
+    """Read a campaign file; relative paths are taken from ``root`` (default: the working
+    directory), the [table] file from the campaign file's folder."""
+    try:
+        data = tomllib.loads(path.read_text(encoding="utf-8"))
+    except OSError as exc:
+        raise CampaignError(f"cannot read campaign file {path}: {exc.strerror}") from exc
+    except tomllib.TOMLDecodeError as exc:
+        raise CampaignError(f"{path}: not TOML: {exc}") from exc
+    return _Reader(path, root or Path.cwd()).read(data)
 
 
 class _Reader:
@@ -141,7 +73,7 @@ class _Reader:
             source=self.path,
             scenario=scenario,
             out=out,
-            variants=made or Variants([variants.Listed(({},))]),
+            variants=made or Variants([Listed(({},))]),
             outputs=outputs,
             derive=derive,
             checks=checks,

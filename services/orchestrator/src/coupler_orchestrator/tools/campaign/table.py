@@ -14,8 +14,7 @@ from typing import Any
 
 from coupler_orchestrator.outputs.parquet import parquet_available
 from coupler_orchestrator.tools.campaign.checks import evaluate_checks
-from coupler_orchestrator.tools.campaign.spec import CampaignSpec
-from coupler_orchestrator.tools.campaign.worker import RunReport
+from coupler_orchestrator.tools.campaign.model import CampaignSpec, RunReport
 
 
 def run_directory(spec: CampaignSpec, report: RunReport) -> Path:

@@ -2,7 +2,7 @@
 (explicit), [table] (one per row of a CSV file), [sample] (n drawn with a seed) — and the key
 that names a variant's run.
 
-Variants are made as they are asked for (:class:`Variants`, a sequence): a grid is its axes, a
+Variants are made as they are asked for (``model.Variants``, a sequence): a grid is its axes, a
 sample its laws and seed, so a campaign is counted before any variant is made, and one of more
 than ``MAXIMUM`` variants is refused at once.
 """
@@ -13,20 +13,21 @@ import contextlib
 import csv
 import hashlib
 import io
-import itertools
 import json
 import math
-import random
-from collections.abc import Callable, Iterator, Mapping, Sequence
-from dataclasses import dataclass
+from collections.abc import Callable, Mapping
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, overload
+from typing import Any
 
-if TYPE_CHECKING:
-    from coupler_orchestrator.tools.campaign.spec import ScenarioSpec
-
-Scalar = float | int | str | bool
-"""A variant's value, an output's value."""
+from coupler_orchestrator.tools.campaign.model import (
+    Grid,
+    Listed,
+    Part,
+    Sample,
+    Scalar,
+    ScenarioSpec,
+    Variants,
+)
 
 MAXIMUM = 100_000
 """Variants a campaign may have, all sections together."""
@@ -39,120 +40,6 @@ RUN_OPTIONS = {"start_time": "--start-time", "stop_time": "--stop-time", "step":
 
 Fail = Callable[[str, str, str], Exception]
 """``fail(section, problem, fix)``: the error naming the campaign file, section and fix."""
-
-
-@dataclass(frozen=True)
-class Grid:
-    """Every combination of the axes' values, the last axis varying fastest (as
-    ``itertools.product``)."""
-
-    axes: tuple[tuple[str, tuple[Scalar, ...]], ...]
-
-    def __len__(self) -> int:
-        return math.prod(len(values) for _, values in self.axes) if self.axes else 0
-
-    def __getitem__(self, index: int) -> dict[str, Scalar]:
-        variant: dict[str, Scalar] = {}
-        for key, values in reversed(self.axes):
-            index, digit = divmod(index, len(values))
-            variant[key] = values[digit]
-        return {key: variant[key] for key, _ in self.axes}
-
-    def names(self) -> list[str]:
-        return [key for key, _ in self.axes]
-
-
-@dataclass(frozen=True)
-class Listed:
-    """Variants written out: [[variant]] tables, [table] rows."""
-
-    variants: tuple[dict[str, Scalar], ...]
-
-    def __len__(self) -> int:
-        return len(self.variants)
-
-    def __getitem__(self, index: int) -> dict[str, Scalar]:
-        return dict(self.variants[index])
-
-    def names(self) -> list[str]:
-        return list(dict.fromkeys(k for v in self.variants for k in v))
-
-
-@dataclass(frozen=True)
-class Sample:
-    """``count`` variants drawn by the laws; the i-th from a generator seeded by the seed and
-    i, so any one is made alone and always the same."""
-
-    count: int
-    seed: int
-    laws: tuple[tuple[str, str, tuple[Scalar, ...]], ...]
-    """(key, "uniform" or "choice", bounds or choices)."""
-
-    def __len__(self) -> int:
-        return self.count
-
-    def __getitem__(self, index: int) -> dict[str, Scalar]:
-        draw = random.Random(f"{self.seed}/{index}")
-        variant: dict[str, Scalar] = {}
-        for key, law, values in self.laws:
-            if law == "uniform":
-                low, high = values
-                variant[key] = draw.uniform(float(low), float(high))
-            else:
-                variant[key] = draw.choice(values)
-        return variant
-
-    def names(self) -> list[str]:
-        return [key for key, _, _ in self.laws]
-
-
-Part = Grid | Listed | Sample
-
-
-class Variants(Sequence[dict[str, Scalar]]):
-    """A campaign's variants, all sections in order (grid, [[variant]], table, sample), each
-    made when it is asked for; a slice is a tuple."""
-
-    def __init__(self, parts: Sequence[Part]) -> None:
-        self.parts = tuple(p for p in parts if len(p))
-        self._ends = list(itertools.accumulate(len(p) for p in self.parts))
-
-    def __len__(self) -> int:
-        return self._ends[-1] if self._ends else 0
-
-    @overload
-    def __getitem__(self, index: int) -> dict[str, Scalar]: ...
-    @overload
-    def __getitem__(self, index: slice) -> tuple[dict[str, Scalar], ...]: ...
-    def __getitem__(self, index: int | slice) -> dict[str, Scalar] | tuple[dict[str, Scalar], ...]:
-        if isinstance(index, slice):
-            return tuple(self[i] for i in range(*index.indices(len(self))))
-        if index < 0:
-            index += len(self)
-        if not 0 <= index < len(self):
-            raise IndexError(index)
-        for part, end in zip(self.parts, self._ends, strict=True):
-            if index < end:
-                return part[index - end + len(part)]
-        raise AssertionError  # unreachable: the index is below the last end
-
-    def __iter__(self) -> Iterator[dict[str, Scalar]]:
-        for part in self.parts:
-            for i in range(len(part)):
-                yield part[i]
-
-    def __eq__(self, other: object) -> bool:
-        return isinstance(other, Variants) and self.parts == other.parts
-
-    def __hash__(self) -> int:
-        return hash(len(self))
-
-    def __repr__(self) -> str:
-        return f"Variants({', '.join(f'{type(p).__name__.lower()} {len(p)}' for p in self.parts)})"
-
-    def names(self) -> list[str]:
-        """Every key a variant may have, in order of appearance (the table's columns)."""
-        return list(dict.fromkeys(k for p in self.parts for k in p.names()))
 
 
 def counted(parts: Mapping[str, Part], fail: Fail) -> Variants:

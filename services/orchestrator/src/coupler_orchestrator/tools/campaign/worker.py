@@ -17,75 +17,29 @@ import sys
 import tempfile
 import time
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
 from coupler.errors import CouplerError
 from coupler.logs import configure_logging
-from coupler_orchestrator.tools.campaign.spec import (
+from coupler_orchestrator.tools.campaign.model import (
+    COMPLETED,
     CampaignError,
-    Derive,
+    Finished,
     Output,
-    ScenarioSpec,
+    RunJob,
+    RunReport,
+    Scalar,
 )
-from coupler_orchestrator.tools.campaign.variants import RUN_OPTIONS, Scalar, number_or_text
+from coupler_orchestrator.tools.campaign.variants import RUN_OPTIONS, number_or_text
 from coupler_orchestrator.tools.fleet import Fleet, FleetError, FleetSpec, free_port, port_variables
 
-COMPLETED = ("completed", "terminated")
 REPORTS = "reports."
 """An output read off the run's summary.json (``reports.<name>.<key>``), not results.csv."""
 SERVICE_LOGS = "service-logs"
 """The folder of a run's scratch folder its fleet's services log into (``service-NAME.log`` in
 the run's folder when the run did not complete)."""
-"""Run statuses a re-run skips."""
-
-
-@dataclass(frozen=True, kw_only=True)
-class Finished:
-    """What a ``[[derive]]`` function is given: one finished run."""
-
-    directory: Path
-    """Its results.csv and summary.json."""
-    variant: Mapping[str, Scalar]
-    root: Path
-    """The campaign's root (the project checkout)."""
-    columns: Mapping[str, list[str]]
-    """results.csv, column name -> cells (text)."""
-
-
-@dataclass(frozen=True, kw_only=True)
-class RunJob:
-    """One run, as sent to a worker (picklable)."""
-
-    index: int
-    key: str
-    variant: dict[str, Scalar]
-    scenario: ScenarioSpec
-    outputs: tuple[Output, ...]
-    derive: tuple[Derive, ...]
-    env: dict[str, str] | None = None
-    """A pool entry; None: start the fleet's services on free ports."""
-    logs: tuple[str, bool] = ("WARNING", False)
-    """The command's log level and whether its lines are JSON: a Dask worker's process logs
-    as the command does (its own default would print every INFO line)."""
-
-
-@dataclass(kw_only=True)
-class RunReport:
-    """One run's row of the campaign table, and its files (from the worker)."""
-
-    index: int
-    key: str
-    variant: dict[str, Scalar]
-    status: str
-    """completed, terminated, failed, aborted, timeout or skipped-from-earlier statuses."""
-    reason: str = ""
-    wall_time_s: float | None = None
-    realtime_factor: float | None = None
-    values: dict[str, Scalar | None] = field(default_factory=dict)
-    worker: str = ""
-    files: dict[str, bytes] = field(default_factory=dict)
 
 
 def execute(job: RunJob) -> RunReport:

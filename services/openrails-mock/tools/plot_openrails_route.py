@@ -4,8 +4,9 @@ Panels: the whole line (railML B-spline, exported section starts), a close-up wh
 sections are shortest, the distance of the exported track from the B-spline along the line
 (as OpenRails lays the sections, read back with the mock's route loader), and each balise's
 passage distance on the mock's track database minus the TrackBalises FMU's distance.
+Lives beside the mock it reads the route with (the railway package imports no service).
 Needs the dev workspace (the mock, matplotlib) and `make setup` (route, FMU).
-Run: .venv/bin/python packages/railway/tools/plot_openrails_route.py
+Run: .venv/bin/python services/openrails-mock/tools/plot_openrails_route.py
 """
 
 from __future__ import annotations
