@@ -12,6 +12,9 @@ Cases (steps/s, median of the repetitions; Coupler and its reference interleaved
   COUPLER_NATIVE_STEPS=0 through Python, one ctypes call per FMI call); against a
   hand-written FMPy FMU2Slave loop over the same FMUs (every output read each step) and
   libcosim (libcosimpy, C++) with the same connections;
+- in-process FMU chain x2 and x10 against a bare C loop (benchmarks/cloop): the same FMI calls
+  and the same results.csv text, formatted by the same shortest round-trip algorithm, nothing
+  else; ten times the chains' steps; both files must be byte-identical (else the row FAILs);
 - in-process FMU chain x2 and x10 against OpenMCx (C; the binary named by $OPENMCX, else the
   rows are skipped, saying so): the same chains with OpenMCx's task annotation (Jacobi,
   ``parallel_single_thread``), OpenMCx's simulation phase timed as it reports it; and a check:
@@ -1100,6 +1103,43 @@ async def chains(
                             note="stretch target"))  # fmt: skip
 
 
+async def tight_loop(
+    sizes: Sizes, log: Callable[[str], None], work: Path, rows: list[Row], extra: dict[str, Any]
+) -> None:
+    """The chains against their physical limit: a bare C loop (cloop.py) making the same FMI
+    calls and writing the same results.csv text with the same formatter; both files compared
+    byte for byte. Ten times the chains' steps: the loop takes well under a second."""
+    import cloop
+
+    why = cloop.missing()
+    if why:
+        log(f"tight C-loop rows skipped: {why}")
+        extra.setdefault("skipped", []).append(f"chain x2 and x10 vs a bare C loop: {why}")
+        return
+    binary = cloop.build(work)
+    for n in (2, 10):
+        log(f"in-process FMU chain x{n} against a bare C loop")
+        ssd = chain_ssd(work, n)
+        steps = 10 * (sizes.chain_steps if n == 2 else sizes.chain_steps // 2)
+        ours, theirs = work / f"tight-coupler{n}", work / f"tight-c{n}.csv"
+
+        async def coupler_chain(ssd: Path = ssd, steps: int = steps, out: Path = ours) -> float:
+            return (await coupler_run(ssd, steps, out)).rate
+
+        async def c_chain(n: int = n, steps: int = steps, out: Path = theirs) -> float:
+            return await asyncio.to_thread(cloop.rate, binary, FMUS, n, steps, round(1 / STEP), out)
+
+        coupler, reference = await interleaved(sizes.repeats, coupler_chain, c_chain)
+        assert coupler is not None and reference is not None
+        same = (ours / "results.csv").read_bytes() == theirs.read_bytes()
+        rows.append(
+            Row(f"in-process FMU chain x{n}", coupler, "bare C loop", reference, 0.5,
+                note="same calls; results.csv byte-identical" if same
+                else "RESULTS DIFFER from the C loop's",
+                equal=same)
+        )  # fmt: skip
+
+
 async def openmcx(
     sizes: Sizes, log: Callable[[str], None], work: Path, rows: list[Row], extra: dict[str, Any]
 ) -> None:
@@ -1644,6 +1684,7 @@ SECTIONS = (
     cli_start,
     watched_run,
     chains,
+    tight_loop,
     openmcx,
     remotes,
     sockets,
