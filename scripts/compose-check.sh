@@ -135,16 +135,20 @@ YAML
     "$OUT/localisation.loopback.yaml"
   docker-compose -p "$PROJECT" -f "$OUT/compose.localisation.merged.yaml" build --force-rm \
     localisation >/dev/null
-  mkdir -p "$OUT/localisation"
+  rm -rf "$OUT/localisation" && mkdir -p "$OUT/localisation"
   timeout "$RUN_TIMEOUT" docker-compose -p "$PROJECT" \
     -f "$OUT/compose.localisation.merged.yaml" up --no-color --exit-code-from orchestrator \
     >"$OUT/compose-localisation.log" 2>&1 || { tail -n 30 "$OUT/compose-localisation.log"; exit 1; }
   orchestrator=$(docker ps -aq --filter "label=com.docker.compose.project=$PROJECT" \
     --filter "label=com.docker.compose.service=orchestrator" | head -n1)
   docker cp "$orchestrator:/results/." "$OUT/localisation/"
-  python3 - "$OUT/localisation/summary.json" <<'PY'
-import json, sys
-summary = json.load(open(sys.argv[1]))
+  # the orchestrator writes a folder per run (/results/Localisation/<UTC time>-<run id>/)
+  python3 - "$OUT/localisation" <<'PY'
+import json, pathlib, sys
+found = sorted(pathlib.Path(sys.argv[1]).rglob("summary.json"), key=lambda p: p.stat().st_mtime)
+if not found:
+    sys.exit(f"compose-check: the localisation run left no summary.json in {sys.argv[1]}")
+summary = json.load(open(found[-1]))
 report = summary.get("reports", {}).get("localisation")
 if summary["status"] != "completed" or not report:
     sys.exit(f"compose-check: localisation run {summary['status']}, report {report!r}")
