@@ -979,6 +979,7 @@ class Sizes:
     rss_steps: int
     render_positions: int
     frame_steps: int
+    perception_stop_s: float
 
 
 QUICK = Sizes(
@@ -989,11 +990,13 @@ QUICK = Sizes(
     rss_steps=100_000,
     render_positions=20,
     frame_steps=150,
+    perception_stop_s=120.0,
 )
 FULL = Sizes(chain_steps=60000, remote_steps=10000, repeats=5, scale_steps=1000,
-             rss_steps=100_000, render_positions=100, frame_steps=500)  # fmt: skip
+             rss_steps=100_000, render_positions=100, frame_steps=500,
+             perception_stop_s=300.0)  # fmt: skip
 SMOKE = Sizes(chain_steps=200, remote_steps=50, repeats=1, scale_steps=5, rss_steps=11_000,
-              render_positions=2, frame_steps=10)  # fmt: skip
+              render_positions=2, frame_steps=10, perception_stop_s=2.0)  # fmt: skip
 """Every section once with the fewest steps it needs (the RSS probe samples at 1e4): a check
 that `make bench` runs (tests/bench), never a figure."""
 
@@ -1632,6 +1635,45 @@ async def render(
     )  # fmt: skip
 
 
+async def perception(
+    sizes: Sizes, log: Callable[[str], None], work: Path, rows: list[Row], extra: dict[str, Any]
+) -> None:
+    """The railway perception run end to end, unpaced, as ``coupler fleet`` runs it
+    (perception_run.py), in clear weather and under every condition: its speed against real
+    time (targets 10x and 5x), and against its floor, the same frames rendered alone on one
+    core (target 0.8); the time around the run (services up, route loaded, stopped)."""
+    import perception_run
+
+    cases = {"clear": ({}, {}), "every condition": (
+        perception_run.EVERY_CONDITION_PARAMETERS, EVERY_CONDITION)}  # fmt: skip
+    if sizes.repeats == 1:  # the smoke run: that it runs
+        cases = {"clear": cases["clear"]}
+    figures: dict[str, Any] = {}
+    for name, (parameters, conditions) in cases.items():
+        log(f"perception run, {name}: {sizes.perception_stop_s:g} s of the line")
+        ran = await asyncio.to_thread(
+            perception_run.run, work, sizes.perception_stop_s, parameters, free_ports(7)
+        )
+        floor_s = await asyncio.to_thread(
+            perception_run.render_floor_s, ran.steps, conditions, sizes.render_positions
+        )
+        floor = ran.stop_s / floor_s
+        figures[name] = {"frames": ran.steps, "stepping_s": round(ran.stepping_s, 2),
+                         "render_alone_s": round(floor_s, 2),
+                         "around_the_run_s": round(ran.overhead_s, 1)}  # fmt: skip
+        target = 10.0 if name == "clear" else 5.0
+        rows.append(
+            Row(f"perception run, {name}", ran.speed, "real time", 1.0, target,
+                note=f"x real time: {sizes.perception_stop_s:g} s of the line, {ran.steps} "
+                     f"frames in {ran.stepping_s:.1f} s; {ran.overhead_s:.0f} s around the run")
+        )  # fmt: skip
+        rows.append(
+            Row(f"perception run, {name}", ran.speed, "its frames rendered alone", floor, 0.8,
+                note=f"the renderer alone on one core: {floor_s:.1f} s, {floor:.1f}x real time")
+        )  # fmt: skip
+    extra["perception_run"] = figures
+
+
 EVERY_CONDITION: dict[str, Any] = {
     "light": "sun", "season": "winter", "weather": "snow", "rain_mm_per_h": 2.0,
     "visibility_m": 300.0, "dirt": 0.5, "leaves_per_m2": 0.3, "trees_per_km": 40.0,
@@ -1694,6 +1736,7 @@ SECTIONS = (
     many,
     frames,
     render,
+    perception,
     memory,
 )
 """The suite's sections, in the order they run (``--sections`` picks some)."""

@@ -1,0 +1,105 @@
+"""The railway perception run end to end, as a user runs it: ``coupler fleet
+scenarios/railway/perception-fleet.toml --exit --realtime-factor 0`` (the OpenRails mock with its
+front camera, the bridge, TrackBalises, perception, the map and the orchestrator, each its own
+process), timed by its summary.json; and its floor, the same number of frames rendered alone by
+the mock's renderer on one core under the same conditions."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+ROOT = Path(__file__).resolve().parents[1]
+FLEET = ROOT / "scenarios" / "railway" / "perception-fleet.toml"
+CAMERA_PERIOD_S = 0.4
+"""Perception.ssd's step: one camera frame a step."""
+
+EVERY_CONDITION_PARAMETERS = {
+    "OpenRails.time_of_day": "43200",
+    "OpenRails.season": "winter",
+    "OpenRails.weather": "snow",
+    "OpenRails.light": "sun",
+    "OpenRails.visibility": "300",
+    "OpenRails.rain_rate": "2",
+    "OpenRails.dirt": "0.5",
+    "OpenRails.leaves": "0.3",
+    "OpenRails.conditions": json.dumps(
+        {"trees_per_km": 40.0, "platform_roofs": True, "noise": True, "motion_blur": True,
+         "jpeg_quality": 80}
+    ),
+}  # fmt: skip
+"""The heaviest condition set (the render rows' every condition), as the run's parameters."""
+
+
+@dataclass(frozen=True)
+class Run:
+    stop_s: float
+    steps: int
+    stepping_s: float
+    """summary.json's wall time: the first step to the last."""
+    total_s: float
+    """The command's whole time: services started, route loaded, run, services stopped."""
+
+    @property
+    def speed(self) -> float:
+        """Simulated seconds per wall second of stepping."""
+        return self.stop_s / self.stepping_s
+
+    @property
+    def overhead_s(self) -> float:
+        return self.total_s - self.stepping_s
+
+
+def run(work: Path, stop_s: float, parameters: dict[str, str], ports: list[int]) -> Run:
+    """One unpaced perception run of ``stop_s`` simulated seconds on free ``ports`` (seven)."""
+    names = ("MOCK_PORT", "BRIDGE_PORT", "BALISE_PORT", "PERCEPTION_PORT", "MAP_PORT",
+             "MAP_HTTP_PORT", "MONITOR_PORT")  # fmt: skip
+    environment = {**os.environ, **{n: str(p) for n, p in zip(names, ports, strict=True)}}
+    out = work / "perception-run"
+    command = [sys.executable, "-m", "coupler_orchestrator", "fleet", str(FLEET), "--exit",
+               "--realtime-factor", "0", "--stop-time", f"{stop_s:g}", "--out", str(out),
+               "--force"]  # fmt: skip
+    for name, value in parameters.items():
+        command += ["--param", f"{name}={value}"]
+    begun = time.perf_counter()
+    ran = subprocess.run(command, cwd=ROOT, env=environment, capture_output=True, text=True)
+    total = time.perf_counter() - begun
+    summary: dict[str, Any] = {}
+    if (out / "summary.json").exists():
+        summary = json.loads((out / "summary.json").read_text())
+    if ran.returncode != 0 or summary.get("status") != "completed":
+        raise RuntimeError(
+            f"perception run: exit {ran.returncode}, {summary.get('status')}: "
+            f"{summary.get('reason') or ran.stderr[-2000:]}"
+        )
+    return Run(stop_s, int(summary["steps"]), float(summary["wall_time_s"]), total)
+
+
+def render_floor_s(frames: int, conditions: dict[str, Any], positions: int) -> float:
+    """Seconds of one core to render ``frames`` 800 x 600 colour frames under ``conditions``
+    (the median frame's CPU time at ``positions`` places 250 m apart, times the count)."""
+    import statistics
+
+    from coupler_railway import load_infrastructure
+    from openrails_mock.conditions import Conditions
+    from openrails_mock.renderer import CameraModel, Renderer, View
+    from openrails_mock.scene import Scene
+
+    railml = ROOT / "scenarios" / "railway" / "data" / "annaberg-schwarzenberg.railml"
+    renderer = Renderer(Scene.of_infrastructure(load_infrastructure(railml)),
+                        conditions=Conditions(**conditions))  # fmt: skip
+    rgb = CameraModel(width=800, height=600, fov_deg=45.0)
+    renderer.render(rgb, 100.0, View(speed_mps=16.0))  # compile or load the kernels
+    took = []
+    for k in range(positions):
+        view = View(elapsed_s=10.0 * k, clock_s=12 * 3600.0 + 10.0 * k, speed_mps=16.0)
+        begun = time.process_time()
+        renderer.render(rgb, 60.0 + 250.0 * k, view).pixels.tobytes()
+        took.append(time.process_time() - begun)
+    return frames * statistics.median(took)
