@@ -171,7 +171,7 @@ def _export(railml: Path, out: Path) -> Path:
     from coupler_railway.openrails.export import ExportError, export_route
 
     try:
-        export_route(railml, out)
+        export_route(railml, out, terrain=False)  # the mock never opens the terrain
     except (OSError, RailMLError, ExportError) as exc:
         raise ScenarioError(
             f"cannot use {railml} as the route (OPENRAILS_MOCK_RAILML): {exc}"
