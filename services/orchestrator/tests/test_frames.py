@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import asyncio
 import io
+import json
 import zlib
 from collections.abc import Mapping
 from dataclasses import replace
@@ -26,7 +27,10 @@ from coupler.participant import Values
 from coupler.testing import remote
 from coupler.v1.sensors_pb2 import Image
 from coupler_dev.browser import CHROMIUM, NO_CHROMIUM, chromium
+from coupler_orchestrator.observer import RunEnd
 from coupler_orchestrator.options import RunOptions
+from coupler_orchestrator.outputs.files import ResultsError
+from coupler_orchestrator.outputs.kept_frames import PENDING, KeptFrames
 from coupler_orchestrator.outputs.monitor import MonitorServer
 from coupler_orchestrator.runner import run_scenario
 
@@ -204,3 +208,63 @@ async def test_the_monitor_page_shows_the_latest_frame(
             await page.wait_for_function(f"{RED} === 40", arg=None)
     assert outcome.end.status == "completed"
     assert not hidden and errors == []
+
+
+class _EveryFifth:
+    """A keeper wanting every fifth point's frames, one before and one after."""
+
+    frames = "Camera.frame"
+    watches = ("Camera.point",)
+    before = 1
+    after = 1
+
+    def wants(self, values: list[Value]) -> bool:
+        return int(values[0]) % 5 == 0
+
+
+def _kept_frames(folder: Path) -> KeptFrames:
+    from collections import deque
+
+    from coupler_orchestrator.outputs.kept_frames import _Kept
+
+    observer = KeptFrames(folder)
+    keeper = _EveryFifth()
+    observer._kept.append(
+        _Kept(keeper=keeper, frame=0, watched=[1], folder=folder / "kept-frames" / keeper.frames,
+              ring=deque(maxlen=2))
+    )  # fmt: skip
+    return observer
+
+
+def _frame(point: int) -> bytes:
+    pixels = bytes([point % 256, 0, 0]) * (WIDTH * HEIGHT)
+    return Image(encoding="rgb8", width=WIDTH, height=HEIGHT, data=pixels, time_s=point / 10)\
+        .SerializeToString()  # fmt: skip
+
+
+def test_kept_frames_are_written_off_the_step_loop_in_order(tmp_path: Path) -> None:
+    """More points wanted than frames may wait for the writer thread: every frame around a
+    wanted point is a PNG of its own pixels, and the index lists them in order."""
+    observer = _kept_frames(tmp_path)
+    for point in range(3 * PENDING * 5):
+        observer.stepped(point / 10, [_frame(point), point])
+    observer.closing(RunEnd(status="completed", reason="", steps=0, end_time=0.0, wall_time=0.0))
+    folder = tmp_path / "kept-frames" / "Camera.frame"
+    index = json.loads((folder / "index.json").read_text())["frames"]
+    points = [e["point"] for e in index]
+    assert points == sorted({p + d for p in range(0, 3 * PENDING * 5, 5) for d in (-1, 0, 1)}
+                            - {-1, 3 * PENDING * 5})  # fmt: skip
+    for entry in index:
+        with Pillow.open(folder / entry["file"]) as png:
+            assert png.getpixel((0, 0)) == (entry["point"] % 256, 0, 0)
+
+
+def test_a_kept_frame_that_cannot_be_written_fails_the_run(tmp_path: Path) -> None:
+    (tmp_path / "kept-frames").write_text("a file where the folder goes")
+    observer = _kept_frames(tmp_path)
+    with pytest.raises(ResultsError, match=r"cannot write .*kept-frames"):
+        for point in range(10):
+            observer.stepped(point / 10, [_frame(point), point])
+        observer.closing(
+            RunEnd(status="completed", reason="", steps=0, end_time=0.0, wall_time=0.0)
+        )

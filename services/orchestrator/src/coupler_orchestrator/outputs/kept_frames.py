@@ -16,12 +16,17 @@ memory: references to frames the run has anyway) and the ``after`` points after 
 as PNG files ``kept-frames/<Component.channel>/<point>.png`` (``point``: the communication
 point's index, 0 at t_0), with ``index.json`` beside them: each file's point, time and the
 frame's sensor, size and intrinsics. The package's report reads them when the run ends.
+
+The PNG files are encoded and written by one thread of their own (zlib lets go of the GIL), so
+that the step loop goes on while they are made; at most ``PENDING`` frames wait for it, and a
+file that cannot be written fails the run at the next point or at its end.
 """
 
 from __future__ import annotations
 
 from collections import deque
 from collections.abc import Callable, Mapping, Sequence
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
 from importlib.metadata import entry_points
 from pathlib import Path
@@ -41,6 +46,8 @@ FOLDER = "kept-frames"
 LEVEL = 1
 """zlib level of kept frames: half the default level's time (4 ms for an 800 x 600 frame of the
 mock), twice its bytes (22 kB)."""
+PENDING = 8
+"""Frames at most waiting for the writer thread; the step loop waits beyond."""
 
 log = structlog.get_logger("coupler.frames")
 
@@ -86,6 +93,8 @@ class KeptFrames(Observer):
         self.run_folder = run_folder
         self._kept: list[_Kept] = []
         self._point = -1
+        self._writer: ThreadPoolExecutor | None = None
+        self._pending: deque[tuple[_Kept, Future[dict[str, Any] | None]]] = deque()
 
     def started(self, info: RunInfo) -> None:
         recorded = {c.name: c.message_type for c in info.columns}
@@ -113,6 +122,7 @@ class KeptFrames(Observer):
             )
 
     def stepped(self, time: float, row: Sequence[Value]) -> None:
+        self._collect(wait=len(self._pending) >= PENDING)
         self._point += 1
         point = self._point
         for kept in self._kept:
@@ -131,6 +141,12 @@ class KeptFrames(Observer):
         super().stepped_batch(steps)
 
     def closing(self, end: RunEnd) -> None:
+        try:
+            self._collect(wait=True, every=True)
+        finally:
+            if self._writer is not None:
+                self._writer.shutdown(wait=True, cancel_futures=True)
+                self._writer = None
         for kept in self._kept:
             if kept.index:
                 write_json(kept.folder / "index.json", {"frames": kept.index})
@@ -139,26 +155,47 @@ class KeptFrames(Observer):
         if point <= kept.written:
             return
         kept.written = point
-        image = read_image(value) if isinstance(value, bytes) else None
-        encoded = png(image, LEVEL) if image is not None else None
-        if image is None or encoded is None:
+        if not isinstance(value, bytes):
             return
-        path = kept.folder / f"{point:06d}.png"
-        try:
-            path.parent.mkdir(parents=True, exist_ok=True)
-            path.write_bytes(encoded)
-        except OSError as exc:
-            raise write_failed(path, exc) from exc
-        k = image.intrinsics
-        kept.index.append(
-            {
-                "point": point,
-                "time": time,
-                "file": path.name,
-                "sensor": image.sensor,
-                "time_s": image.time_s,
-                "width": image.width,
-                "height": image.height,
-                "intrinsics": {"fx": k.fx, "fy": k.fy, "cx": k.cx, "cy": k.cy},
-            }
-        )
+        if self._writer is None:
+            self._writer = ThreadPoolExecutor(1, thread_name_prefix="coupler-kept-frames")
+        job = self._writer.submit(_write_png, kept.folder / f"{point:06d}.png", point, time, value)
+        self._pending.append((kept, job))
+
+    def _collect(self, *, wait: bool, every: bool = False) -> None:
+        """The written frames' index entries, in order; waits for the oldest (``wait``) or for
+        all (``every``); a frame that could not be written raises here."""
+        while self._pending:
+            kept, job = self._pending[0]
+            if not (wait or job.done()):
+                return
+            self._pending.popleft()
+            entry = job.result()
+            if entry is not None:
+                kept.index.append(entry)
+            wait = every
+
+
+def _write_png(path: Path, point: int, time: float, value: bytes) -> dict[str, Any] | None:
+    """The frame ``value`` as the PNG file ``path`` and its index entry (None: no image PNG
+    can show); on the writer thread."""
+    image = read_image(value)
+    encoded = png(image, LEVEL) if image is not None else None
+    if image is None or encoded is None:
+        return None
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_bytes(encoded)
+    except OSError as exc:
+        raise write_failed(path, exc) from exc
+    k = image.intrinsics
+    return {
+        "point": point,
+        "time": time,
+        "file": path.name,
+        "sensor": image.sensor,
+        "time_s": image.time_s,
+        "width": image.width,
+        "height": image.height,
+        "intrinsics": {"fx": k.fx, "fy": k.fy, "cx": k.cx, "cy": k.cy},
+    }
