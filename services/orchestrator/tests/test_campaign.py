@@ -205,6 +205,69 @@ y_final = "Gain.y"
     assert "completed earlier" not in capsys.readouterr().err
 
 
+def fleets_of(out: Path, rows: list[dict[str, str]]) -> list[str]:
+    """The private socket folder each run reached its services in (``run.log``'s command)."""
+    found = []
+    for row in rows:
+        command = (out / row["directory"] / "run.log").read_text().splitlines()[0]
+        address = command.split("=unix://", 1)[1].split()[0]
+        found.append(str(Path(address).parent))
+    return found
+
+
+KEPT = """
+[[variant]]
+"Gain.gain" = 1.0
+
+[[variant]]
+"Gain.gain" = 2.0
+
+[[variant]]
+"Gain.no_such_parameter" = 1.0
+
+[[variant]]
+"Gain.gain" = 3.0
+
+[[variant]]
+"Gain.gain" = 4.0
+
+[outputs]
+y_max = "max(Gain.y)"
+x_final = "Integrator.x"
+"""
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("scheduler", [[], ["--scheduler", "local"]], ids=["here", "dask"])
+def test_kept_services_serve_run_after_run_with_the_same_results(
+    ramp_gain: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str], scheduler: list[str]
+) -> None:
+    """``keep_services = true``: one run at a time (--jobs 1) takes the fleet the run before
+    left, so five runs start two fleets (the failed run's is not kept); every value is the one
+    of the same campaign with services of their own, and the services end with the campaign
+    (the hygiene check fails a test that leaves a process or a temporary folder)."""
+    (tmp_path / "kept").mkdir(), (tmp_path / "own").mkdir()
+    kept = campaign_file(tmp_path / "kept", KEPT, scenario=(
+        'fleet = "examples/ramp-gain/fleet.toml"\nkeep_services = true'))  # fmt: skip
+    own = campaign_file(tmp_path / "own", KEPT)
+    assert main(["campaign", str(kept), "--jobs", "1", *scheduler]) == 1  # the failed run
+    assert main(["campaign", str(own), "--jobs", "1"]) == 1
+    capsys.readouterr()
+    rows = table(tmp_path / "kept" / "out" / "campaign.csv")
+    alone = table(tmp_path / "own" / "out" / "campaign.csv")
+    values = ("Gain.gain", "status", "y_max", "x_final")
+    assert [{k: r.get(k) for k in values} for r in rows] == [
+        {k: r.get(k) for k in values} for r in alone
+    ]
+    assert [r["status"] for r in rows] == ["completed", "completed", "failed"] + ["completed"] * 2
+    fleets = fleets_of(tmp_path / "kept" / "out", rows)
+    assert fleets[0] == fleets[1] == fleets[2] != fleets[3] == fleets[4]
+    assert len(set(fleets_of(tmp_path / "own" / "out", alone))) == 5
+    failed = tmp_path / "kept" / "out" / rows[2]["directory"]
+    assert "participant_serving" in (failed / "service-gain.log").read_text()  # its services'
+    assert not any(Path(f).exists() for f in fleets)
+
+
 @pytest.fixture
 def gain_pool(fmus: dict[str, Path]) -> Iterator[list[int]]:
     """Two gain participants already running, each its own process."""
@@ -239,6 +302,8 @@ def test_a_pool_of_running_participants_serves_one_run_each(
     ("body", "message"),
     [
         ("[grids]\n", "[grids]: unknown section"),
+        ("keep_service = true\n", "[scenario]: unknown key 'keep_service'; keys are args,"),
+        ('keep_services = "yes"\n', "[scenario]: keep_services must be true or false"),
         ('[grid]\n"gain" = [1]\n', "'gain' is neither Component.parameter"),
         ('[grid]\n"Gain.gain" = 2\n', "'Gain.gain' is not a list of values"),
         ('[outputs]\ny = "median(Gain.y)"\n', "is not a channel or a reduction of one"),

@@ -299,8 +299,12 @@ class Fleet:
         health_timeout: float = 60.0,
         logs: Path | None = None,
         sockets: bool = False,
+        die_with_parent: bool = False,
     ) -> None:
         self.spec = spec
+        self.die_with_parent = die_with_parent
+        """Each service gets SIGTERM when the thread that started it ends (Linux; a campaign
+        worker's kept services, which must not outlive a worker that is killed)."""
         self.use_sockets = sockets
         """Serve the ``grpc://`` participants on unix sockets (``coupler fleet`` asks for it
         unless ``--tcp`` or the fleet file's ``unix_sockets = false``); off for callers that
@@ -355,6 +359,10 @@ class Fleet:
 
     def log_of(self, name: str) -> Path:
         return self.logs / f"{name}.log"
+
+    def running(self) -> bool:
+        """Whether the fleet is up and every one of its services still runs."""
+        return bool(self._processes) and all(p.returncode is None for p in self._processes.values())
 
     def check_ports(self) -> None:
         """FleetError naming every port that is taken and the process holding it, before
@@ -435,6 +443,7 @@ class Fleet:
                     stdout=output,
                     stderr=asyncio.subprocess.STDOUT,
                     start_new_session=True,
+                    preexec_fn=_die_with_parent if self.die_with_parent else None,
                 )
             except OSError as exc:
                 raise FleetError(f"cannot start {service.name} ({command[0]}): {exc}") from exc
@@ -510,6 +519,15 @@ class Fleet:
                 os.unlink(self._lock.name)
             self._lock.close()
             self._lock = None
+
+
+def _die_with_parent() -> None:
+    """In the child before exec: SIGTERM when the thread that forked it ends (prctl
+    PR_SET_PDEATHSIG)."""
+    if sys.platform == "linux":
+        import ctypes
+
+        ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGTERM, 0, 0, 0)
 
 
 def _socket_base() -> str:

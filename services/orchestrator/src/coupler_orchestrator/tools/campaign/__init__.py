@@ -9,6 +9,7 @@ A campaign file (TOML) names the scenario and its variants::
     out = "results/campaigns/ramp-gain"
     args = ["--step", "0.1"]                  # extra `coupler run` options
     timeout = 600                             # [s] per run
+    keep_services = false                     # true: services kept up between runs
 
     [grid]                                    # every combination (cartesian product)
     "Gain.gain" = [1.0, 2.0, 3.0]

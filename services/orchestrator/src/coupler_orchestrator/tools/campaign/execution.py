@@ -28,7 +28,7 @@ from coupler_orchestrator.tools.campaign.model import (
 from coupler_orchestrator.tools.campaign.progress import CampaignProgress
 from coupler_orchestrator.tools.campaign.table import write_table
 from coupler_orchestrator.tools.campaign.variants import variant_key
-from coupler_orchestrator.tools.campaign.worker import execute, run_job
+from coupler_orchestrator.tools.campaign.worker import KEPT, execute, run_job
 
 Executor = Callable[[RunJob], Awaitable[RunReport]]
 
@@ -114,7 +114,10 @@ async def run_campaign(
 async def _executor(scheduler: str | None, jobs: int | None) -> Any:
     """(execute(job) awaitable, how many runs at once)."""
     if scheduler is None:
-        yield run_job, jobs or os.cpu_count() or 1
+        try:
+            yield run_job, jobs or os.cpu_count() or 1
+        finally:
+            await KEPT.close()  # the services kept between runs ([scenario] keep_services)
         return
     try:
         import dask

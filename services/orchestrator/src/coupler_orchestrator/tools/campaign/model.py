@@ -189,6 +189,9 @@ class ScenarioSpec:
     """[s] a run may take, services' start included."""
     health_timeout: float = 60.0
     """[s] a service may take to become healthy."""
+    keep_services: bool = False
+    """Keep the fleet's services up between runs (a worker's next run takes them): for
+    participants that begin afresh at every Initialize, as Coupler's do."""
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -25,6 +25,11 @@ from coupler_orchestrator.tools.campaign.model import (
 )
 from coupler_orchestrator.tools.fleet import FleetSpec
 
+SCENARIO_KEYS = frozenset(
+    {"fleet", "ssp", "stop_time", "out", "args", "timeout", "health_timeout", "keep_services"}
+)
+"""The keys of a campaign file's [scenario]."""
+
 
 def read(path: Path, *, root: Path | None = None) -> CampaignSpec:
     """Read a campaign file; relative paths are taken from ``root`` (default: the working
@@ -96,6 +101,18 @@ class _Reader:
             raise self.fail("scenario", "no ssp and no fleet", 'add ssp = "path/to/the.ssd"')
         if not ssp.exists():
             raise self.fail("scenario", f"scenario {ssp} does not exist", "fix ssp = ...")
+        unknown = sorted(set(raw) - SCENARIO_KEYS)
+        if unknown:
+            raise self.fail(
+                "scenario",
+                f"unknown key {unknown[0]!r}",
+                f"keys are {', '.join(sorted(SCENARIO_KEYS))}",
+            )
+        keep = raw.get("keep_services", False)
+        if not isinstance(keep, bool):
+            raise self.fail(
+                "scenario", "keep_services must be true or false", "keep_services = true"
+            )
         args = raw.get("args", [])
         if not isinstance(args, list) or not all(isinstance(a, str) for a in args):
             raise self.fail(
@@ -110,6 +127,7 @@ class _Reader:
                 args=tuple(args),
                 timeout=float(raw.get("timeout", 3600.0)),
                 health_timeout=float(raw.get("health_timeout", 60.0)),
+                keep_services=keep,
             )
         except (TypeError, ValueError) as exc:
             raise self.fail("scenario", str(exc), "stop_time and timeout are numbers [s]") from exc

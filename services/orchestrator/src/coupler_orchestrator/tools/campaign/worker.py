@@ -1,10 +1,19 @@
 """One run of a campaign, as a worker executes it (here, or a Dask task): its services started on
-free ports (or its pool entry taken), ``coupler run`` as a process in a scratch folder, its
-results reduced to the table's values; the run's files sent back whole."""
+free ports (or its pool entry taken, or services kept from an earlier run taken), ``coupler
+run`` as a process in a scratch folder, its results reduced to the table's values; the run's
+files sent back whole.
+
+With ``[scenario] keep_services = true`` a worker keeps a fleet's services up between runs
+(``KEPT``): a run takes an idle fleet of its fleet file, or starts one; a run that did not
+complete, or a fleet one of whose services ended, is stopped rather than kept. A Dask worker
+runs its jobs on one event loop of its own (``_kept_loop``) so that the fleets it keeps outlive a
+job, and stops them when its process ends; a kept service also ends with the thread that started
+it (``Fleet(die_with_parent=True)``), should the worker be killed."""
 
 from __future__ import annotations
 
 import asyncio
+import atexit
 import contextlib
 import csv
 import importlib
@@ -15,6 +24,7 @@ import os
 import shutil
 import sys
 import tempfile
+import threading
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import replace
@@ -46,7 +56,84 @@ def execute(job: RunJob) -> RunReport:
     """Run ``job`` to its report (a Dask task, in a worker's process; blocks)."""
     level, json_lines = job.logs
     configure_logging(level, json=json_lines)
+    if job.scenario.keep_services and job.env is None and job.scenario.fleet is not None:
+        return asyncio.run_coroutine_threadsafe(run_job(job), _kept_loop()).result()
     return asyncio.run(run_job(job))
+
+
+class KeptFleets:
+    """Fleets kept up between runs, the idle ones by fleet file (one run on a fleet at once)."""
+
+    def __init__(self) -> None:
+        self._idle: dict[Path, list[tuple[Fleet, dict[str, str]]]] = {}
+        self._busy: set[Fleet] = set()
+        self.started = 0
+        """Fleets started so far (a campaign's runs minus this: the starts kept services saved)."""
+
+    async def take(self, job: RunJob) -> tuple[Fleet, dict[str, str]]:
+        """An idle fleet of the job's fleet file whose services all still run, else a new one."""
+        assert job.scenario.fleet is not None
+        idle = self._idle.setdefault(job.scenario.fleet, [])
+        while idle:
+            fleet, env = idle.pop()
+            if fleet.running():
+                self._busy.add(fleet)
+                return fleet, env
+            await fleet.stop()
+        root = Path(tempfile.mkdtemp(prefix="coupler-kept-services-"))
+        fleet, env = await _start_fleet(job, root, root / SERVICE_LOGS, die_with_parent=True)
+        self.started += 1
+        self._busy.add(fleet)
+        return fleet, env
+
+    async def give_back(self, job: RunJob, fleet: Fleet, env: dict[str, str], keep: bool) -> None:
+        """``fleet`` idle again (``keep``: the run completed), or stopped."""
+        assert job.scenario.fleet is not None
+        self._busy.discard(fleet)
+        if keep and fleet.running():
+            self._idle.setdefault(job.scenario.fleet, []).append((fleet, env))
+        else:
+            await _stop_kept(fleet)
+
+    async def close(self) -> None:
+        """Stop every fleet kept (the campaign, or the worker's process, ends)."""
+        fleets = [f for idle in self._idle.values() for f, _ in idle] + list(self._busy)
+        self._idle.clear()
+        self._busy.clear()
+        for fleet in fleets:
+            await _stop_kept(fleet)
+
+
+KEPT = KeptFleets()
+"""This process's kept fleets."""
+
+_LOOP: asyncio.AbstractEventLoop | None = None
+_LOOP_LOCK = threading.Lock()
+
+
+def _kept_loop() -> asyncio.AbstractEventLoop:
+    """The event loop a Dask worker runs kept-services jobs on (started on the first)."""
+    global _LOOP
+    with _LOOP_LOCK:
+        if _LOOP is None:
+            loop = asyncio.new_event_loop()
+            threading.Thread(
+                target=loop.run_forever, name="coupler-kept-services", daemon=True
+            ).start()
+            atexit.register(_close_kept_loop, loop)
+            _LOOP = loop
+        return _LOOP
+
+
+def _close_kept_loop(loop: asyncio.AbstractEventLoop) -> None:
+    with contextlib.suppress(Exception):
+        asyncio.run_coroutine_threadsafe(KEPT.close(), loop).result(30)
+    loop.call_soon_threadsafe(loop.stop)
+
+
+async def _stop_kept(fleet: Fleet) -> None:
+    await fleet.stop()
+    shutil.rmtree(fleet.spec.out, ignore_errors=True)
 
 
 async def run_job(job: RunJob) -> RunReport:
@@ -108,14 +195,41 @@ async def _run_with_services(job: RunJob, scratch: Path) -> None:
     if job.env is not None or scenario.fleet is None:
         await _coupler_run(job, scratch, {**os.environ, **(job.env or {})})
         return
+    if scenario.keep_services:
+        fleet, env = await KEPT.take(job)
+        completed = False
+        try:
+            await _coupler_run(job, scratch, env, fleet.addresses)
+            completed = _completed(scratch)
+        finally:
+            if not completed:  # what its services said, with the run (as a run's own fleet)
+                shutil.copytree(fleet.logs, scratch / SERVICE_LOGS / fleet.logs.name,
+                                dirs_exist_ok=True)  # fmt: skip
+            await KEPT.give_back(job, fleet, env, keep=completed)
+        return
+    fleet, env = await _start_fleet(job, scratch, scratch / SERVICE_LOGS)
+    try:
+        await _coupler_run(job, scratch, env, fleet.addresses)
+    finally:
+        await fleet.stop()
+
+
+async def _start_fleet(
+    job: RunJob, out: Path, logs: Path, *, die_with_parent: bool = False
+) -> tuple[Fleet, dict[str, str]]:
+    """The job's fleet file's services started (healthy) on free ports, and the environment
+    naming those ports (the SSD reads the same variables)."""
+    scenario = job.scenario
+    assert scenario.fleet is not None
     for attempt in range(3):  # another process may take a free port before the fleet binds it
         env = {**os.environ, **{name: str(free_port()) for name in port_variables(scenario.fleet)}}
-        spec = replace(FleetSpec.load(scenario.fleet, root=scenario.root, env=env), out=scratch)
+        spec = replace(FleetSpec.load(scenario.fleet, root=scenario.root, env=env), out=out)
         fleet = Fleet(  # its services' logs stay with the run (kept when it fails)
             spec,
             health_timeout=scenario.health_timeout,
-            logs=scratch / SERVICE_LOGS,
+            logs=logs,
             sockets=True,  # on unix sockets, as `coupler fleet` (unless unix_sockets = false)
+            die_with_parent=die_with_parent,
         )
         try:
             fleet.check_ports()
@@ -123,9 +237,18 @@ async def _run_with_services(job: RunJob, scratch: Path) -> None:
             if attempt == 2:
                 raise
             continue
-        async with fleet:
-            await _coupler_run(job, scratch, env, fleet.addresses)
-        return
+        await fleet.__aenter__()
+        return fleet, env
+    raise AssertionError("unreachable")
+
+
+def _completed(scratch: Path) -> bool:
+    """Whether the run in ``scratch`` completed (its summary.json says so)."""
+    try:
+        summary = json.loads((scratch / "summary.json").read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return False
+    return summary.get("status") in COMPLETED
 
 
 async def _coupler_run(
