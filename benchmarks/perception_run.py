@@ -103,3 +103,54 @@ def render_floor_s(frames: int, conditions: dict[str, Any], positions: int) -> f
         renderer.render(rgb, 60.0 + 250.0 * k, view).pixels.tobytes()
         took.append(time.process_time() - begun)
     return frames * statistics.median(took)
+
+
+CAMPAIGN = """[scenario]
+fleet = "scenarios/railway/perception-fleet.toml"
+stop_time = {stop_s}
+timeout = 600
+keep_services = true
+out = "{out}"
+
+[grid]
+"OpenRails.visibility" = [{visibilities}]
+
+[outputs]
+recall = "reports.perception.recall"
+"""
+
+
+@dataclass(frozen=True)
+class Campaign:
+    runs: int
+    workers: int
+    wall_s: float
+    """The command's whole time, the Dask cluster's start and end included."""
+    stepping_s: float
+    """The runs' stepping (their summary.json wall times), summed."""
+
+    @property
+    def around_a_run_s(self) -> float:
+        """A worker's time per run that is not the run's stepping."""
+        return (self.wall_s * self.workers - self.stepping_s) / self.runs
+
+
+def campaign(work: Path, runs: int, stop_s: float, workers: int = 2) -> Campaign:
+    """``coupler campaign --scheduler local`` of ``runs`` perception runs of ``stop_s`` seconds
+    (the fog's visibility varied), services kept between a worker's runs."""
+    import csv
+
+    out = work / "perception-campaign"
+    path = work / "perception-campaign.toml"
+    visibilities = ", ".join(f"{50.0 * (k + 1):g}" for k in range(runs))
+    path.write_text(CAMPAIGN.format(stop_s=stop_s, out=out, visibilities=visibilities))
+    command = [sys.executable, "-m", "coupler_orchestrator", "campaign", str(path), "--force",
+               "--scheduler", "local", "--jobs", str(workers)]  # fmt: skip
+    begun = time.perf_counter()
+    ran = subprocess.run(command, cwd=ROOT, capture_output=True, text=True)
+    wall = time.perf_counter() - begun
+    if ran.returncode != 0:
+        raise RuntimeError(f"perception campaign: exit {ran.returncode}: {ran.stderr[-2000:]}")
+    with (out / "campaign.csv").open(encoding="utf-8", newline="") as file:
+        rows = list(csv.DictReader(file))
+    return Campaign(len(rows), workers, wall, sum(float(r["wall_time_s"]) for r in rows))

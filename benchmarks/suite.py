@@ -1674,6 +1674,27 @@ async def perception(
     extra["perception_run"] = figures
 
 
+async def perception_campaign(
+    sizes: Sizes, log: Callable[[str], None], work: Path, rows: list[Row], extra: dict[str, Any]
+) -> None:
+    """A campaign of short perception runs on a local Dask cluster of two workers, services
+    kept between a worker's runs: the time a run costs around its stepping (target 3 s)."""
+    import perception_run
+
+    runs = 2 if sizes.repeats == 1 else 12
+    log(f"perception campaign: {runs} runs of 4 s of the line, 2 Dask workers")
+    done = await asyncio.to_thread(perception_run.campaign, work, runs, 4.0)
+    extra["perception_campaign"] = {"runs": done.runs, "wall_s": round(done.wall_s, 1),
+                                    "stepping_s": round(done.stepping_s, 1),
+                                    "around_a_run_s": round(done.around_a_run_s, 2)}  # fmt: skip
+    rows.append(
+        Row("perception campaign, time around a run", 1.0 / done.around_a_run_s,
+            "the 3 s target", 1.0 / 3.0, 1.0,
+            note=f"runs/s of it: {done.around_a_run_s:.1f} s a run besides its stepping; "
+                 f"{done.runs} runs in {done.wall_s:.0f} s, cluster start included")
+    )  # fmt: skip
+
+
 EVERY_CONDITION: dict[str, Any] = {
     "light": "sun", "season": "winter", "weather": "snow", "rain_mm_per_h": 2.0,
     "visibility_m": 300.0, "dirt": 0.5, "leaves_per_m2": 0.3, "trees_per_km": 40.0,
@@ -1737,6 +1758,7 @@ SECTIONS = (
     frames,
     render,
     perception,
+    perception_campaign,
     memory,
 )
 """The suite's sections, in the order they run (``--sections`` picks some)."""
