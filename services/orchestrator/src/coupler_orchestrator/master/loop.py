@@ -57,6 +57,17 @@ Key = tuple[str, str]
 Due = tuple[Member, Stepper]
 
 
+async def _landed(flying: list[asyncio.Future[Values]]) -> None:
+    """Every answer in flight landed; cancelled (Ctrl-C, SIGTERM), the calls in flight are
+    cancelled too: an interrupted run does not wait for a participant stuck in its step."""
+    try:
+        await asyncio.wait(flying)
+    except asyncio.CancelledError:
+        for landing in flying:
+            landing.cancel()
+        raise
+
+
 def _failed_recording(end: RunEnd, problem: str) -> RunEnd:
     """``end`` after a recorder could not write what it held: failed, saying so."""
     if end.status in ("completed", "terminated"):
@@ -500,7 +511,7 @@ class Master:
                     pending[k + m.multiple].append((m, self._finished(m, stepper, k)))
             finally:
                 if flying:
-                    await asyncio.wait(flying)
+                    await _landed(flying)
             for m, stepper in awaited:
                 pending[k + m.multiple].append((m, self._finished(m, stepper, k)))
         for m, outputs in pending.pop(k + 1, []):
