@@ -29,6 +29,7 @@ from coupler.v1 import component_pb2 as pb
 from coupler.v1 import component_pb2_grpc as pb_grpc
 from coupler_orchestrator.master import native_step_channel as steps
 from coupler_orchestrator.native import MISSING
+from coupler_orchestrator.options import NATIVE_STEPS_VARIABLE
 
 ROOT = Path(__file__).resolve().parents[2]
 EXAMPLE = ROOT / "examples" / "participant-node"
@@ -79,7 +80,7 @@ def env(request: pytest.FixtureRequest, scale: int, tmp_path: Path) -> dict[str,
         pytest.fail(f"the native step channel: {steps.library.problem}")
     SSD.write(tmp_path / "node.ssd")
     native = "1" if request.param == "native" else "0"
-    return {**os.environ, "SCALE_PORT": str(scale), steps.ENVIRONMENT: native}
+    return {**os.environ, "SCALE_PORT": str(scale), NATIVE_STEPS_VARIABLE: native}
 
 
 def results(out: Path) -> list[dict[str, str]]:

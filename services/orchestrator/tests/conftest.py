@@ -33,6 +33,7 @@ from coupler_orchestrator import native
 from coupler_orchestrator.cli.main import main
 from coupler_orchestrator.master import native_fmu_step as kernel
 from coupler_orchestrator.master import native_step_channel as steps
+from coupler_orchestrator.options import NATIVE_STEPS_VARIABLE
 from coupler_orchestrator.outputs import csv as csv_output
 from coupler_tools.fmubuild import build_all
 
@@ -167,7 +168,7 @@ def step_path(request: pytest.FixtureRequest, monkeypatch: pytest.MonkeyPatch) -
     if request.param == "native":
         require_native(steps.library)
     else:
-        monkeypatch.setenv(steps.ENVIRONMENT, "0")
+        monkeypatch.setenv(NATIVE_STEPS_VARIABLE, "0")
     return str(request.param)
 
 
@@ -178,7 +179,7 @@ def fmu_path(request: pytest.FixtureRequest, monkeypatch: pytest.MonkeyPatch) ->
     if request.param == "C":
         require_native(kernel.library)
     else:
-        monkeypatch.setenv(steps.ENVIRONMENT, "0")
+        monkeypatch.setenv(NATIVE_STEPS_VARIABLE, "0")
     return str(request.param)
 
 

@@ -34,7 +34,7 @@ from coupler.v1 import component_pb2_grpc as pb_grpc
 from coupler_orchestrator import ssp
 from coupler_orchestrator.master import native_step_channel as steps
 from coupler_orchestrator.native import MISSING
-from coupler_orchestrator.options import RunOptions
+from coupler_orchestrator.options import NATIVE_STEPS_VARIABLE, RunOptions
 from coupler_orchestrator.pipeline import participants
 
 from .conftest import Coupler, FailingGain, Outcome, require_native, serving
@@ -70,8 +70,10 @@ def test_remote_participants_step_natively_unless_told_not_to(
     assert steps.transport(RunOptions(native_steps=False).native_steps)() is None
     plain = participants.create(component(), RunOptions())
     assert type(plain) is RemoteParticipant and plain.steps is None
-    monkeypatch.setenv(steps.ENVIRONMENT, "0")
-    assert steps.transport()() is None
+    monkeypatch.setenv(NATIVE_STEPS_VARIABLE, "0")  # read once, where the run's options are
+    assert RunOptions().switched().native_steps is False and RunOptions().step_socket
+    assert steps.transport(RunOptions().switched().native_steps)() is None
+    assert RunOptions().switched({"COUPLER_STEP_SOCKET": "no"}).step_socket is False
 
 
 @pytest.mark.usefixtures("native")

@@ -11,7 +11,6 @@ platform it has no wheel for) every run steps through Python with the same resul
 
 from __future__ import annotations
 
-import os
 import sys
 from collections.abc import Callable
 from pathlib import Path
@@ -21,21 +20,6 @@ from typing import Any
 import structlog
 
 log = structlog.get_logger("coupler.native")
-
-ENVIRONMENT = "COUPLER_NATIVE_STEPS"
-"""``0`` turns native stepping (the native step channel, the native FMU step) off for every run
-of the process."""
-
-
-def switched_on(asked: bool, variable: str) -> bool:
-    """Whether ``asked`` and not turned off by the environment ``variable`` (0, no or false)."""
-    return asked and os.environ.get(variable, "1").strip().lower() not in ("0", "no", "false")
-
-
-def wanted(asked: bool = True) -> bool:
-    """Whether native stepping is asked for and not turned off by ``COUPLER_NATIVE_STEPS``."""
-    return switched_on(asked, ENVIRONMENT)
-
 
 MISSING = (
     "coupler-native is not installed (its wheel is built for Linux x86_64; in the repository: "

@@ -9,7 +9,7 @@ import os
 import secrets
 import uuid
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from coupler.archives import DEFAULT_BUDGET_BYTES
@@ -21,6 +21,12 @@ from coupler_orchestrator.model import Algorithm
 from coupler_orchestrator.observer import RunEnd
 
 SECRET_VARIABLE = "COUPLER_RUN_SECRET"
+NATIVE_STEPS_VARIABLE = "COUPLER_NATIVE_STEPS"
+"""``0`` (or no, false) turns native stepping off for every run of the process, as
+``--no-native-steps`` does (``RunOptions.switched``)."""
+STEP_SOCKET_VARIABLE = "COUPLER_STEP_SOCKET"
+"""``0`` (or no, false) keeps remote participants off their step sockets, as
+``--no-step-socket`` does (``RunOptions.switched``)."""
 """A run secret chosen from outside (UTF-8, at least 16 bytes); unset: a random one."""
 
 
@@ -127,3 +133,18 @@ class RunOptions:
     """Called once per remote participant that is not SERVING at the first check, with its
     component name, address and the reason (e.g. "connection refused: ..."), so a person
     sees at once what the run waits for."""
+
+    def switched(self, environ: Mapping[str, str] | None = None) -> RunOptions:
+        """These options with the environment's switches applied (``COUPLER_NATIVE_STEPS``,
+        ``COUPLER_STEP_SOCKET``): the one place they are read; every later stage takes
+        ``native_steps`` and ``step_socket`` as they are here."""
+        env = os.environ if environ is None else environ
+
+        def on(variable: str) -> bool:
+            return env.get(variable, "1").strip().lower() not in ("0", "no", "false")
+
+        return replace(
+            self,
+            native_steps=self.native_steps and on(NATIVE_STEPS_VARIABLE),
+            step_socket=self.step_socket and on(STEP_SOCKET_VARIABLE),
+        )

@@ -122,6 +122,7 @@ async def run_scenario(
     Raises ScenarioError/ValidationError before anything runs; a participant failing during
     the run ends it as ``failed`` with every completed step recorded.
     """
+    options = options.switched()  # the environment's switches, read here only
     budget = Budget.of(options.unpack_limit)  # the archive and its FMUs together
     async with loaded(path, budget) as scenario:
         if out_dir is None and base is None:

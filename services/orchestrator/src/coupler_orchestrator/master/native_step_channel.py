@@ -42,15 +42,12 @@ from coupler.errors import ParticipantError, ParticipantTimeout, answered_unaske
 from coupler.participant import Values
 from coupler.security import read_secret
 from coupler.v1 import component_pb2 as pb
-from coupler_orchestrator.native import ENVIRONMENT as ENVIRONMENT
 from coupler_orchestrator.native import answers as answers
-from coupler_orchestrator.native import step_streams, switched_on, wanted
+from coupler_orchestrator.native import step_streams
 
 _CODES = {code.value[0]: code for code in grpc.StatusCode}
 log = structlog.get_logger("coupler.master")
 
-STEP_SOCKET_ENVIRONMENT = "COUPLER_STEP_SOCKET"
-"""``0`` keeps every member on its StepStream even where it offers a step socket."""
 STREAM = ("native step channel", "its StepStream over C++ gRPC")
 """How summary.json names a member stepped over its StepStream, and why."""
 
@@ -59,20 +56,14 @@ library = step_streams
 
 
 def enabled(asked: bool = True) -> bool:
-    """Whether runs step remote members natively: asked for, not turned off by the
-    environment, and the library at hand."""
-    return wanted(asked) and library() is not None
-
-
-def socket_wanted(asked: bool = True) -> bool:
-    """Whether members that offer a step socket are stepped over it: asked for and not turned
-    off by ``COUPLER_STEP_SOCKET``."""
-    return switched_on(asked, STEP_SOCKET_ENVIRONMENT)
+    """Whether runs step remote members natively: asked for (``RunOptions.native_steps``,
+    the environment applied by ``RunOptions.switched``) and the library at hand."""
+    return asked and library() is not None
 
 
 def why_python(participant: object, asked: bool) -> str:
     """Why a remote participant (after Initialize) steps over ``grpc.aio``."""
-    if not wanted(asked):
+    if not asked:
         return "native steps are off (--no-native-steps or COUPLER_NATIVE_STEPS=0)"
     if library() is None:
         return str(library.problem)
@@ -85,7 +76,7 @@ class NativeSteps(StepTransport):
     """A remote participant's steps over the native step channel, given to it as its
     ``StepTransport`` (``transport``); ``split`` gives the master the two halves of a step.
     Taken when the participant offers a StepStream; without one its steps stay DoStep calls.
-    With ``step_socket`` (and ``socket_wanted``), over the participant's step socket where it
+    With ``step_socket`` (``RunOptions.step_socket``), over the participant's step socket where it
     offers one and is reached over a unix socket."""
 
     def __init__(self, step_socket: bool = True) -> None:
@@ -124,7 +115,7 @@ class NativeSteps(StepTransport):
     def _open(self, remote: RemoteParticipant) -> Any:
         offered = remote.codec.description.capabilities.step_socket
         self.described = STREAM
-        if offered and remote.address.startswith("unix://") and socket_wanted(self._step_socket):
+        if offered and remote.address.startswith("unix://") and self._step_socket:
             stream = self._open_socket(remote, offered)
             if stream is not None:
                 return stream

@@ -6,7 +6,6 @@ from __future__ import annotations
 from coupler.durations import MAX_LEASE
 from coupler.errors import ScenarioError
 from coupler_orchestrator.model import Checked, Link, Plan
-from coupler_orchestrator.native import wanted
 from coupler_orchestrator.options import RunOptions
 
 
@@ -28,7 +27,7 @@ def build_plan(checked: Checked, links: tuple[Link, ...], options: RunOptions) -
         realtime_factor=options.realtime_factor or None,
         on_abandoned=options.on_abandoned,
         progress=options.progress,
-        native=wanted(options.native_steps) and additions is None,
+        native=options.native_steps and additions is None,
         openmcx=additions,
     )
 
