@@ -312,7 +312,7 @@ def test_headers_alone_make_the_participant_hold_nothing_they_announce(gain: Gai
 def test_a_frame_that_stalls_ends_its_connection(gain: Gain) -> None:
     """A header and the frame's first bytes, then nothing: after FRAME_STALL_S (10 s) the
     connection ends DEADLINE_EXCEEDED (it waited for the rest for good)."""
-    from coupler.server import FRAME_STALL_S
+    from coupler.step_socket import FRAME_STALL_S
 
     secret = secrets.token_bytes(32)
     gain.initialize("stalled", secret)
