@@ -19,7 +19,7 @@ from abc import ABC, abstractmethod
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import replace
 from types import TracebackType
-from typing import Any, TypeVar
+from typing import Any, TypeVar, cast
 from urllib.parse import urlsplit
 
 import grpc
@@ -100,10 +100,87 @@ class StepTransport(ABC):
         """End this run's steps: after Terminate, waiting up to ``timeout`` seconds for the
         end's status; at once (``timeout`` 0) when the participant is closed."""
 
+    async def end(self) -> None:
+        """After Terminate: this run's steps ended, their end's status waited for a while."""
+        self.close(timeout=1.0)
+
     def split(self) -> Any | None:
         """This run's steps in two halves on the caller's thread (an object with ``send`` and
         ``receive``), when the transport carries them and can; None: through ``step``."""
         return None
+
+
+class _Unary(StepTransport):
+    """Steps as DoStep calls on the participant's ``grpc.aio`` channel."""
+
+    def __init__(self, participant: RemoteParticipant) -> None:
+        self._participant = participant
+
+    def start(self, participant: RemoteParticipant) -> bool:
+        return True
+
+    async def step(self, request: wire.DoStepRequest) -> wire.DoStepResponse:
+        p = self._participant
+        call = p._stubbed().DoStep(request, timeout=p.call_timeout, metadata=p.metadata)
+        response: wire.DoStepResponse = await p._call("DoStep", call)
+        return response
+
+    def close(self, *, timeout: float) -> None:
+        pass
+
+
+class _Streamed(StepTransport):
+    """Steps over one StepStream on the participant's ``grpc.aio`` channel: a request
+    written, its answer read, each within the call deadline."""
+
+    def __init__(self, participant: RemoteParticipant) -> None:
+        self._participant = participant
+        self._stream: grpc.aio.StreamStreamCall = participant._stubbed().StepStream(
+            metadata=participant.metadata
+        )
+
+    def start(self, participant: RemoteParticipant) -> bool:
+        return True
+
+    async def step(self, request: wire.DoStepRequest) -> wire.DoStepResponse:
+        response: wire.DoStepResponse = await self._participant._call(
+            "DoStep", self._exchange(request)
+        )
+        return response
+
+    async def _exchange(self, request: wire.DoStepRequest) -> wire.DoStepResponse:
+        p, stream = self._participant, self._stream
+        try:
+            await stream.write(request)
+            async with asyncio.timeout(p.call_timeout):  # no task per step (wait_for's)
+                response = await stream.read()
+        except asyncio.InvalidStateError:  # the stream ended before this step was written
+            response = grpc.aio.EOF
+        if response is grpc.aio.EOF:  # the server closed the stream: its status says why
+            code = await stream.code()
+            details = await stream.details()
+            raise translate(code, details, participant=p.name, call="DoStep", address=p.address)
+        return cast(wire.DoStepResponse, response)
+
+    async def end(self) -> None:
+        """Half-close the run's step stream and wait for its status: the run has ended either
+        way, the stream's end only confirms it -- unless answers come that no request asked
+        for (ABORTED: the participant answered a request twice)."""
+        p, stream = self._participant, self._stream
+        unasked = 0
+        with contextlib.suppress(grpc.aio.AioRpcError, TimeoutError, asyncio.InvalidStateError):
+            await stream.done_writing()
+            async with asyncio.timeout(p.call_timeout):
+                while await stream.read() is not grpc.aio.EOF:
+                    unasked += 1
+                await stream.code()
+        if unasked:
+            raise ParticipantError(
+                answered_unasked(unasked), participant=p.name, call="Terminate", status="ABORTED"
+            )
+
+    def close(self, *, timeout: float) -> None:
+        self._stream.cancel()
 
 
 class RemoteParticipant(Participant):
@@ -137,8 +214,10 @@ class RemoteParticipant(Participant):
         self.address = address
         self.steps = steps
         """The transport given for the steps (None: ``grpc.aio``)."""
-        self._transported = False
-        """Whether ``steps`` carries this run's steps."""
+        self._transport: StepTransport | None = None
+        """How this run's steps travel, chosen once at Initialize: ``steps`` when it takes
+        them, else a StepStream where the participant offers one and ``streaming``, else
+        DoStep calls."""
         self.max_message_bytes = max_message_bytes
         self.limits = wire.MessageLimits(*[max(max_message_bytes, MAX_MESSAGE_BYTES)] * 2)
         """What the gRPC channel lets through (``wire.client_limits`` once described; before,
@@ -154,7 +233,6 @@ class RemoteParticipant(Participant):
         self._channel: grpc.aio.Channel | None = None
         self._stub: pb_grpc.GRPCComponentServiceStub | None = None
         self._codec: wire.Codec | None = None
-        self._stream: grpc.aio.StreamStreamCall | None = None
         self._run = wire.RunKey()
         """The run's id and secret, carried by every call after Initialize."""
         self._requests: wire.StepRequests | None = None
@@ -298,9 +376,11 @@ class RemoteParticipant(Participant):
         )
         outputs = self._response("Initialize", lambda: wire.outputs_from_pb(response, self.codec))
         if self.steps is not None and self.steps.start(self):
-            self._transported = True
+            self._transport = self.steps
         elif self.streaming and self.codec.description.capabilities.streaming:
-            self._stream = self._stubbed().StepStream(metadata=self._metadata)
+            self._transport = _Streamed(self)
+        else:
+            self._transport = _Unary(self)
         return outputs
 
     def step_request(
@@ -342,40 +422,15 @@ class RemoteParticipant(Participant):
         return self.steps.split() if self.steps is not None else None
 
     async def do_step(self, time: float, step: float, inputs: Mapping[str, Value]) -> Values:
-        request = self.step_request(time, step, inputs)
-        if self._transported:
-            assert self.steps is not None
-            response = await self.steps.step(request)
-        elif self._stream is not None:
-            response = await self._call("DoStep", self._stream_step(self._stream, request))
-        else:
-            response = await self._call(
-                "DoStep",
-                self._stubbed().DoStep(request, timeout=self.call_timeout, metadata=self._metadata),
-            )
-        return self.step_outputs(response)
+        return self.step_outputs(await self._steps().step(self.step_request(time, step, inputs)))
 
-    async def _stream_step(
-        self, stream: grpc.aio.StreamStreamCall, request: wire.DoStepRequest
-    ) -> wire.DoStepResponse:
-        try:
-            await stream.write(request)
-            async with asyncio.timeout(self.call_timeout):  # no task per step (wait_for's)
-                response = await stream.read()
-        except asyncio.InvalidStateError:  # the stream ended before this step was written
-            response = grpc.aio.EOF
-        if response is grpc.aio.EOF:  # the server closed the stream: its status says why
-            code = await stream.code()
-            details = await stream.details()
-            raise translate(
-                code, details, participant=self.name, call="DoStep", address=self.address
-            )
-        return response
+    def _steps(self) -> StepTransport:
+        """The run's transport; outside a run, DoStep calls (the participant says why not)."""
+        return self._transport or _Unary(self)
 
     async def terminate(self, reason: str = "") -> None:
-        """Terminate the run (named by its id), then close its step stream."""
-        stream, self._stream = self._stream, None
-        transported, self._transported = self._transported, False
+        """Terminate the run (named by its id), then end its steps' transport."""
+        transport, self._transport = self._transport, None
         try:
             await self._call(
                 "Terminate",
@@ -386,34 +441,13 @@ class RemoteParticipant(Participant):
                 ),
             )
         finally:
-            if transported and self.steps is not None:
-                self.steps.close(timeout=1.0)
-            if stream is not None:
-                await self._end_stream(stream)
-
-    async def _end_stream(self, stream: grpc.aio.StreamStreamCall) -> None:
-        """Half-close a run's step stream and wait for its status: the run has ended either
-        way, the stream's end only confirms it -- unless answers come that no request asked
-        for (ABORTED: the participant answered a request twice)."""
-        unasked = 0
-        with contextlib.suppress(grpc.aio.AioRpcError, TimeoutError, asyncio.InvalidStateError):
-            await stream.done_writing()
-            async with asyncio.timeout(self.call_timeout):
-                while await stream.read() is not grpc.aio.EOF:
-                    unasked += 1
-                await stream.code()
-        if unasked:
-            raise ParticipantError(
-                answered_unasked(unasked), participant=self.name, call="Terminate", status="ABORTED"
-            )
+            if transport is not None:
+                await transport.end()
 
     async def close(self) -> None:
-        if self._transported and self.steps is not None:
-            self._transported = False
-            self.steps.close(timeout=0.0)
-        if self._stream is not None:
-            self._stream.cancel()
-            self._stream = None
+        transport, self._transport = self._transport, None
+        if transport is not None:
+            transport.close(timeout=0.0)
         if self._channel is not None:
             await self._channel.close()
         self._channel = None
