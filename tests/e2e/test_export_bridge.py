@@ -30,7 +30,7 @@ from coupler_orchestrator.tools.fleet import Fleet, FleetSpec
 
 ROOT = Path(__file__).resolve().parents[2]
 FLEET = ROOT / "scenarios" / "railway" / "fleet.toml"
-DRIVER = ROOT / "services" / "orchestrator" / "tests" / "fmpy_driver.py"
+DRIVER = ROOT / "services" / "orchestrator" / "tests" / "tools" / "fmpy_driver.py"
 STARTS = {"throttle": 0.8, "brake": 0.0, "direction": 1}
 STOP, STEP = 60.0, 1.0  # whole multiples of the lockstep 0.2 s, exact in binary
 

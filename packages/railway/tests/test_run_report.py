@@ -30,7 +30,7 @@ from coupler.v1.railway_pb2 import TrainState
 from coupler.v1.sensors_pb2 import CameraIntrinsics, Image
 from coupler_railway.messages import BALISE_DETECTIONS, IMAGE, TRAIN_STATE
 
-from .test_scoring import ROWS, detections
+from .support import ROWS, detections
 
 LOOPBACK = "grpc://127.0.0.1:{}"
 

@@ -18,20 +18,7 @@ from coupler.messages import encode_message, message_json
 from coupler_railway.messages import BALISE_DETECTIONS
 from coupler_railway.scoring import Grid, ScoringError, score_results
 
-
-def detections(time_s: float, *positions: float, ahead: float = 20.0) -> bytes:
-    return encode_message(
-        BALISE_DETECTIONS,
-        {
-            "time_s": time_s,
-            "sensor": "front",
-            "detections": [
-                {"time_s": time_s, "track_position_m": p, "distance_ahead_m": ahead,
-                 "confidence": 0.9}
-                for p in positions
-            ],
-        },
-    )  # fmt: skip
+from .support import ROWS
 
 
 def write(folder: Path, rows: list[tuple[float, bytes, str]], *, as_hex: bool = False) -> Path:
@@ -43,17 +30,6 @@ def write(folder: Path, rows: list[tuple[float, bytes, str]], *, as_hex: bool = 
             cell = found.hex() if as_hex else message_json(BALISE_DETECTIONS, found)
             writer.writerow([time_s, cell, passed])
     return folder
-
-
-ROWS = [
-    (0.0, detections(0.0), ""),
-    (5.0, detections(5.0, 100.4, 102.7), ""),  # both of the group, 0.4 and 0.3 m off
-    (6.0, detections(6.0, 100.1), ""),
-    (10.0, detections(10.0), "1:1:100;2:1:103"),
-    (20.0, detections(20.0, 350.0), ""),  # nothing there: false
-    (50.0, detections(50.0), "3:2:600"),  # never seen: missed
-    (55.0, detections(55.0, 600.2), ""),  # after it was passed: false
-]
 
 
 @pytest.mark.parametrize("as_hex", [False, True])

@@ -3,15 +3,11 @@ linking data, and a train driven along it through the transmission and the estim
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import pytest
 
 from localisation.linking import Linking
 
-ROOT = Path(__file__).resolve().parents[3]
-TEST_LINE = ROOT / "packages/railway/tests/data/test-line.railml"
-SCENARIO_LINE = ROOT / "scenarios/railway/data/annaberg-schwarzenberg.railml"
+from .support import SCENARIO_LINE
 
 
 @pytest.fixture(scope="session")

@@ -19,7 +19,7 @@ from coupler.testing import process_group, served, wait_until_serving
 from localisation.sensors import OdometerParticipant, TransmissionParticipant
 from localisation.unit import participant
 
-from .conftest import SCENARIO_LINE
+from .support import SCENARIO_LINE
 
 
 def setup(**parameters: object) -> RunSetup:

@@ -12,7 +12,7 @@ import pytest
 
 from coupler_dev.browser import CHROMIUM
 
-from .conftest import EXPECTED_IDS, REPO, MapService, Run, page_errors
+from .support import EXPECTED_IDS, REPO, MapService, Run, page_errors
 
 ARTIFACT = REPO / "test-artifacts" / "mapserver.png"
 

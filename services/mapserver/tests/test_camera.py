@@ -23,7 +23,7 @@ from coupler.v1.sensors_pb2 import Image
 from coupler_dev.browser import CHROMIUM, NO_CHROMIUM
 from mapserver.camera import CameraView
 
-from .conftest import REPO, EventStream, MapService, Run, page_errors
+from .support import REPO, EventStream, MapService, Run, page_errors
 
 ARTIFACT = REPO / "test-artifacts" / "mapserver-camera.png"
 BOX = (380, 400, 420, 410)  # left, top, right, bottom

@@ -9,7 +9,7 @@ import pytest
 
 from mapserver import assets
 
-from .conftest import EXPECTED_IDS, MapService
+from .support import EXPECTED_IDS, MapService
 
 
 async def test_geojson_has_the_line_the_balises_and_the_stations(service: MapService) -> None:

@@ -17,7 +17,7 @@ from PIL import Image
 from coupler_dev.browser import CHROMIUM, NO_CHROMIUM
 from mapserver.config import MapServerSettings
 
-from .conftest import REPO, TEST_LINE, MapService, Run, page_errors
+from .support import REPO, TEST_LINE, MapService, Run, page_errors
 
 ARTIFACT = REPO / "test-artifacts" / "mapserver-controls.png"
 

@@ -16,7 +16,7 @@ from mapserver.feed import Feed
 from mapserver.participant import CHANNELS
 from mapserver.state import RunState
 
-from .conftest import TEST_LINE
+from .support import TEST_LINE
 
 DEFAULTS: dict[str, Any] = {c.name: c.start for c in CHANNELS}
 

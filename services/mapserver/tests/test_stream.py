@@ -16,7 +16,7 @@ import pytest
 
 from mapserver.config import MapServerSettings
 
-from .conftest import (
+from .support import (
     EXPECTED_IDS,
     TEST_LINE,
     BrowserModel,

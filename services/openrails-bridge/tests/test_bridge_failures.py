@@ -23,7 +23,7 @@ from coupler.testing import served
 from openrails_bridge.__main__ import build
 from openrails_bridge.config import BridgeSettings
 
-from .conftest import Bridge, Handler, Mock, serve_app, tiny_openrails
+from .support import Bridge, Handler, Mock, serve_app, tiny_openrails
 
 
 def failing_step(how: str, release: asyncio.Event) -> Handler:

@@ -23,7 +23,7 @@ from coupler_railway.messages import TRAIN_STATE
 from openrails_mock.api import SERVER, create_app
 from openrails_mock.config import MockConfig
 
-from .conftest import Bridge, Mock, serve_app
+from .support import Bridge, Mock, serve_app
 
 
 async def test_describe_lists_channels_and_fixed_step(mock: Mock, bridge: Bridge) -> None:

@@ -23,8 +23,7 @@ from coupler.channels import RunSetup
 from coupler.client import RemoteParticipant
 from coupler.errors import ParticipantError
 
-from .conftest import Mock, serve_app
-from .test_bridge_replies import HUGE, MIB, Firehose, tiny_openrails
+from .support import HUGE, MIB, Firehose, Mock, serve_app, tiny_openrails
 
 pytestmark = pytest.mark.timeout(120)
 RSS_LIMIT_MIB = 200

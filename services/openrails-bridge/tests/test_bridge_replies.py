@@ -22,10 +22,18 @@ from aiohttp import web
 from coupler.channels import RunSetup
 from coupler.errors import ParticipantError, ParticipantUnavailable
 
-from .conftest import GOOD_TRAIN, RANGES, Bridge, Handler, serve_app, step_reply, tiny_openrails
-
-MIB = 1024 * 1024
-HUGE = 400 * MIB
+from .support import (
+    GOOD_TRAIN,
+    HUGE,
+    MIB,
+    RANGES,
+    Bridge,
+    Firehose,
+    Handler,
+    serve_app,
+    step_reply,
+    tiny_openrails,
+)
 
 
 def answering(payload: Any) -> Handler:
@@ -105,31 +113,6 @@ async def test_a_good_reply_of_the_tiny_server_passes(bridge: Bridge) -> None:
         await remote.initialize(RunSetup(run_id="t", start_time=0.0, step_size=0.2))
         outputs = await remote.do_step(0.0, 0.2, {"throttle": 0.5})
     assert outputs["speed"] == 1.5 and outputs["distance"] == 12.0 and outputs["track_node"] == 1
-
-
-class Firehose:
-    """A 400 MB answer, generated as it is sent; counts what got out before the bridge hung up."""
-
-    def __init__(self, *, declare_length: bool) -> None:
-        self.declare_length = declare_length
-        self.sent = 0
-        self.finished = asyncio.Event()
-
-    async def handle(self, request: web.Request) -> web.StreamResponse:
-        response = web.StreamResponse(headers={"Content-Type": "application/json"})
-        if self.declare_length:
-            response.content_length = HUGE
-        await response.prepare(request)
-        chunk = b'{"trains": {"PLAYER": {"padding": "' + b"x" * (MIB - 36)
-        try:
-            while self.sent < HUGE:
-                await response.write(chunk)
-                self.sent += len(chunk)
-        except (ConnectionError, asyncio.CancelledError):
-            pass
-        finally:
-            self.finished.set()
-        return response
 
 
 @pytest.mark.parametrize("declare_length", [False, True], ids=["chunked", "content-length"])

@@ -34,7 +34,7 @@ from coupler_railway.messages import FRAME_LABELS, IMAGE
 from openrails_bridge.__main__ import build
 from openrails_bridge.config import BridgeSettings
 
-from .conftest import RANGES, Bridge, Mock, serve_app, step_reply
+from .support import RANGES, Bridge, Mock, serve_app, step_reply
 
 ROOT = Path(__file__).resolve().parents[3]
 TEST_LINE = ROOT / "packages/railway/tests/data/test-line.railml"

@@ -15,7 +15,7 @@ from coupler.channels import RunSetup
 from coupler.messages import decode_message
 from coupler_railway.messages import TRAIN_STATE
 
-from .conftest import Bridge, Mock
+from .support import Bridge, Mock
 
 
 async def test_stock_mode_paces_on_the_wall_clock(mock: Mock, bridge: Bridge) -> None:

@@ -4,8 +4,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import AsyncIterator, Callable
-from contextlib import AbstractAsyncContextManager, asynccontextmanager
-from typing import Any
+from contextlib import asynccontextmanager
 
 import aiohttp
 import pytest
@@ -15,29 +14,7 @@ from openrails_mock.api import create_app
 from openrails_mock.config import MockConfig
 from openrails_mock.route import Route
 
-Serve = Callable[..., AbstractAsyncContextManager[aiohttp.ClientSession]]
-
-
-def body(**controls: float) -> dict[str, Any]:
-    """A lockstep POST /API/CABCONTROLS body setting ``controls`` of the PLAYER train."""
-    return {
-        "Controls": [
-            {"LocomotiveName": "PLAYER", "TypeName": name, "ControlIndex": 1, "Value": value}
-            for name, value in controls.items()
-        ],
-        "Commands": [],
-        "SwitchCommands": {},
-    }
-
-
-class FakeClock:
-    """Monotonic seconds that move only when the test says so."""
-
-    def __init__(self) -> None:
-        self.now = 1000.0
-
-    def __call__(self) -> float:
-        return self.now
+from .support import Serve
 
 
 @pytest.fixture

@@ -48,7 +48,7 @@ import aiohttp
 from openrails_mock.config import MockConfig
 from openrails_mock.route import StraightRoute
 
-from .conftest import Serve, body
+from .support import Serve, body
 
 TILE = 2048.0
 START_TILE = (-5354, 14849)  # DEFAULT_START_TILE of the public client (routecreation)

@@ -13,7 +13,7 @@ import pytest
 from openrails_mock.config import MockConfig
 from openrails_mock.route import StraightRoute
 
-from .conftest import FakeClock, Serve
+from .support import FakeClock, Serve
 
 GOOD = {"LocomotiveName": "PLAYER", "TypeName": "THROTTLE", "ControlIndex": 1, "Value": 1.0}
 

@@ -16,7 +16,7 @@ import aiohttp
 from openrails_mock.config import ConsistOverrides, MockConfig
 from openrails_mock.route import StraightRoute
 
-from .conftest import FakeClock, Serve, body
+from .support import FakeClock, Serve, body
 
 G = 9.80665
 

@@ -19,7 +19,7 @@ from coupler_railway.openrails.export import export_route
 from coupler_railway.openrails.world import WorldFrame
 from openrails_mock.config import MockConfig
 
-from .conftest import Serve, body
+from .support import Serve, body
 
 ROOT = Path(__file__).resolve().parents[3]
 TEST_LINE = ROOT / "packages/railway/tests/data/test-line.railml"

@@ -12,7 +12,7 @@ import aiohttp
 from openrails_mock.config import MockConfig
 from openrails_mock.route import StraightRoute
 
-from .conftest import FakeClock, Serve, body
+from .support import FakeClock, Serve, body
 
 
 async def drive(session: aiohttp.ClientSession) -> list[Any]:

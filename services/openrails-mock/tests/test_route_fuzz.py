@@ -16,7 +16,7 @@ from openrails_mock.routefolder import load_route
 from openrails_mock.stf import RouteError
 from openrails_mock.tdb import TrackNetwork
 
-from .test_route_folder import ARC_END, pat, tdb, utf16
+from .support import ARC_END, ROUTE_FILE, SECTIONS, pat, tdb, utf16
 
 FUZZ = settings(
     max_examples=int(os.environ.get("COUPLER_FUZZ_EXAMPLES", "120")),
@@ -36,8 +36,6 @@ def mutated(text: str, data: st.DataObject) -> bytes:
 
 @pytest.fixture
 def folder(tmp_path: Path) -> Path:
-    from .test_route_folder import ROUTE_FILE, SECTIONS
-
     (tmp_path / "PATHS").mkdir(exist_ok=True)
     (tmp_path / "hand.trk").write_bytes(utf16(ROUTE_FILE))
     (tmp_path / "tsection.dat").write_text(SECTIONS, encoding="utf-8")

@@ -31,7 +31,7 @@ from coupler_railway import LocalFrame, load_infrastructure
 from openrails_mock.config import MockConfig
 from openrails_mock.sensors import load_sensors, parse_sensors
 
-from .conftest import Serve, body
+from .support import Serve, body
 
 ROOT = Path(__file__).resolve().parents[3]
 TEST_LINE = ROOT / "packages/railway/tests/data/test-line.railml"

@@ -16,7 +16,7 @@ from openrails_mock.config import MockConfig
 from openrails_mock.physics import DB_CLASS_642
 from openrails_mock.route import StraightRoute
 
-from .conftest import FakeClock, Serve
+from .support import FakeClock, Serve
 
 
 def stock(**changes: object) -> MockConfig:

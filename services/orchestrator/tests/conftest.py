@@ -7,38 +7,27 @@ own thread, so that tests can call the ``coupler`` CLI (which runs its own loop)
 
 from __future__ import annotations
 
-import contextlib
-import csv
 import importlib.abc
-import io
-import json
-import os
-import subprocess
 import sys
-from collections.abc import Iterator, Mapping
-from dataclasses import dataclass
+from collections.abc import Iterator
+from contextlib import ExitStack
 from pathlib import Path
 from typing import Any
 
 import pytest
 
-from coupler.channels import Causality, Channel, Description, RunSetup, Value, ValueType
 from coupler.examples.gain import GainParticipant
 from coupler.logs import configure_logging
-from coupler.participant import Participant, Values
-from coupler.security import ServerSecurity
 from coupler.server import ParticipantServer
-from coupler.testing import Component, Connector, fmu, served_in_thread
 from coupler_orchestrator import native
-from coupler_orchestrator.cli.main import main
 from coupler_orchestrator.master import native_fmu_step as kernel
 from coupler_orchestrator.master import native_step_channel as steps
 from coupler_orchestrator.options import NATIVE_STEPS_VARIABLE
 from coupler_orchestrator.outputs import csv as csv_output
 from coupler_tools.fmubuild import build_all
 
-REPO = Path(__file__).resolve().parents[3]
-DATA = Path(__file__).parent / "data"
+from .support import REPO, Coupler, FailingGain, require_native, serving
+from .support.frames import Fleet
 
 
 @pytest.fixture(scope="session")
@@ -64,83 +53,6 @@ def fmus(built_fmus: dict[str, Path], monkeypatch: pytest.MonkeyPatch) -> dict[s
     """The built FMUs; ``${COUPLER_FMU_DIR}`` in the SSDs of data/ names their folder."""
     monkeypatch.setenv("COUPLER_FMU_DIR", str(next(iter(built_fmus.values())).parent))
     return built_fmus
-
-
-def project_fmu(name: str, model: str, *connectors: Connector, **options: Any) -> Component:
-    """Component ``name`` of an SSD: the project's FMU ``model`` ("Source2") in the folder
-    ``${COUPLER_FMU_DIR}`` names (the ``fmus`` fixture sets it); ``options``: ``fmu``'s."""
-    return fmu(name, f"${{COUPLER_FMU_DIR}}/{model}.fmu", *connectors, **options)
-
-
-@dataclass(frozen=True)
-class Outcome:
-    """What one ``coupler`` command did."""
-
-    code: int
-    out: str
-    err: str
-
-
-class Coupler:
-    """Runs the ``coupler`` CLI in-process (or, ``process``, as the user does: a command of its
-    own) and reads what a run recorded."""
-
-    def __init__(self, capsys: pytest.CaptureFixture[str]) -> None:
-        self.capsys = capsys
-
-    def __call__(self, *argv: str | Path) -> Outcome:
-        self.capsys.readouterr()
-        stdout = io.StringIO()
-        code = main([str(a) for a in argv], stdout=stdout)
-        return Outcome(code, stdout.getvalue(), self.capsys.readouterr().err)
-
-    @staticmethod
-    def process(
-        *argv: str | Path,
-        timeout: float = 120,
-        env: Mapping[str, str] | None = None,
-        cwd: Path | None = None,
-    ) -> Outcome:
-        """``coupler ARGV...`` as a process of its own (the installed console script), stdin
-        and stderr not a terminal: only what the command itself imports is imported."""
-        script = Path(sys.executable).with_name("coupler")
-        command = (
-            [str(script)] if script.exists() else [sys.executable, "-m", "coupler_orchestrator"]
-        )
-        done = subprocess.run(
-            [*command, *(str(a) for a in argv)],
-            capture_output=True,
-            text=True,
-            timeout=timeout,
-            stdin=subprocess.DEVNULL,
-            env=None if env is None else {**os.environ, **env},
-            cwd=cwd,
-        )
-        return Outcome(done.returncode, done.stdout, done.stderr)
-
-    @staticmethod
-    def results(out_dir: Path) -> list[dict[str, str]]:
-        """results.csv as one dict per row (header -> cell text)."""
-        with (out_dir / "results.csv").open(newline="") as file:
-            return list(csv.DictReader(file))
-
-    @staticmethod
-    def column(out_dir: Path, name: str) -> list[float]:
-        """One column of results.csv as floats."""
-        return [float(row[name]) for row in Coupler.results(out_dir)]
-
-    @staticmethod
-    def summary(out_dir: Path) -> dict[str, Any]:
-        return json.loads((out_dir / "summary.json").read_text())  # type: ignore[no-any-return]
-
-
-def require_native(module: native.NativeModule) -> None:
-    """A module of coupler-native, loaded from the installed package (one that does not load
-    fails the test; only coupler-native not installed at all skips it, saying so)."""
-    if module() is None:
-        if module.problem == native.MISSING:
-            pytest.skip(module.problem)
-        pytest.fail(f"{module.what}: {module.problem}")
 
 
 class _Uninstalled(importlib.abc.MetaPathFinder):
@@ -189,63 +101,6 @@ def coupler(capsys: pytest.CaptureFixture[str]) -> Coupler:
     return Coupler(capsys)
 
 
-def serving(
-    participant: Participant, security: ServerSecurity | None = None, **options: Any
-) -> contextlib.AbstractContextManager[ParticipantServer]:
-    """``participant`` served on 127.0.0.1, port 0 (or as ``options`` say, e.g. on a
-    ``unix_socket``), by a loop in a background thread, so that a test can call the ``coupler``
-    CLI (which runs its own loop) in-process."""
-    return served_in_thread(participant, security=security, **options)
-
-
-class FailingGain(GainParticipant):
-    """The example gain participant, failing every DoStep that starts at t >= ``fail_at``."""
-
-    def __init__(self, name: str = "Gain", *, fail_at: float = 1.0) -> None:
-        super().__init__(name)
-        self.fail_at = fail_at
-
-    async def do_step(self, time: float, step: float, inputs: Mapping[str, object]) -> Values:
-        if time >= self.fail_at:
-            raise RuntimeError(f"gain overheated at t={time:g}")
-        return await super().do_step(time, step, inputs)  # type: ignore[arg-type]
-
-
-class Stepper(Participant):
-    """Enumerations over gRPC: ``phase`` = steps done mod 2; ``shown`` = ``aspect`` as received.
-
-    ``aspect`` has no start value: it must be connected or bound in the SSD.
-    """
-
-    CHANNELS = (
-        Channel(name="aspect", causality=Causality.INPUT, type=ValueType.ENUMERATION),
-        Channel(name="phase", causality=Causality.OUTPUT, type=ValueType.ENUMERATION),
-        Channel(name="shown", causality=Causality.OUTPUT, type=ValueType.ENUMERATION),
-    )
-
-    def __init__(self) -> None:
-        self._steps = 0
-        self._aspect: Value = 0
-
-    async def describe(self) -> Description:
-        return Description(name="Stepper", channels=self.CHANNELS, implementation="tests.Stepper")
-
-    async def initialize(self, setup: RunSetup) -> Values:
-        self._steps, self._aspect = 0, setup.inputs.get("aspect", 0)
-        return self._outputs()
-
-    async def do_step(self, time: float, step: float, inputs: Mapping[str, Value]) -> Values:
-        self._steps += 1
-        self._aspect = inputs.get("aspect", self._aspect)
-        return self._outputs()
-
-    async def terminate(self, reason: str = "") -> None:
-        self._steps = 0
-
-    def _outputs(self) -> Values:
-        return {"phase": self._steps % 2, "shown": self._aspect}
-
-
 @pytest.fixture
 def gain_server(monkeypatch: pytest.MonkeyPatch) -> Iterator[ParticipantServer]:
     """The example gain participant; its port is in ``$GAIN_PORT``."""
@@ -265,3 +120,10 @@ def failing_gain_server(monkeypatch: pytest.MonkeyPatch) -> Iterator[Participant
     with serving(FailingGain()) as server:
         monkeypatch.setenv("GAIN_PORT", str(server.port))
         yield server
+
+
+@pytest.fixture
+def fleet(monkeypatch: pytest.MonkeyPatch) -> Iterator[Fleet]:
+    """Camera and Gain served in this process, once the test calls ``fleet.serve``."""
+    with ExitStack() as stack:
+        yield Fleet(stack, monkeypatch)

@@ -34,7 +34,8 @@ from coupler_orchestrator.observer import Column
 from coupler_orchestrator.outputs.csv import csv_field, formatter, row_formatter
 from coupler_railway.messages import TRAIN_STATE
 
-from .conftest import Coupler, project_fmu, serving
+from .support import Coupler, project_fmu, serving
+from .support.rows import RESULT_ROWS
 
 pytestmark = pytest.mark.usefixtures("fmus")
 
@@ -521,29 +522,6 @@ def test_csv_fields_are_written_exactly_as_the_csv_module_writes_them(texts: lis
     written = io.StringIO()
     csv.writer(written, lineterminator="\n").writerow(["0.5", *texts])
     assert ",".join(["0.5", *(csv_field(t) for t in texts)]) + "\n" == written.getvalue()
-
-
-CELLS = {
-    "Real": st.floats(allow_nan=True) | st.integers(),
-    "Integer": st.integers(),
-    "Enumeration": st.integers(),
-    "UInt64": st.integers(min_value=0, max_value=2**64 - 1),
-    "Boolean": st.booleans() | st.integers(),
-    "String": st.text(),
-    "Binary": st.binary(),
-}
-
-
-RESULT_ROWS = st.lists(st.sampled_from(sorted(CELLS)), min_size=1, max_size=8).flatmap(
-    lambda types: st.tuples(
-        st.just(types),
-        st.tuples(*(CELLS[t] for t in types)),
-        st.sets(st.integers(0, len(types) - 1)),
-        st.floats(allow_nan=False),
-    )
-)
-"""(column types, a row of values of them, the picked columns, the time): any row results.csv
-may be asked to write."""
 
 
 @given(RESULT_ROWS)

@@ -32,7 +32,7 @@ from coupler.testing import (
     remote,
 )
 
-from .conftest import DATA, Coupler, Stepper, project_fmu, serving
+from .support import DATA, Coupler, Stepper, project_fmu, serving
 
 pytestmark = pytest.mark.usefixtures("fmus")
 

@@ -11,8 +11,6 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import csv
-import json
 import os
 import re
 import secrets
@@ -21,8 +19,7 @@ import subprocess
 import sys
 import threading
 import time
-from collections.abc import Iterator, Mapping
-from contextlib import contextmanager
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -33,25 +30,14 @@ from coupler.channels import RunSetup, Value
 from coupler.client import parse_address
 from coupler.examples.gain import GainParticipant
 from coupler.participant import Values
-from coupler.testing import SystemStructure, end_group, fmu, free_port, remote, wait_until
+from coupler.testing import SystemStructure, fmu, free_port, wait_until
 from coupler.v1 import component_pb2 as pb
 from coupler.v1 import component_pb2_grpc as pb_grpc
 
-from .conftest import Coupler, serving
+from .support import Coupler, serving
+from .support.faults import FAULTY_SSD, RUN, SSD, Gain, assert_rows_kept, gain, rows, summary
 
 pytestmark = pytest.mark.usefixtures("fmus")
-HERE = Path(__file__).parent
-SSD = SystemStructure(
-    "Faults",
-    components=[
-        fmu("Source", "${COUPLER_FMU_DIR}/Source2.fmu", outputs=["ramp"]),
-        remote("Gain", "grpc://127.0.0.1:${GAIN_PORT}", inputs=["u"], outputs=["y"]),
-        fmu("Integ", "${COUPLER_FMU_DIR}/Integrator2.fmu", inputs=["u"]),
-    ],
-    connections=[("Source.ramp", "Gain.u"), ("Gain.y", "Integ.u")],
-    stop_time=20,
-)
-RUN = ("--step", "0.1")
 PACED = ("--realtime-factor", "5")
 """200 steps in 4 s: the first rows reach the disk after 1 s (results.csv is flushed once a
 second), and a fault caused then lands well before the run's end on a slow machine too."""
@@ -60,43 +46,6 @@ second), and a fault caused then lands well before the run's end on a slow machi
 @pytest.fixture
 def ssd(tmp_path: Path) -> Path:
     return SSD.write(tmp_path / "faults.ssd")
-
-
-class Gain:
-    """A participant process (faulty_participant.py) on a port of its own."""
-
-    def __init__(self, port: int, *flags: str) -> None:
-        self.port = port
-        self.log = Path(os.environ.get("TMPDIR", "/tmp")) / f"gain-{port}-{time.time_ns()}.log"
-        with self.log.open("wb") as err:
-            self.process = subprocess.Popen(
-                [sys.executable, str(HERE / "faulty_participant.py"), "--port", str(port), *flags],
-                stdout=subprocess.PIPE,
-                stderr=err,
-                text=True,
-                start_new_session=True,  # ``stop`` ends whatever it started too
-            )
-        assert self.process.stdout is not None
-        line = self.process.stdout.readline()
-        assert line.startswith("serving Gain at"), (line, self.log.read_text())
-
-    def signal(self, sig: int) -> None:
-        self.process.send_signal(sig)
-
-    def stop(self) -> None:
-        end_group(self.process, grace=1)
-        self.log.unlink(missing_ok=True)
-
-
-@contextmanager
-def gain(monkeypatch: pytest.MonkeyPatch, *flags: str, port: int = 0) -> Iterator[Gain]:
-    port = port or free_port()
-    monkeypatch.setenv("GAIN_PORT", str(port))
-    process = Gain(port, *flags)
-    try:
-        yield process
-    finally:
-        process.stop()
 
 
 def later(seconds: float, action: Any) -> threading.Timer:
@@ -115,27 +64,6 @@ def once_rows(out: Path, count: int, action: Any) -> threading.Thread:
     thread = threading.Thread(target=watch, daemon=True)
     thread.start()
     return thread
-
-
-def rows(out: Path) -> list[dict[str, str]]:
-    with (out / "results.csv").open(newline="") as file:
-        return list(csv.DictReader(file))
-
-
-def summary(out: Path) -> dict[str, Any]:
-    return json.loads((out / "summary.json").read_text())  # type: ignore[no-any-return]
-
-
-def assert_rows_kept(out: Path) -> list[dict[str, str]]:
-    """Every recorded row is whole and the summary counts them."""
-    recorded = rows(out)
-    assert recorded, "no row was kept"
-    width = len(recorded[0])
-    for row in recorded:  # a cut row would have missing (None) or surplus cells
-        assert len(row) == width and None not in row.values() and None not in row, row
-        float(row["time"])
-    assert len(recorded) == summary(out)["steps"] + 1
-    return recorded
 
 
 @pytest.mark.usefixtures("step_path")
@@ -591,17 +519,6 @@ def test_a_full_disk_leaves_no_unreadable_parquet_behind(
             assert pq.read_table(parquet).num_rows > 0
     finally:
         subprocess.run(["umount", str(full)], check=False)
-
-
-FAULTY_SSD = SystemStructure(
-    "FaultyFmu",
-    components=[
-        fmu("Source", "${COUPLER_FMU_DIR}/Source2.fmu", outputs=["ramp"]),
-        fmu("Faulty", "${FAULTY_FMU_DIR}/Faulty2.fmu", inputs=["u"]),
-    ],
-    connections=[("Source.ramp", "Faulty.u")],
-    stop_time=10,
-)
 
 
 @pytest.fixture

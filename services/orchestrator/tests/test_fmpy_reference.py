@@ -24,7 +24,7 @@ from coupler.errors import ParticipantError
 from coupler.fmu import FmuParticipant
 from coupler.testing import Component, SystemStructure
 
-from .conftest import Coupler
+from .support import Coupler
 
 CASES = {
     "Source2": {"slope": 0.7, "offset": 0.1, "amplitude": 1.5, "freq": 0.3},

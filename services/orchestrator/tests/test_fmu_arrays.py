@@ -20,7 +20,7 @@ import pytest
 
 from coupler.testing import Component, Connector, SystemStructure, fmu
 
-from .conftest import Coupler
+from .support import Coupler
 
 #: The model description's start values (row-major), and the elements the tests bind.
 STARTS = {

@@ -20,7 +20,7 @@ import time
 from collections.abc import Mapping
 from pathlib import Path
 
-from .conftest import Coupler
+from .support import Coupler
 
 CHILD = """
 import json, sys

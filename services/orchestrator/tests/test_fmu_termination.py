@@ -23,7 +23,7 @@ from coupler.fmu import FmuParticipant
 from coupler.participant import Participant
 from coupler.testing import Component, SystemStructure, remote
 
-from .conftest import Coupler, Outcome, serving
+from .support import Coupler, Outcome, serving
 
 
 class RecordsTerminate(Participant):

@@ -15,7 +15,7 @@ import pytest
 
 from coupler.server import ParticipantServer
 
-from .conftest import DATA, REPO, Coupler
+from .support import DATA, REPO, Coupler
 
 pytestmark = pytest.mark.usefixtures("fmus")
 

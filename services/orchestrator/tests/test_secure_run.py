@@ -19,7 +19,7 @@ from coupler.security import ServerSecurity
 from coupler.server import ParticipantServer
 from coupler_dev.devcerts import DevPki, write_pki
 
-from .conftest import DATA, Coupler, serving
+from .support import DATA, Coupler, serving
 
 pytestmark = pytest.mark.usefixtures("fmus")
 

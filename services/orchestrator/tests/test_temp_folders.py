@@ -23,7 +23,7 @@ import pytest
 
 from coupler.testing import wait_until
 
-from .test_faults import FAULTY_SSD, RUN, assert_rows_kept, summary
+from .support.faults import FAULTY_SSD, RUN, assert_rows_kept, summary
 
 pytestmark = pytest.mark.usefixtures("fmus")
 

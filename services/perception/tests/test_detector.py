@@ -15,7 +15,7 @@ from coupler_railway import Infrastructure
 from openrails_mock.renderer import Renderer
 from perception.detector import Intrinsics, Mounting, detect, ground_distance, yellow_mask
 
-from .conftest import CAMERA
+from .support import CAMERA
 
 
 def intrinsics() -> Intrinsics:

@@ -22,7 +22,7 @@ from coupler_railway.messages import BALISE_DETECTIONS, IMAGE, TRAIN_STATE
 from openrails_mock.renderer import Renderer
 from perception.detector import MAX_DETECTIONS
 
-from .conftest import frame, state
+from .support import frame, state
 
 OFFSET = 41.7  # the camera's place on the line when the train has travelled 0 m
 

@@ -19,7 +19,7 @@ from PIL import Image
 from coupler_dev.browser import CHROMIUM, NO_CHROMIUM, chromium
 from coupler_orchestrator.assets import VENDOR
 
-from .conftest import DATA, REPO, Coupler
+from ..support import DATA, REPO, Coupler
 
 ARTIFACT = REPO / "test-artifacts" / "plot.png"
 

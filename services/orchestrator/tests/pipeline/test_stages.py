@@ -27,7 +27,7 @@ from coupler_orchestrator.pipeline.semantics import COUPLER
 from coupler_orchestrator.pipeline.wiring import converter, wire
 from coupler_orchestrator.ssp.units import affine, from_symbol
 
-DATA = Path(__file__).parent / "ssp" / "data"
+DATA = Path(__file__).parents[1] / "ssp" / "data"
 
 
 class Mirror(Participant):

@@ -19,8 +19,8 @@ import pytest
 
 from coupler_orchestrator.ssp import load_ssp
 
-from .conftest import Coupler
-from .openmcx_files import TOLERANCE, differences, table
+from ..support import Coupler
+from ..support.openmcx_files import TOLERANCE, differences, table
 
 EXAMPLES = ("getting_started", "connections", "parameters", "units", "vector_ports")
 

@@ -29,7 +29,7 @@ from coupler_orchestrator.outputs.monitor import (
 )
 from coupler_orchestrator.runner import run_scenario
 
-from .conftest import DATA, REPO, Coupler
+from ..support import DATA, REPO, Coupler
 
 ARTIFACT = REPO / "test-artifacts" / "monitor.png"
 MEMBERS = ["Source", "Gain", "Feed", "Feed2"]

@@ -37,8 +37,8 @@ from coupler_orchestrator.native import MISSING
 from coupler_orchestrator.options import NATIVE_STEPS_VARIABLE, RunOptions
 from coupler_orchestrator.pipeline import participants
 
-from .conftest import Coupler, FailingGain, Outcome, require_native, serving
-from .test_faults import SSD, gain
+from ..support import Coupler, FailingGain, Outcome, require_native, serving
+from ..support.faults import SSD, gain
 
 pytestmark = pytest.mark.usefixtures("fmus")
 

@@ -22,8 +22,8 @@ import pytest
 from coupler.testing import process_group
 from coupler_tools.fmubuild import build_all
 
-from .conftest import DATA, REPO, Coupler
-from .openmcx_files import differences, table
+from ..support import DATA, REPO, Coupler
+from ..support.openmcx_files import differences, table
 
 CASES = DATA / "openmcx"
 

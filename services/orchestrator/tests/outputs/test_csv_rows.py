@@ -17,9 +17,9 @@ from coupler_orchestrator.observer import Column
 from coupler_orchestrator.outputs import csv as csv_output
 from coupler_orchestrator.outputs.csv import native_row_formatter, row_formatter
 
-from .conftest import Coupler, require_native
-from .test_correctness import RESULT_ROWS
-from .test_native_kernel import PARAMS, ROUTES, chain
+from ..support import Coupler, require_native
+from ..support.chains import PARAMS, ROUTES, chain
+from ..support.rows import RESULT_ROWS
 
 AWKWARD = {
     "Real": [-0.0, 0.0, math.inf, -math.inf, math.nan, 1e-300, 5e-324, -5e-324, 1e16, 1e15,

@@ -34,8 +34,7 @@ from coupler_orchestrator.tools.fleet import (
     port_is_free,
 )
 
-DATA = Path(__file__).parent / "data"
-REPO = Path(__file__).resolve().parents[3]
+from ..support import DATA, REPO
 
 FLEET = f"""
 [scenario]

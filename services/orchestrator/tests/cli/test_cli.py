@@ -21,7 +21,7 @@ from coupler.testing import SystemStructure, fmu
 from coupler_orchestrator.observer import RunEnd, RunInfo
 from coupler_orchestrator.outputs.progress import ProgressLines
 
-from .conftest import DATA, REPO, Coupler
+from ..support import DATA, REPO, Coupler
 
 
 def test_describe_grpc_participant(coupler: Coupler, gain_server: ParticipantServer) -> None:

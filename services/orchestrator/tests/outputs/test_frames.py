@@ -34,8 +34,8 @@ from coupler_orchestrator.outputs.kept_frames import PENDING, KeptFrames
 from coupler_orchestrator.outputs.monitor import MonitorServer
 from coupler_orchestrator.runner import run_scenario
 
-from .conftest import Coupler
-from .test_message_size import SSD, Camera, Fleet, fleet  # noqa: F401 - the fixture
+from ..support import Coupler
+from ..support.frames import SSD, Camera, Fleet
 
 WIDTH, HEIGHT = 8, 4
 RED = (
@@ -95,7 +95,7 @@ class ImageCamera(Camera):
 def test_frames_are_left_out_of_results_csv(
     ssd: Path,
     tmp_path: Path,
-    fleet: Fleet,  # noqa: F811
+    fleet: Fleet,
 ) -> None:
     fleet.serve(camera=ImageCamera(0))
     out = tmp_path / "out"
@@ -111,7 +111,7 @@ def test_frames_are_left_out_of_results_csv(
 def test_picked_frames_are_numbered_png_files(
     ssd: Path,
     tmp_path: Path,
-    fleet: Fleet,  # noqa: F811
+    fleet: Fleet,
 ) -> None:
     fleet.serve(camera=ImageCamera(0))
     out = tmp_path / "out"
@@ -140,7 +140,7 @@ def test_picked_frames_are_numbered_png_files(
 def test_only_the_picked_frames_are_written(
     ssd: Path,
     tmp_path: Path,
-    fleet: Fleet,  # noqa: F811
+    fleet: Fleet,
 ) -> None:
     fleet.serve(camera=ImageCamera(0))
     out = tmp_path / "out"
@@ -158,7 +158,7 @@ def test_only_the_picked_frames_are_written(
 async def test_the_monitor_serves_the_latest_frame_and_keeps_no_frame_history(
     ssd: Path,
     tmp_path: Path,
-    fleet: Fleet,  # noqa: F811
+    fleet: Fleet,
 ) -> None:
     fleet.serve(camera=ImageCamera(0))
     async with MonitorServer("127.0.0.1:0") as monitor:
@@ -187,7 +187,7 @@ async def test_the_monitor_serves_the_latest_frame_and_keeps_no_frame_history(
 async def test_the_monitor_page_shows_the_latest_frame(
     ssd: Path,
     tmp_path: Path,
-    fleet: Fleet,  # noqa: F811
+    fleet: Fleet,
 ) -> None:
     fleet.serve(camera=ImageCamera(0))
     async with MonitorServer("127.0.0.1:0") as monitor:

@@ -23,7 +23,7 @@ from coupler import values, wire
 from coupler.channels import Causality, Channel, Description, ValueType
 from coupler_orchestrator.master import native_step_channel
 
-from .conftest import require_native
+from ..support import require_native
 
 OUTPUTS = {
     "speed": ValueType.REAL,

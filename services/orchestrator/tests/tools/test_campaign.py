@@ -34,7 +34,8 @@ from coupler_orchestrator.tools.campaign import (
 )
 from coupler_orchestrator.tools.campaign.worker import report_value
 
-REPO = Path(__file__).resolve().parents[3]
+from ..support import REPO
+
 EXAMPLE = REPO / "examples" / "ramp-gain"
 
 GRID = """

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from .conftest import Coupler
+from ..support import Coupler
 
 
 @pytest.mark.slow

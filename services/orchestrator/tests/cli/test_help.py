@@ -9,7 +9,7 @@ from pathlib import Path
 from coupler.examples.gain import GainParticipant
 from coupler_orchestrator.outputs.files import RUN_FILES
 
-from .conftest import Coupler, serving
+from ..support import Coupler, serving
 
 
 def test_version_names_the_orchestrator_and_the_sdk() -> None:

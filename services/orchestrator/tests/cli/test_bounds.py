@@ -18,7 +18,7 @@ import pytest
 from coupler.server import ParticipantServer
 from coupler.testing import Annotation, SystemStructure
 
-from .conftest import DATA, Coupler, project_fmu
+from ..support import DATA, Coupler, project_fmu
 
 COUPLER = str(Path(sys.executable).with_name("coupler"))
 SECONDS = "must be a number of seconds > 0 and <= 86400 (24 h)"

@@ -34,7 +34,7 @@ from coupler_orchestrator import recording
 from coupler_orchestrator.observer import Column, RunEnd, RunInfo
 from coupler_orchestrator.pipeline.replay import ReplayParticipant
 
-from .conftest import DATA, Coupler
+from ..support import DATA, Coupler
 
 BLOB = "00010203ff"
 

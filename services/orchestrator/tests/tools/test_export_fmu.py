@@ -35,7 +35,7 @@ from coupler_dev.devcerts import write_pki
 from coupler_orchestrator.tools import export_fmu as export
 from coupler_orchestrator.tools.export_fmu import fingerprint, write_fmu
 
-from .conftest import Coupler, serving
+from ..support import Coupler, serving
 
 DRIVER = Path(__file__).parent / "fmpy_driver.py"
 OUTPUTS = ["y", "x", "count", "inverted"]  # FMPy records no String or Binary values

@@ -30,7 +30,7 @@ from coupler_orchestrator.observer import Column
 from coupler_orchestrator.outputs import latency
 from coupler_orchestrator.outputs.csv import native_row_format
 
-from .conftest import require_native
+from ..support import require_native
 
 SLOTS = {
     "d": ctypes.c_double,

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from .conftest import DATA, Coupler, Stepper, serving
+from ..support import DATA, Coupler, Stepper, serving
 
 pytestmark = pytest.mark.usefixtures("fmus")
 
