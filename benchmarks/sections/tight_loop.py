@@ -5,13 +5,17 @@ machine's C compiler against this interpreter's libpython and FMPy's FMI headers
 
 from __future__ import annotations
 
+import asyncio
 import shutil
 import subprocess
 import sysconfig
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
-HERE = Path(__file__).resolve().parent
-SOURCE = HERE / "cloop" / "chain.c"
+from sections.common import FMUS, STEP, Row, Sizes, chain_ssd, coupler_run, interleaved
+
+SOURCE = Path(__file__).resolve().parents[1] / "cloop" / "chain.c"
 
 
 def missing() -> str:
@@ -62,3 +66,38 @@ def rate(binary: Path, fmus: Path, n: int, steps: int, denominator: int, out: Pa
         for folder in unpacked:
             shutil.rmtree(folder, ignore_errors=True)
     return steps / float(ran.stdout)
+
+
+async def tight_loop(
+    sizes: Sizes, log: Callable[[str], None], work: Path, rows: list[Row], extra: dict[str, Any]
+) -> None:
+    """The chains against their physical limit: a bare C loop (cloop.py) making the same FMI
+    calls and writing the same results.csv text with the same formatter; both files compared
+    byte for byte. Ten times the chains' steps: the loop takes well under a second."""
+    why = missing()
+    if why:
+        log(f"tight C-loop rows skipped: {why}")
+        extra.setdefault("skipped", []).append(f"chain x2 and x10 vs a bare C loop: {why}")
+        return
+    binary = build(work)
+    for n in (2, 10):
+        log(f"in-process FMU chain x{n} against a bare C loop")
+        ssd = chain_ssd(work, n)
+        steps = 10 * (sizes.chain_steps if n == 2 else sizes.chain_steps // 2)
+        ours, theirs = work / f"tight-coupler{n}", work / f"tight-c{n}.csv"
+
+        async def coupler_chain(ssd: Path = ssd, steps: int = steps, out: Path = ours) -> float:
+            return (await coupler_run(ssd, steps, out)).rate
+
+        async def c_chain(n: int = n, steps: int = steps, out: Path = theirs) -> float:
+            return await asyncio.to_thread(rate, binary, FMUS, n, steps, round(1 / STEP), out)
+
+        coupler, reference = await interleaved(sizes.repeats, coupler_chain, c_chain)
+        assert coupler is not None and reference is not None
+        same = (ours / "results.csv").read_bytes() == theirs.read_bytes()
+        rows.append(
+            Row(f"in-process FMU chain x{n}", coupler, "bare C loop", reference, 0.5,
+                note="same calls; results.csv byte-identical" if same
+                else "RESULTS DIFFER from the C loop's",
+                equal=same)
+        )  # fmt: skip

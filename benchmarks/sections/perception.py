@@ -6,16 +6,20 @@ the mock's renderer on one core under the same conditions."""
 
 from __future__ import annotations
 
+import asyncio
 import json
 import os
 import subprocess
 import sys
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-ROOT = Path(__file__).resolve().parents[1]
+from sections.common import ROOT, Row, Sizes, free_ports
+from sections.render import EVERY_CONDITION
+
 FLEET = ROOT / "scenarios" / "railway" / "perception-fleet.toml"
 CAMERA_PERIOD_S = 0.4
 """Perception.ssd's step: one camera frame a step."""
@@ -154,3 +158,57 @@ def campaign(work: Path, runs: int, stop_s: float, workers: int = 2) -> Campaign
     with (out / "campaign.csv").open(encoding="utf-8", newline="") as file:
         rows = list(csv.DictReader(file))
     return Campaign(len(rows), workers, wall, sum(float(r["wall_time_s"]) for r in rows))
+
+
+async def perception(
+    sizes: Sizes, log: Callable[[str], None], work: Path, rows: list[Row], extra: dict[str, Any]
+) -> None:
+    """The railway perception run end to end, unpaced, as ``coupler fleet`` runs it
+    (py), in clear weather and under every condition: its speed against real
+    time (targets 10x and 5x), and against its floor, the same frames rendered alone on one
+    core (target 0.8); the time around the run (services up, route loaded, stopped)."""
+    cases = {"clear": ({}, {}), "every condition": (
+        EVERY_CONDITION_PARAMETERS, EVERY_CONDITION)}  # fmt: skip
+    if sizes.repeats == 1:  # the smoke run: that it runs
+        cases = {"clear": cases["clear"]}
+    figures: dict[str, Any] = {}
+    for name, (parameters, conditions) in cases.items():
+        log(f"perception run, {name}: {sizes.perception_stop_s:g} s of the line")
+        ran = await asyncio.to_thread(run, work, sizes.perception_stop_s, parameters, free_ports(7))
+        floor_s = await asyncio.to_thread(
+            render_floor_s, ran.steps, conditions, sizes.render_positions
+        )
+        floor = ran.stop_s / floor_s
+        figures[name] = {"frames": ran.steps, "stepping_s": round(ran.stepping_s, 2),
+                         "render_alone_s": round(floor_s, 2),
+                         "around_the_run_s": round(ran.overhead_s, 1)}  # fmt: skip
+        target = 10.0 if name == "clear" else 5.0
+        rows.append(
+            Row(f"perception run, {name}", ran.speed, "real time", 1.0, target,
+                note=f"x real time: {sizes.perception_stop_s:g} s of the line, {ran.steps} "
+                     f"frames in {ran.stepping_s:.1f} s; {ran.overhead_s:.0f} s around the run")
+        )  # fmt: skip
+        rows.append(
+            Row(f"perception run, {name}", ran.speed, "its frames rendered alone", floor, 0.8,
+                note=f"the renderer alone on one core: {floor_s:.1f} s, {floor:.1f}x real time")
+        )  # fmt: skip
+    extra["perception_run"] = figures
+
+
+async def perception_campaign(
+    sizes: Sizes, log: Callable[[str], None], work: Path, rows: list[Row], extra: dict[str, Any]
+) -> None:
+    """A campaign of short perception runs on a local Dask cluster of two workers, services
+    kept between a worker's runs: the time a run costs around its stepping (target 3 s)."""
+    runs = 2 if sizes.repeats == 1 else 12
+    log(f"perception campaign: {runs} runs of 4 s of the line, 2 Dask workers")
+    done = await asyncio.to_thread(campaign, work, runs, 4.0)
+    extra["perception_campaign"] = {"runs": done.runs, "wall_s": round(done.wall_s, 1),
+                                    "stepping_s": round(done.stepping_s, 1),
+                                    "around_a_run_s": round(done.around_a_run_s, 2)}  # fmt: skip
+    rows.append(
+        Row("perception campaign, time around a run", 1.0 / done.around_a_run_s,
+            "the 3 s target", 1.0 / 3.0, 1.0,
+            note=f"runs/s of it: {done.around_a_run_s:.1f} s a run besides its stepping; "
+                 f"{done.runs} runs in {done.wall_s:.0f} s, cluster start included")
+    )  # fmt: skip
