@@ -228,7 +228,6 @@ def main() -> int:
 
     from coupler_orchestrator.master import native_fmu_step as kernel
     from coupler_orchestrator.master import native_step_channel as steps
-
     from coupler_orchestrator.options import RunOptions
 
     native = RunOptions().switched().native_steps  # the environment, as a run reads it
