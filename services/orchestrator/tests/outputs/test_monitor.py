@@ -18,6 +18,7 @@ import aiohttp
 import pytest
 
 from coupler.server import ParticipantServer
+from coupler.testing import eventually
 from coupler_dev.browser import CHROMIUM, NO_CHROMIUM, chromium
 from coupler_orchestrator.options import RunOptions
 from coupler_orchestrator.outputs.monitor import (
@@ -242,9 +243,15 @@ async def test_at_most_16_pages_stream_at_once_and_the_17th_is_told_why() -> Non
             "the monitor serves at most 16 live pages at once and 16 are open; close one"
         )
         streams.pop().close()
-        await asyncio.sleep(2 * 0.25 + 0.1)  # the server sees the stream gone at its next write
-        again = await session.get(url)
-        assert again.status == 200
+
+        async def served() -> aiohttp.ClientResponse:  # once the server has seen it gone
+            reply = await session.get(url)  # (at its next write to it, 0.25 s at most)
+            if reply.status != 200:
+                reply.close()
+                raise AssertionError(f"answered {reply.status}")
+            return reply
+
+        again = await eventually(served, within=5.0)
         for reply in [*streams, again]:
             reply.close()
 
