@@ -239,7 +239,7 @@ class _Servicer(pb_grpc.GRPCComponentServiceServicer):
         """One step: the protocol's checks, the inputs decoded, the participant's step, its
         outputs encoded (into ``answers``' prepared message on a stream). No lambdas, no
         ``_guard`` per stage: one ``try`` around each stage that can fail, ``_refuse`` maps
-        what it raises (the per-step cost is docs/performance.md's profile). ``received`` is
+        what it raises (the per-step cost is docs/performance-history.md's profile). ``received`` is
         the request and its long Binary inputs, cut out of its bytes (``wire.step_request``);
         the answer may be serialized already, in pieces (``wire.step_response``)."""
         request, large = received

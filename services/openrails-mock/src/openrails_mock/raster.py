@@ -1,6 +1,6 @@
 """The renderer's compiled kernels (numba): rasterise, shade, blur, finish.
 
-Chosen by measurement (docs/performance.md, "render"): Pillow's polygon fill plus numpy's
+Chosen by measurement (docs/performance-history.md, "render"): Pillow's polygon fill plus numpy's
 per-pixel passes took 32 ms for a clear 800 x 600 frame on one core here, most of it in
 whole-frame numpy passes that each read and write the frame again; every condition would
 have added more. These loops visit each pixel once per stage in compiled code, single
