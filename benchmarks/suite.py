@@ -1743,6 +1743,8 @@ def render_times(positions: int, cases: dict[str, dict[str, Any]]) -> dict[str, 
     return took
 
 
+from frameworks import frameworks  # noqa: E402  (benchmarks/frameworks.py)
+
 SECTIONS = (
     cli_start,
     watched_run,
@@ -1758,6 +1760,7 @@ SECTIONS = (
     frames,
     render,
     perception,
+    frameworks,
     perception_campaign,
     memory,
 )
