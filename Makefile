@@ -110,7 +110,8 @@ lint: sync
 	$(UV) run --frozen ruff format --check .
 	$(UV) run --frozen lint-imports
 	$(UV) run --frozen mypy packages/coupler/src packages/coupler-dev/src packages/coupler-tools/src \
-	  packages/coupler-native/src packages/railway/src services/*/src
+	  packages/coupler-native/src packages/railway/src packages/coupler-mosaik/src \
+	  packages/coupler-helics/src services/*/src
 
 # The suite without the tests marked slow (whole scenarios, campaigns, clusters, several hosts):
 # the developer's default. `make test-slow` runs those; CI runs both (`make test-all` too).

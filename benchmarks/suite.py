@@ -44,6 +44,7 @@ from sections.common import (
     serving,
 )
 from sections.frames import frames
+from sections.frameworks import frameworks
 from sections.many import gain_host, many, many_line, scale
 from sections.memory import memory, replay_probe, rss_probe
 from sections.openmcx import openmcx
@@ -108,6 +109,7 @@ SECTIONS = (
     render,
     perception,
     perception_campaign,
+    frameworks,
     memory,
 )
 """The suite's sections, in the order they run (``--sections`` picks some)."""

@@ -121,7 +121,7 @@ def mosaik_rate(steps: int) -> float | None:
         "Local2": {"python": "mosaik_gain:Simulator"},
         "Remote": {"cmd": f"{sys.executable} {script} %(addr)s"},
     }
-    with _quiet():  # mosaik's banner and its simulators' log lines
+    with quiet():  # mosaik's banner and its simulators' log lines
         return _mosaik_world(config, steps)
 
 
@@ -140,7 +140,7 @@ def _mosaik_world(config: dict[str, Any], steps: int) -> float:
 
 
 @contextlib.contextmanager
-def _quiet() -> Iterator[None]:
+def quiet() -> Iterator[None]:
     """stdout and stderr of this process and its children to /dev/null (file descriptors)."""
     sys.stdout.flush()
     sys.stderr.flush()

@@ -68,5 +68,10 @@ def test_every_section_runs_with_the_fewest_steps(tmp_path: Path) -> None:
         "camera frames x1 (1.44 MB, 5 Hz)",
         "orchestrator RSS 1e4 -> 1e5 steps",
         "replay RSS, 160 MB recording",
+        "mosaik World, CouplerSimulator x1 (gRPC)",
+        "HELICS federate <-> Coupler run",
+        "bare C loop",
+        "perception run, clear",
+        "perception campaign, time around a run",
     ]:
         assert row in done.stdout, f"no row {row!r}:\n{done.stdout}"

@@ -6,6 +6,7 @@
     federate = "coupler"            # the federate's name in the federation
     broker = "127.0.0.1:23500"      # the helics_broker's address (HOST:PORT)
     core_type = "tcp_ss"            # HELICS core type (tcp_ss: one outgoing connection)
+timeout = 5.0                   # [s] a broker silent this long has ended: the run fails
 
     [[publication]]                 # a Coupler input, published to the federation
     channel = "y"
@@ -81,7 +82,11 @@ class HelicsConfig(BaseModel):
     core_init: str = ""
     """More of the core's init string (HELICS options), appended as written."""
     tick: float = Field(default=0.5, gt=0)
-    """The core's heartbeat [s]: a broker that has gone is noticed after a few of them."""
+    """The core's heartbeat [s]: how often it checks on a silent broker."""
+    timeout: float = Field(default=5.0, gt=0)
+    """How long [s] the core waits for the broker: to connect when the run starts, and to
+    answer once it has gone silent; a broker that ended mid-run fails the run after it
+    (HELICS's own default is 30 s)."""
     publication: list[Interface] = Field(default_factory=list)
     """Coupler inputs, published."""
     subscription: list[Interface] = Field(default_factory=list)

@@ -104,6 +104,7 @@ class Federate:
                 info,
                 f"--federates=1 --broker_address={host} --brokerport={port} "
                 f"--local_interface=127.0.0.1 --tick={self.config.tick * 1000:.0f}ms "
+                f"--timeout={self.config.timeout * 1000:.0f}ms "
                 f"{self.config.core_init}",
             )
             h.helicsFederateInfoSetFlagOption(info, h.HELICS_FLAG_UNINTERRUPTIBLE, True)

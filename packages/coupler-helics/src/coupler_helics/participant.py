@@ -17,7 +17,8 @@ What maps to what (docs/frameworks.md):
   they are next granted a time after t (t + h on the same grid).
 - Terminate: the federate disconnects; a new run joins again.
 - Errors: a broker that cannot be reached or that ends during the run fails the call with
-  UNAVAILABLE naming the broker (the run fails; what was recorded stays).
+  UNAVAILABLE naming the broker, within the file's ``timeout`` (5 s; HELICS's own 30 s would
+  outlast the orchestrator's call deadline); the run fails, what was recorded stays.
 """
 
 from __future__ import annotations

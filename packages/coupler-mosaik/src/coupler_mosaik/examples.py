@@ -14,15 +14,16 @@ from __future__ import annotations
 from typing import Any
 
 import mosaik_api_v3
+from mosaik_api_v3.types import CreateResult, Meta
 
-META = {
+META: Meta = {
     "api_version": "3.0",
     "type": "time-based",
     "models": {"Gain": {"public": True, "params": ["gain", "x0"], "attrs": ["u", "y", "x"]}},
 }
 
 
-class Gain(mosaik_api_v3.Simulator):  # type: ignore[misc]
+class Gain(mosaik_api_v3.Simulator):
     """Entities y = gain * u and x = integral of u (explicit Euler), stepped every step_size."""
 
     def __init__(self) -> None:
@@ -33,15 +34,17 @@ class Gain(mosaik_api_v3.Simulator):  # type: ignore[misc]
 
     def init(
         self, sid: str, time_resolution: float = 1.0, step_size: int = 1, **params: Any
-    ) -> dict[str, Any]:
+    ) -> Meta:
         self.step_size = step_size
         self.dt = time_resolution * step_size
-        return self.meta  # type: ignore[no-any-return]
+        return self.meta
 
     def create(
-        self, num: int, model: str, gain: float = 2.0, x0: float = 0.0
-    ) -> list[dict[str, str]]:
-        created = []
+        self, num: int, model: str, gain: float = 2.0, x0: float = 0.0, **unknown: Any
+    ) -> list[CreateResult]:
+        if unknown:
+            raise ValueError(f"Gain takes gain and x0, not {sorted(unknown)}")
+        created: list[CreateResult] = []
         for i in range(len(self.entities), len(self.entities) + num):
             eid = f"{model}-{i}"
             self.entities[eid] = {"gain": gain, "u": 0.0, "y": 0.0, "x": x0}

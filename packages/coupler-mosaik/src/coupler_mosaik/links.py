@@ -64,7 +64,7 @@ class SimulatorLink(ABC):
         )
 
 
-class _Refusing(MosaikProxy):  # type: ignore[misc]
+class _Refusing(MosaikProxy):
     """What an in-process simulator's ``self.mosaik`` answers."""
 
     def __init__(self, progress: Progress) -> None:

@@ -36,6 +36,7 @@ from collections.abc import Mapping
 from typing import Any
 
 import mosaik_api_v3
+from mosaik_api_v3.types import CreateResult, Meta
 
 from coupler.channels import Causality, Description, RunSetup, Value
 from coupler.client import RemoteParticipant
@@ -45,7 +46,7 @@ from coupler_mosaik.background import BackgroundLoop
 from coupler_mosaik.ticks import Ticks
 from coupler_mosaik.values import from_mosaik, to_mosaik
 
-META: dict[str, Any] = {
+META: Meta = {
     "api_version": "3.0",
     "type": "time-based",
     "models": {},
@@ -53,7 +54,7 @@ META: dict[str, Any] = {
 }
 
 
-class CouplerSimulator(mosaik_api_v3.Simulator):  # type: ignore[misc]
+class CouplerSimulator(mosaik_api_v3.Simulator):
     """One Coupler participant (its address given to ``init``) as one mosaik entity."""
 
     def __init__(self) -> None:
@@ -77,14 +78,14 @@ class CouplerSimulator(mosaik_api_v3.Simulator):  # type: ignore[misc]
         sid: str,
         time_resolution: float = 1.0,
         *,
-        address: str,
+        address: str = "",
         step_size: int = 1,
         start_time: float = 0.0,
         model: str = "",
         connect_timeout: float = 10.0,
         call_timeout: float = 30.0,
         **unknown: Any,
-    ) -> dict[str, Any]:
+    ) -> Meta:
         """Connect to the participant at ``address`` and describe it as META.
 
         ``time_resolution``: seconds per mosaik tick (the World's); ``step_size``: ticks per
@@ -95,6 +96,8 @@ class CouplerSimulator(mosaik_api_v3.Simulator):  # type: ignore[misc]
                 f"unknown simulator parameters {sorted(unknown)} for {sid}; CouplerSimulator "
                 "takes address, step_size, start_time, model, connect_timeout, call_timeout"
             )
+        if not address:
+            raise ValueError(f"{sid}: give address= (the Coupler participant's HOST:PORT)")
         if not isinstance(step_size, int) or isinstance(step_size, bool) or step_size < 1:
             raise ValueError(f"step_size of {sid} must be a whole number of ticks >= 1")
         self._sid = sid
@@ -114,9 +117,9 @@ class CouplerSimulator(mosaik_api_v3.Simulator):  # type: ignore[misc]
                 "attrs": [c.name for c in (*d.of(Causality.INPUT), *d.of(Causality.OUTPUT))],
             }
         }
-        return self.meta  # type: ignore[no-any-return]
+        return self.meta
 
-    def create(self, num: int, model: str, **params: Any) -> list[dict[str, Any]]:
+    def create(self, num: int, model: str, **params: Any) -> list[CreateResult]:
         """The participant as one entity; ``params``: its parameter values."""
         d = self._described()
         if num != 1 or self._eid:

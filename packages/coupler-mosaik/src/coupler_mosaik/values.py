@@ -21,7 +21,7 @@ from coupler.values import check, coerce
 def to_mosaik(channel: Channel, value: Value) -> Any:
     """A Coupler value as mosaik carries it (Binary: base64 text)."""
     if channel.type is ValueType.BINARY:
-        return base64.b64encode(bytes(value)).decode("ascii")  # type: ignore[arg-type]
+        return base64.b64encode(bytes(value)).decode("ascii")
     return value
 
 
