@@ -56,6 +56,13 @@ class _Reader:
                 f"sections are {', '.join(sorted(known))}, checks, pool",
             )
         scenario, out = self.scenario(data.get("scenario"))
+        timings = data["scenario"].get("timings", True)
+        if not isinstance(timings, bool):
+            raise self.fail(
+                "scenario",
+                f"timings = {timings!r} is not true or false",
+                "write timings = false to leave the runs' wall times out of the table",
+            )
         made = variants.counted(
             {
                 "grid": variants.grid(data.get("grid", {}), self.fail),
@@ -78,6 +85,7 @@ class _Reader:
             derive=derive,
             checks=checks,
             pool=pool,
+            timings=timings,
         )
 
     def scenario(self, raw: Any) -> tuple[ScenarioSpec, Path]:
