@@ -1,6 +1,6 @@
 """The perception campaign (scenarios/railway/perception-campaign.toml) in a reduced form: two
 of its variants (clear noon; 23:00 in 12 m fog with dirty, snowed-over balises) for the first
-45 s (the five balises at 120-326 m), on the local Dask cluster, twice. The second campaign
+48 s (the five balises at 120-326 m), on the local Dask cluster, twice. The second campaign
 writes the same campaign.csv byte for byte (``[scenario] timings = false``: no wall times in
 it); the clear run finds every balise, the foggy night none, and the envelope says so."""
 
@@ -35,7 +35,7 @@ async def test_the_perception_campaign_twice_gives_the_same_table(
             spec,
             out=tmp_path / attempt,
             variants=[clear, adverse],
-            scenario=replace(spec.scenario, stop_time=45.0, timeout=400),
+            scenario=replace(spec.scenario, stop_time=48.0, timeout=400),
         )
         result = await run_campaign(reduced, jobs=2, scheduler="local")
         assert not result.failed, [(r.status, r.reason) for r in result.reports]

@@ -39,7 +39,8 @@ THRESHOLDS = (0.9, 0.5)
 WORST = 5
 """Runs listed with their frames."""
 DETECTOR = "detector"
-"""A variant key naming the perception participant; runs are split into series by it."""
+"""A variant key (or a component's parameter, ``Perception.detector``) naming the detector;
+runs are split into series by it, runs naming none are the participant's default."""
 COLOURS = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd")
 
 
@@ -62,7 +63,12 @@ class Run:
 
     @property
     def detector(self) -> str:
-        return str(self.variant.get(DETECTOR, self.variant.get("perception", "")))
+        """The detector its variant names (``detector`` or ``Component.detector``); empty: the
+        participant's default."""
+        for key, value in self.variant.items():
+            if _is_detector(key):
+                return str(value)
+        return str(self.variant.get("perception", ""))
 
 
 @dataclass
@@ -107,15 +113,19 @@ def read_campaign(folder: Path) -> Envelope:
             f"{folder}: no completed run with a perception report (summary.json "
             f"reports.perception): is it a perception campaign, and did its runs complete?"
         )
-    keys = list(dict.fromkeys(k for r in runs for k in r.variant if k != DETECTOR))
+    keys = list(dict.fromkeys(k for r in runs for k in r.variant if not _is_detector(k)))
     axes = [
         k
         for k in keys
         if len({r.variant.get(k) for r in runs}) > 1
         and all(_number(r.variant.get(k)) is not None for r in runs)
     ]
-    detectors = list(dict.fromkeys(r.detector for r in runs))
+    detectors = sorted(dict.fromkeys(r.detector for r in runs))  # the default ("") first
     return Envelope(runs=runs, axes=axes, detectors=detectors)
+
+
+def _is_detector(key: str) -> bool:
+    return key == DETECTOR or key.endswith("." + DETECTOR)
 
 
 def _number(value: Any) -> float | None:
@@ -296,13 +306,14 @@ def html_page(envelope: Envelope, axes: Sequence[str], target: Path, title: str)
     body = [
         f"<h1>{html.escape(title)}</h1>",
         f"<p>{len(envelope.runs)} scored runs; detectors: "
-        f"{html.escape(', '.join(d or 'the scenario' for d in envelope.detectors))}. "
+        f"{html.escape(', '.join(d or 'default' for d in envelope.detectors))}. "
         "Dashed lines: recall 0.9 and 0.5, and where each detector's mean recall crosses "
         "them; on the map, thick edges separate recall of 0.9 or more, 0.5 to 0.9 and below "
         "0.5.</p>",
     ]
     legend = "".join(
-        f'<span style="color:{COLOURS[i % len(COLOURS)]}">&#9632; {html.escape(d or "run")}</span> '
+        f'<span style="color:{COLOURS[i % len(COLOURS)]}">&#9632; '
+        f"{html.escape(d or 'default')}</span> "
         for i, d in enumerate(envelope.detectors)
     )
     body.append(f"<p>{legend}</p>")
@@ -368,7 +379,9 @@ def png(envelope: Envelope, axes: Sequence[str], target: Path, title: str) -> No
             for i, detector in enumerate(envelope.detectors):
                 points = along(envelope, axis, detector, name)
                 colour = COLOURS[i % len(COLOURS)]
-                chart.plot(*zip(*points, strict=True), "-o", color=colour, label=detector or None)
+                chart.plot(
+                    *zip(*points, strict=True), "-o", color=colour, label=detector or "default"
+                )
                 for t in THRESHOLDS if name == "recall" else ():
                     for crossing in boundary(points, t):
                         chart.axvline(crossing, color=colour, linestyle=":")
