@@ -167,6 +167,15 @@ def grid_of(
     return xs, ys, {k: sum(v) / len(v) for k, v in cells.items()}
 
 
+def _rank(values: Sequence[float], x: float) -> float:
+    """Where ``x`` lies among the sorted ``values`` the campaign ran, evenly spaced (a grid of
+    12, 25, 50 and 10000 m reads), linear between neighbours (where a boundary crosses)."""
+    for i, (a, b) in enumerate(itertools.pairwise(values)):
+        if a <= x <= b:
+            return i + (x - a) / (b - a)
+    return 0.0
+
+
 def _band(recall: float) -> int:
     return sum(recall < t for t in THRESHOLDS)
 
@@ -188,12 +197,12 @@ def _line_chart(envelope: Envelope, axis: str, figure: str, label: str, threshol
     ys = [y for points in series.values() for _, y in points]
     dots = [(_number(r.variant.get(axis)), getattr(r, figure), r.detector) for r in envelope.runs]
     ys += [y for _, y, _ in dots]
-    x0, x1 = min(xs), max(xs)
     y0, y1 = (0.0, 1.0) if figure == "recall" else (0.0, max([*ys, 1e-09]) * 1.1)
-    x1 = x1 if x1 > x0 else x0 + 1
+    values = sorted(set(xs))
+    span = max(len(values) - 1, 1)
 
     def px(x: float) -> float:
-        return left + (x - x0) / (x1 - x0) * (width - left - right)
+        return left + _rank(values, x) / span * (width - left - right)
 
     def py(y: float) -> float:
         return height - bottom - (y - y0) / (y1 - y0) * (height - top - bottom)
@@ -204,7 +213,7 @@ def _line_chart(envelope: Envelope, axis: str, figure: str, label: str, threshol
         f'<rect x="{left}" y="{top}" width="{width - left - right}" '
         f'height="{height - top - bottom}" fill="#fafafa" stroke="#999"/>',
     ]
-    for value in sorted(set(xs)):
+    for value in values:
         parts.append(
             f'<text x="{px(value):.1f}" y="{height - bottom + 14}" font-size="10" '
             f'text-anchor="middle">{value:g}</text>'
@@ -376,15 +385,18 @@ def png(envelope: Envelope, axes: Sequence[str], target: Path, title: str) -> No
             (("recall", "recall"), ("max_abs_error_m", "max error [m]"))
         ):
             chart = grid[row][col]
+            values = sorted({x for d in envelope.detectors
+                             for x, _ in along(envelope, axis, d, name)})  # fmt: skip
             for i, detector in enumerate(envelope.detectors):
                 points = along(envelope, axis, detector, name)
                 colour = COLOURS[i % len(COLOURS)]
-                chart.plot(
-                    *zip(*points, strict=True), "-o", color=colour, label=detector or "default"
-                )
+                ranks = [_rank(values, x) for x, _ in points]
+                chart.plot(ranks, [y for _, y in points], "-o", color=colour,
+                           label=detector or "default")  # fmt: skip
                 for t in THRESHOLDS if name == "recall" else ():
                     for crossing in boundary(points, t):
-                        chart.axvline(crossing, color=colour, linestyle=":")
+                        chart.axvline(_rank(values, crossing), color=colour, linestyle=":")
+            chart.set_xticks(range(len(values)), [f"{v:g}" for v in values])
             if name == "recall":
                 for t in THRESHOLDS:
                     chart.axhline(t, color="grey", linestyle="--", linewidth=0.8)
