@@ -385,18 +385,18 @@ def png(envelope: Envelope, axes: Sequence[str], target: Path, title: str) -> No
             (("recall", "recall"), ("max_abs_error_m", "max error [m]"))
         ):
             chart = grid[row][col]
-            values = sorted({x for d in envelope.detectors
-                             for x, _ in along(envelope, axis, d, name)})  # fmt: skip
+            ran = sorted({x for d in envelope.detectors
+                          for x, _ in along(envelope, axis, d, name)})  # fmt: skip
             for i, detector in enumerate(envelope.detectors):
                 points = along(envelope, axis, detector, name)
                 colour = COLOURS[i % len(COLOURS)]
-                ranks = [_rank(values, x) for x, _ in points]
+                ranks = [_rank(ran, x) for x, _ in points]
                 chart.plot(ranks, [y for _, y in points], "-o", color=colour,
                            label=detector or "default")  # fmt: skip
                 for t in THRESHOLDS if name == "recall" else ():
                     for crossing in boundary(points, t):
-                        chart.axvline(_rank(values, crossing), color=colour, linestyle=":")
-            chart.set_xticks(range(len(values)), [f"{v:g}" for v in values])
+                        chart.axvline(_rank(ran, crossing), color=colour, linestyle=":")
+            chart.set_xticks(range(len(ran)), [f"{v:g}" for v in ran])
             if name == "recall":
                 for t in THRESHOLDS:
                     chart.axhline(t, color="grey", linestyle="--", linewidth=0.8)

@@ -174,8 +174,7 @@ def find(
     ``max_detections`` of them, and how many more there were. ``mask`` says which pixels are
     a balise's; with ``max_width_ratio`` a blob wider than that many balise widths at its
     distance is no balise (a platform edge's line, a rail's glint)."""
-    mask = mask(rgb)
-    labels, count = ndimage.label(mask, structure=np.ones((3, 3), dtype=bool))
+    labels, count = ndimage.label(mask(rgb), structure=np.ones((3, 3), dtype=bool))
     if count == 0:
         return Found(detections=[])
     top, bottom, left, right, sizes = _boxes(labels, count)
