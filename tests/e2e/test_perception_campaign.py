@@ -2,7 +2,8 @@
 of its variants (clear noon; 23:00 in 12 m fog with dirty, snowed-over balises) for the first
 48 s (the five balises at 120-326 m), on the local Dask cluster, twice. The second campaign
 writes the same campaign.csv byte for byte (``[scenario] timings = false``: no wall times in
-it); the clear run finds every balise, the foggy night none, and the envelope says so."""
+it); the clear run finds every balise, the foggy night with dirty, snowed-over balises fewer
+than half, and the envelope links that run's misses to their frames."""
 
 from __future__ import annotations
 
