@@ -9,14 +9,14 @@ ROUTE := build/routes/annaberg-schwarzenberg
 .PHONY: setup sync proto proto-check lint test test-slow test-all demo demo-perception demo-localisation \
         demo-example fmus \
         faulty-fmus track-fmu route assets node-participant browser grpc-dev wheels bench \
-        compose-check swarm-check k8s-check export-fmu-check native-check detector-cpp clean
+        compose-check swarm-check k8s-check export-fmu-check native-check detector-cpp detector-model clean
 
 $(UV):
 	python3 -m venv .venv-uv && .venv-uv/bin/pip install --quiet uv
 
 # Everything a fresh machine needs: the workspace, the FMUs, the railway's OpenRails route,
 # the map's browser assets, the Node.js example participant's packages.
-setup: sync fmus faulty-fmus track-fmu route assets node-participant
+setup: sync fmus faulty-fmus track-fmu route assets node-participant detector-model
 
 # The workspace. Its coupler-native member is compiled by its build backend (CMake, with
 # Debian's C++ gRPC: grpc-dev) into a wheel that uv installs; uv rebuilds it only when its
@@ -151,6 +151,15 @@ demo-localisation: setup
 detector-cpp: grpc-dev
 	cmake -S examples/detector-cpp -B build/detector-cpp -DCMAKE_BUILD_TYPE=Release > /dev/null
 	cmake --build build/detector-cpp -j 2
+
+# The learned balise detector's pixel model (services/perception, detector = learned): frames
+# and labels rendered by the mock under varied conditions, a scikit-learn decision tree, written
+# as JSON (about 30 s; rebuilt when the script, the features or the renderer change).
+MODEL := build/models/balise-pixels.json
+detector-model: sync $(MODEL)
+
+$(MODEL): scripts/train-balise-model.py services/perception/src/perception/learned.py           $(wildcard services/openrails-mock/src/openrails_mock/*.py)
+	$(UV) run --frozen python scripts/train-balise-model.py --out $@
 
 # The smallest scenario: two FMUs and the example gRPC participant.
 demo-example: setup

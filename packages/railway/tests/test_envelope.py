@@ -27,14 +27,16 @@ def recall(fog: float, sun: float, detector: str) -> float:
     return round(min(1.0, made * 1.5) if detector == "learned" else made, 3)
 
 
-def campaign(folder: Path) -> Path:
+def campaign(folder: Path, key: str = "detector", default: str = "") -> Path:
+    """Runs naming ``default`` leave the detector out of their variant (the participant's)."""
     n = 0
     for detector in ("colour", "learned"):
         for fog in FOG:
             for sun in SUN:
                 run = folder / "runs" / f"{n:03d}-key{n}"
                 (run / "perception-frames").mkdir(parents=True)
-                variant = {"detector": detector, "OpenRails.fog_m": fog, "OpenRails.sun_deg": sun}
+                named = {} if detector == default else {key: detector}
+                variant = {**named, "OpenRails.fog_m": fog, "OpenRails.sun_deg": sun}
                 value = recall(fog, sun, detector)
                 report = {"recall": value, "precision": 1.0, "max_abs_error_m": 2 - value,
                           "mean_abs_error_m": 0.1}  # fmt: skip
@@ -53,6 +55,15 @@ def test_the_envelope_reads_the_runs_and_their_axes(tmp_path: Path) -> None:
     assert envelope.axes == ["OpenRails.fog_m", "OpenRails.sun_deg"]
     assert envelope.detectors == ["colour", "learned"]
     assert boundary([(50.0, 0.25), (100.0, 0.5), (200.0, 1.0)], 0.9) == [180.0]
+
+
+def test_a_detector_named_as_a_parameter_and_the_default_are_series(tmp_path: Path) -> None:
+    """The perception campaign names the learned detector as ``Perception.detector`` and runs
+    the colour one as the participant's default (no key): two series, neither an axis."""
+    envelope = read_campaign(campaign(tmp_path, "Perception.detector", default="colour"))
+    assert envelope.axes == ["OpenRails.fog_m", "OpenRails.sun_deg"]
+    assert envelope.detectors == ["", "learned"]
+    assert sum(r.detector == "learned" for r in envelope.runs) == 12
 
 
 def test_the_command_writes_html_png_and_csv_with_boundaries_and_frame_links(

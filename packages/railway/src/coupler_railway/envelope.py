@@ -39,7 +39,8 @@ THRESHOLDS = (0.9, 0.5)
 WORST = 5
 """Runs listed with their frames."""
 DETECTOR = "detector"
-"""A variant key naming the perception participant; runs are split into series by it."""
+"""A variant key (or a component's parameter, ``Perception.detector``) naming the detector;
+runs are split into series by it, runs naming none are the participant's default."""
 COLOURS = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd")
 
 
@@ -62,7 +63,12 @@ class Run:
 
     @property
     def detector(self) -> str:
-        return str(self.variant.get(DETECTOR, self.variant.get("perception", "")))
+        """The detector its variant names (``detector`` or ``Component.detector``); empty: the
+        participant's default."""
+        for key, value in self.variant.items():
+            if _is_detector(key):
+                return str(value)
+        return str(self.variant.get("perception", ""))
 
 
 @dataclass
@@ -107,15 +113,19 @@ def read_campaign(folder: Path) -> Envelope:
             f"{folder}: no completed run with a perception report (summary.json "
             f"reports.perception): is it a perception campaign, and did its runs complete?"
         )
-    keys = list(dict.fromkeys(k for r in runs for k in r.variant if k != DETECTOR))
+    keys = list(dict.fromkeys(k for r in runs for k in r.variant if not _is_detector(k)))
     axes = [
         k
         for k in keys
         if len({r.variant.get(k) for r in runs}) > 1
         and all(_number(r.variant.get(k)) is not None for r in runs)
     ]
-    detectors = list(dict.fromkeys(r.detector for r in runs))
+    detectors = sorted(dict.fromkeys(r.detector for r in runs))  # the default ("") first
     return Envelope(runs=runs, axes=axes, detectors=detectors)
+
+
+def _is_detector(key: str) -> bool:
+    return key == DETECTOR or key.endswith("." + DETECTOR)
 
 
 def _number(value: Any) -> float | None:
@@ -157,6 +167,15 @@ def grid_of(
     return xs, ys, {k: sum(v) / len(v) for k, v in cells.items()}
 
 
+def _rank(values: Sequence[float], x: float) -> float:
+    """Where ``x`` lies among the sorted ``values`` the campaign ran, evenly spaced (a grid of
+    12, 25, 50 and 10000 m reads), linear between neighbours (where a boundary crosses)."""
+    for i, (a, b) in enumerate(itertools.pairwise(values)):
+        if a <= x <= b:
+            return i + (x - a) / (b - a)
+    return 0.0
+
+
 def _band(recall: float) -> int:
     return sum(recall < t for t in THRESHOLDS)
 
@@ -178,12 +197,12 @@ def _line_chart(envelope: Envelope, axis: str, figure: str, label: str, threshol
     ys = [y for points in series.values() for _, y in points]
     dots = [(_number(r.variant.get(axis)), getattr(r, figure), r.detector) for r in envelope.runs]
     ys += [y for _, y, _ in dots]
-    x0, x1 = min(xs), max(xs)
     y0, y1 = (0.0, 1.0) if figure == "recall" else (0.0, max([*ys, 1e-09]) * 1.1)
-    x1 = x1 if x1 > x0 else x0 + 1
+    values = sorted(set(xs))
+    span = max(len(values) - 1, 1)
 
     def px(x: float) -> float:
-        return left + (x - x0) / (x1 - x0) * (width - left - right)
+        return left + _rank(values, x) / span * (width - left - right)
 
     def py(y: float) -> float:
         return height - bottom - (y - y0) / (y1 - y0) * (height - top - bottom)
@@ -194,7 +213,7 @@ def _line_chart(envelope: Envelope, axis: str, figure: str, label: str, threshol
         f'<rect x="{left}" y="{top}" width="{width - left - right}" '
         f'height="{height - top - bottom}" fill="#fafafa" stroke="#999"/>',
     ]
-    for value in sorted(set(xs)):
+    for value in values:
         parts.append(
             f'<text x="{px(value):.1f}" y="{height - bottom + 14}" font-size="10" '
             f'text-anchor="middle">{value:g}</text>'
@@ -296,13 +315,14 @@ def html_page(envelope: Envelope, axes: Sequence[str], target: Path, title: str)
     body = [
         f"<h1>{html.escape(title)}</h1>",
         f"<p>{len(envelope.runs)} scored runs; detectors: "
-        f"{html.escape(', '.join(d or 'the scenario' for d in envelope.detectors))}. "
+        f"{html.escape(', '.join(d or 'default' for d in envelope.detectors))}. "
         "Dashed lines: recall 0.9 and 0.5, and where each detector's mean recall crosses "
         "them; on the map, thick edges separate recall of 0.9 or more, 0.5 to 0.9 and below "
         "0.5.</p>",
     ]
     legend = "".join(
-        f'<span style="color:{COLOURS[i % len(COLOURS)]}">&#9632; {html.escape(d or "run")}</span> '
+        f'<span style="color:{COLOURS[i % len(COLOURS)]}">&#9632; '
+        f"{html.escape(d or 'default')}</span> "
         for i, d in enumerate(envelope.detectors)
     )
     body.append(f"<p>{legend}</p>")
@@ -365,13 +385,18 @@ def png(envelope: Envelope, axes: Sequence[str], target: Path, title: str) -> No
             (("recall", "recall"), ("max_abs_error_m", "max error [m]"))
         ):
             chart = grid[row][col]
+            ran = sorted({x for d in envelope.detectors
+                          for x, _ in along(envelope, axis, d, name)})  # fmt: skip
             for i, detector in enumerate(envelope.detectors):
                 points = along(envelope, axis, detector, name)
                 colour = COLOURS[i % len(COLOURS)]
-                chart.plot(*zip(*points, strict=True), "-o", color=colour, label=detector or None)
+                ranks = [_rank(ran, x) for x, _ in points]
+                chart.plot(ranks, [y for _, y in points], "-o", color=colour,
+                           label=detector or "default")  # fmt: skip
                 for t in THRESHOLDS if name == "recall" else ():
                     for crossing in boundary(points, t):
-                        chart.axvline(crossing, color=colour, linestyle=":")
+                        chart.axvline(_rank(ran, crossing), color=colour, linestyle=":")
+            chart.set_xticks(range(len(ran)), [f"{v:g}" for v in ran])
             if name == "recall":
                 for t in THRESHOLDS:
                     chart.axhline(t, color="grey", linestyle="--", linewidth=0.8)

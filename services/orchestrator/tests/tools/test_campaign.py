@@ -32,6 +32,8 @@ from coupler_orchestrator.tools.campaign import (
     reduce,
     run_campaign,
 )
+from coupler_orchestrator.tools.campaign.model import RunReport
+from coupler_orchestrator.tools.campaign.table import write_table
 from coupler_orchestrator.tools.campaign.worker import report_value
 
 from ..support import REPO
@@ -530,3 +532,30 @@ def test_report_values_are_read_off_the_summary() -> None:
     assert report_value(summary, "reports.perception.by_distance.7.recall") is None
     assert report_value(summary, "reports.other.recall") is None
     assert report_value(summary, "reports.perception.by_distance.0") == '{"recall": null}'
+
+
+def test_a_table_without_timings_is_the_same_for_the_same_runs(
+    ramp_gain: Path, tmp_path: Path
+) -> None:
+    """``[scenario] timings = false``: no wall time in campaign.csv, so two campaigns whose runs
+    gave the same values write the same bytes; a timings that is no boolean is refused."""
+    path = campaign_file(tmp_path, GRID, scenario='fleet = "examples/ramp-gain/fleet.toml"\n'
+                         "timings = false")  # fmt: skip
+    spec = CampaignSpec.load(path)
+    assert not spec.timings
+    tables = []
+    for wall_time in (1.5, 2.5):
+        report = RunReport(index=1, key="k", variant={"Gain.gain": 1.0}, status="completed",
+                           wall_time_s=wall_time, realtime_factor=1 / wall_time,
+                           values={"y_max": 1.9})  # fmt: skip
+        spec.out.mkdir(parents=True, exist_ok=True)
+        write_table(spec, [report])
+        tables.append((spec.out / "campaign.csv").read_bytes())
+    assert tables[0] == tables[1]
+    assert b"wall_time_s" not in tables[0] and b"y_max" in tables[0]
+    timed = CampaignSpec.load(campaign_file(tmp_path, GRID))
+    assert timed.timings
+    bad = campaign_file(tmp_path, GRID, scenario='fleet = "examples/ramp-gain/fleet.toml"\n'
+                        'timings = "no"')  # fmt: skip
+    with pytest.raises(CampaignError, match=r"\[scenario\]: timings = 'no' is not true or false"):
+        CampaignSpec.load(bad)

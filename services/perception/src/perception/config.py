@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 from pydantic import Field
 from pydantic_settings import SettingsConfigDict
 
@@ -15,3 +17,6 @@ class PerceptionSettings(ParticipantSettings):
 
     port: int = Field(default=50063, ge=0, le=65535)
     """gRPC port; 0 picks a free one."""
+    model: Path = Path("build/models/balise-pixels.json")
+    """The learned detector's model file (``make detector-model``), read when a run asks for
+    ``detector = learned``."""

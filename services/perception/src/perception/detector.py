@@ -30,6 +30,7 @@ the arc (0.1 m short at 50 m on a 185 m radius).
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -38,6 +39,10 @@ import numpy.typing as npt
 from scipy import ndimage
 
 Pixels = npt.NDArray[np.uint8]
+Mask = Callable[[Pixels], npt.NDArray[np.bool_]]
+"""Which pixels are a balise's: ``yellow_mask``, or the learned detector's model."""
+BALISE_WIDTH_M = 0.52
+"""Across the track: a blob's expected width in pixels at a distance."""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -162,11 +167,14 @@ def find(
     min_pixels: int = 2,
     max_detections: int = MAX_DETECTIONS,
     shape: BaliseShape = BALISE,
+    mask: Mask = yellow_mask,
+    max_width_ratio: float | None = None,
 ) -> Found:
     """The balises in the frame within ``max_range_m``, nearest first, at most
-    ``max_detections`` of them, and how many more there were."""
-    mask = yellow_mask(rgb)
-    labels, count = ndimage.label(mask, structure=np.ones((3, 3), dtype=bool))
+    ``max_detections`` of them, and how many more there were. ``mask`` says which pixels are
+    a balise's; with ``max_width_ratio`` a blob wider than that many balise widths at its
+    distance is no balise (a platform edge's line, a rail's glint)."""
+    labels, count = ndimage.label(mask(rgb), structure=np.ones((3, 3), dtype=bool))
     if count == 0:
         return Found(detections=[])
     top, bottom, left, right, sizes = _boxes(labels, count)
@@ -178,12 +186,16 @@ def find(
     far_ahead, far_lateral = _ground(u, top - 0.5, mounting.height_m + shape.top_m,
                                      intrinsics, mounting)  # fmt: skip
     distance = (near_ahead + far_ahead) / 2.0  # NaN above the horizon
-    inside = np.flatnonzero(distance <= max_range_m)
+    within = distance <= max_range_m
+    if max_width_ratio is not None:
+        expected_px = BALISE_WIDTH_M * intrinsics.fx / np.maximum(distance, 1.0)
+        within &= (right - left + 1) <= max_width_ratio * np.maximum(expected_px, 1.0)
+    inside = np.flatnonzero(within)
     order = inside[np.argsort(distance[inside], kind="stable")]
     shown = order[: max(max_detections, 0)]
     lateral = (near_lateral + far_lateral) / 2.0
     # a balise of 0.52 m across at this distance is this many pixels wide
-    expected = 0.52 * intrinsics.fx / np.maximum(distance[shown], 1.0)
+    expected = BALISE_WIDTH_M * intrinsics.fx / np.maximum(distance[shown], 1.0)
     confidence = np.minimum(1.0, (right[shown] - left[shown] + 1) / np.maximum(expected, 1.0))
     detections = [
         Detection(

@@ -22,6 +22,8 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
+from functools import cache
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -44,9 +46,16 @@ from coupler_railway.messages import (
     image_bytes,
 )
 
-from .detector import MAX_DETECTIONS, Intrinsics, Mounting, find
+from .detector import MAX_DETECTIONS, Intrinsics, Mask, Mounting, find, yellow_mask
+from .learned import ModelError, PixelModel
 
 NAME = "Perception"
+DETECTORS = ("colour", "learned")
+"""``detector``: the colour thresholds, or the learned pixel model (``learned.py``)."""
+MODEL = Path("build/models/balise-pixels.json")
+"""The learned detector's model file (``make detector-model``), from the working folder."""
+LEARNED_MAX_WIDTH = 2.0
+"""The learned detector drops blobs wider than this many balise widths at their distance."""
 MAX_DETECTIONS_LIMIT = 10_000
 """The largest ``max_detections`` taken: 10,000 detections are a 0.5 MB answer."""
 
@@ -79,6 +88,9 @@ CHANNELS = (
     _channel("max_detections", _PAR, T.INTEGER, MAX_DETECTIONS,
              description="Detections reported per frame at most (the nearest); how many more "
                          "there were is the message's `omitted`"),
+    _channel("detector", _PAR, T.STRING, "colour",
+             description="Which detector: colour (yellow thresholds) or learned (a decision "
+                         "tree over pixel colours, trained on the mock's labelled frames)"),
     _channel("detections", _OUT, T.BINARY, None, message_type=BALISE_DETECTIONS,
              description="Every balise found in the last frame (coupler.v1.BaliseDetections)"),
     _channel("detection_count", _OUT, T.INTEGER, None,
@@ -89,7 +101,10 @@ CHANNELS = (
 class PerceptionParticipant(Participant):
     """Finds balises in each frame it is given; see the module docstring."""
 
-    def __init__(self) -> None:
+    def __init__(self, *, model: Path = MODEL) -> None:
+        self._model = model
+        self._mask: Mask = yellow_mask
+        self._max_width: float | None = None
         self._parameters: dict[str, Value] = {}
         self._inputs: dict[str, Value] = {}
         self._outputs: Values = {}
@@ -112,9 +127,24 @@ class PerceptionParticipant(Participant):
                 channel="max_detections",
                 expected=f"1 to {MAX_DETECTIONS_LIMIT}",
             )
+        self._mask, self._max_width = self._detector(str(self._parameters["detector"]))
         self._inputs = {**_starts(_IN), **setup.inputs}
         self._outputs = self._perceive(self._inputs)
         return self._outputs
+
+    def _detector(self, name: str) -> tuple[Mask, float | None]:
+        if name == "colour":
+            return yellow_mask, None
+        if name != "learned":
+            raise ChannelValueError(
+                f"parameter 'detector' is {name!r}; give one of {', '.join(DETECTORS)}",
+                channel="detector",
+                expected=" or ".join(DETECTORS),
+            )
+        try:
+            return _model(self._model.resolve()).mask, LEARNED_MAX_WIDTH
+        except ModelError as exc:
+            raise ChannelValueError(str(exc), channel="detector", expected="a model file") from None
 
     async def do_step(self, time: float, step: float, inputs: Mapping[str, Value]) -> Values:
         self._inputs.update(inputs)
@@ -140,6 +170,8 @@ class PerceptionParticipant(Participant):
             max_range_m=float(p["max_range"]),
             min_pixels=int(p["min_pixels"]),
             max_detections=int(p["max_detections"]),
+            mask=self._mask,
+            max_width_ratio=self._max_width,
         )
         camera_at = float(p["track_offset"]) + state.distance_m
         message = BaliseDetections(
@@ -219,6 +251,12 @@ def _intrinsics(image: Image) -> Intrinsics:
             expected="fx, fy > 0 and finite; cx, cy finite",
         )
     return Intrinsics(fx=k.fx, fy=k.fy, cx=k.cx, cy=k.cy)
+
+
+@cache
+def _model(path: Path) -> PixelModel:
+    """The model in ``path``, read once per process."""
+    return PixelModel.load(path)
 
 
 def _starts(causality: Causality) -> dict[str, Value]:

@@ -210,6 +210,9 @@ class CampaignSpec:
     checks: tuple[Check, ...] = ()
     pool: tuple[dict[str, str], ...] = ()
     """Environments naming running participants (``GAIN_PORT``...), one run each at a time."""
+    timings: bool = True
+    """The table has each run's ``wall_time_s`` and ``realtime_factor``; without them (``[scenario]
+    timings = false``) the same campaign run again writes the same campaign.csv."""
 
     def __post_init__(self) -> None:
         if not isinstance(self.variants, Variants):

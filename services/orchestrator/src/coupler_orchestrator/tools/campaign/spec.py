@@ -26,7 +26,17 @@ from coupler_orchestrator.tools.campaign.model import (
 from coupler_orchestrator.tools.fleet import FleetSpec
 
 SCENARIO_KEYS = frozenset(
-    {"fleet", "ssp", "stop_time", "out", "args", "timeout", "health_timeout", "keep_services"}
+    {
+        "fleet",
+        "ssp",
+        "stop_time",
+        "out",
+        "args",
+        "timeout",
+        "health_timeout",
+        "keep_services",
+        "timings",
+    }
 )
 """The keys of a campaign file's [scenario]."""
 
@@ -61,6 +71,13 @@ class _Reader:
                 f"sections are {', '.join(sorted(known))}, checks, pool",
             )
         scenario, out = self.scenario(data.get("scenario"))
+        timings = data["scenario"].get("timings", True)
+        if not isinstance(timings, bool):
+            raise self.fail(
+                "scenario",
+                f"timings = {timings!r} is not true or false",
+                "write timings = false to leave the runs' wall times out of the table",
+            )
         made = variants.counted(
             {
                 "grid": variants.grid(data.get("grid", {}), self.fail),
@@ -83,6 +100,7 @@ class _Reader:
             derive=derive,
             checks=checks,
             pool=pool,
+            timings=timings,
         )
 
     def scenario(self, raw: Any) -> tuple[ScenarioSpec, Path]:

@@ -32,20 +32,18 @@ def table_rows(
         found = dict(report.values)
         row: dict[str, Any] = {"run": report.index, "key": report.key}
         row |= {p: report.variant.get(p) for p in parameters}
-        row |= {
-            "status": report.status,
-            "reason": report.reason,
-            "wall_time_s": report.wall_time_s,
-            "realtime_factor": report.realtime_factor,
-        }
+        row |= {"status": report.status, "reason": report.reason}
+        if spec.timings:
+            row |= {"wall_time_s": report.wall_time_s, "realtime_factor": report.realtime_factor}
         row |= {name: found.pop(name, None) for name in values}
         row |= found  # derived columns
         names = {**{k: v for k, v in report.variant.items() if k.isidentifier()}, **row}
         row |= evaluate_checks(spec.checks, names)
         row["directory"] = str(run_directory(spec, report).relative_to(spec.out))
         rows.append(row)
+    timings = ["wall_time_s", "realtime_factor"] if spec.timings else []
     header = list(dict.fromkeys(k for row in rows for k in row)) if rows else [
-        "run", "key", *parameters, "status", "reason", "wall_time_s", "realtime_factor", *values,
+        "run", "key", *parameters, "status", "reason", *timings, *values,
     ]  # fmt: skip
     return header, rows
 
