@@ -13,14 +13,9 @@ import pytest
 
 from coupler_railway import Infrastructure
 from openrails_mock.renderer import Renderer
-from perception.detector import Intrinsics, Mounting, detect, ground_distance, yellow_mask
+from perception.detector import Mounting, detect, ground_distance, yellow_mask
 
-from .support import CAMERA
-
-
-def intrinsics() -> Intrinsics:
-    fx, fy, cx, cy = CAMERA.intrinsics()
-    return Intrinsics(fx=fx, fy=fy, cx=cx, cy=cy)
+from .support import CAMERA, intrinsics
 
 
 @pytest.mark.parametrize("ahead", [8.0, 15.0, 25.0, 33.0, 36.0])

@@ -25,8 +25,7 @@ from perception.detector import Mounting, find
 from perception.learned import ModelError, PixelModel
 from perception.participant import MODEL, PerceptionParticipant
 
-from .conftest import CAMERA, ROOT, frame, state
-from .test_detector import intrinsics
+from .support import CAMERA, ROOT, frame, intrinsics, state
 
 BUILT = ROOT / MODEL
 
