@@ -105,11 +105,11 @@ import sys
 from pathlib import Path
 
 sys.path.insert(0, "benchmarks")
-import suite
+from sections import common
 
-suite.FMUS = Path("/app/build/fmus")
-suite.chain_ssd(Path(sys.argv[1]), 2)
-suite.ring_ssd(Path(sys.argv[1]), [int(suite.free_ports(1)[0])])
+common.FMUS = Path("/app/build/fmus")
+common.chain_ssd(Path(sys.argv[1]), 2)
+common.ring_ssd(Path(sys.argv[1]), [int(common.free_ports(1)[0])])
 PY
 cp scripts/lib/fmpy_run.py "$OUT/"
 docker run --rm --network host -v "$PWD/$OUT:/check" --entrypoint sh "$IMAGE" -c '
