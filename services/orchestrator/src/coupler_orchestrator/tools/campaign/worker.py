@@ -67,8 +67,6 @@ class KeptFleets:
     def __init__(self) -> None:
         self._idle: dict[Path, list[tuple[Fleet, dict[str, str]]]] = {}
         self._busy: set[Fleet] = set()
-        self.started = 0
-        """Fleets started so far (a campaign's runs minus this: the starts kept services saved)."""
 
     async def take(self, job: RunJob) -> tuple[Fleet, dict[str, str]]:
         """An idle fleet of the job's fleet file whose services all still run, else a new one."""
@@ -82,7 +80,6 @@ class KeptFleets:
             await fleet.stop()
         root = Path(tempfile.mkdtemp(prefix="coupler-kept-services-"))
         fleet, env = await _start_fleet(job, root, root / SERVICE_LOGS, die_with_parent=True)
-        self.started += 1
         self._busy.add(fleet)
         return fleet, env
 
