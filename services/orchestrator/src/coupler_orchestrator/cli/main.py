@@ -3,6 +3,7 @@ and decide how the process ends (exit codes: ``exits``; Ctrl-C: ``interrupts``).
 
 from __future__ import annotations
 
+import os
 import sys
 from collections.abc import Sequence
 from typing import TextIO
@@ -23,7 +24,10 @@ def main(
         from coupler_orchestrator.cli.supervisor import SUPERVISED, supervised
 
         if args.command in SUPERVISED and (code := supervised()) is not None:
-            return code
+            # The watching parent ran nothing of the command: no finalising of its own to wait for.
+            sys.stdout.flush()
+            sys.stderr.flush()
+            os._exit(code)
 
     import asyncio
 
