@@ -174,10 +174,16 @@ def find(
     ``max_detections`` of them, and how many more there were. ``mask`` says which pixels are
     a balise's; with ``max_width_ratio`` a blob wider than that many balise widths at its
     distance is no balise (a platform edge's line, a rail's glint)."""
-    labels, count = ndimage.label(mask(rgb), structure=np.ones((3, 3), dtype=bool))
-    if count == 0:
+    found = mask(rgb)
+    rows = np.flatnonzero(found.any(axis=1))
+    if rows.size == 0:
         return Found(detections=[])
+    # labelled on the rows that have any pixel: the same blobs, numbered in the same order
+    first = int(rows[0])
+    labels, count = ndimage.label(found[first : rows[-1] + 1], structure=np.ones((3, 3), bool))
     top, bottom, left, right, sizes = _boxes(labels, count)
+    top += first
+    bottom += first
     kept = np.flatnonzero(sizes >= min_pixels)
     top, bottom, left, right, sizes = (a[kept] for a in (top, bottom, left, right, sizes))
     u = (left + right) / 2.0
