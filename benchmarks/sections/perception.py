@@ -1,8 +1,8 @@
 """The railway perception run end to end, as a user runs it: ``coupler fleet
 scenarios/railway/perception-fleet.toml --exit --realtime-factor 0`` (the OpenRails mock with its
 front camera, the bridge, TrackBalises, perception, the map and the orchestrator, each its own
-process), timed by its summary.json; and its floor, the same number of frames rendered alone by
-the mock's renderer on one core under the same conditions."""
+process), timed by its summary.json; and its floor, the same frames (its results.csv's places
+and times) rendered alone by the mock's renderer on one core under the same conditions."""
 
 from __future__ import annotations
 
@@ -21,6 +21,8 @@ from sections.common import ROOT, Row, Sizes, free_ports
 from sections.render import EVERY_CONDITION
 
 FLEET = ROOT / "scenarios" / "railway" / "perception-fleet.toml"
+MOCK_START_CLOCK_S = 8 * 3600.0
+"""The mock's time of day at start when the run sets none (its ``start_time_s``)."""
 CAMERA_PERIOD_S = 0.4
 """Perception.ssd's step: one camera frame a step."""
 
@@ -49,6 +51,8 @@ class Run:
     """summary.json's wall time: the first step to the last."""
     total_s: float
     """The command's whole time: services started, route loaded, run, services stopped."""
+    results: Path
+    """Its results.csv."""
 
     @property
     def speed(self) -> float:
@@ -82,31 +86,39 @@ def run(work: Path, stop_s: float, parameters: dict[str, str], ports: list[int])
             f"perception run: exit {ran.returncode}, {summary.get('status')}: "
             f"{summary.get('reason') or ran.stderr[-2000:]}"
         )
-    return Run(stop_s, int(summary["steps"]), float(summary["wall_time_s"]), total)
+    return Run(stop_s, int(summary["steps"]), float(summary["wall_time_s"]), total,
+               out / "results.csv")  # fmt: skip
 
 
-def render_floor_s(frames: int, conditions: dict[str, Any], positions: int) -> float:
-    """Seconds of one core to render ``frames`` 800 x 600 colour frames under ``conditions``
-    (the median frame's CPU time at ``positions`` places 250 m apart, times the count)."""
-    import statistics
+def render_floor_s(results: Path, conditions: dict[str, Any], start_clock_s: float) -> float:
+    """Seconds of one core to render, alone, the frames a run's camera took: each row of its
+    ``results`` (results.csv: time, distance and speed) rendered 800 x 600 in colour under
+    ``conditions`` by the mock's renderer on one thread from a run that started at
+    ``start_clock_s`` (time of day), the CPU time of every frame summed."""
+    import csv
 
     from coupler_railway import load_infrastructure
     from openrails_mock.conditions import Conditions
+    from openrails_mock.physics import PRESETS
     from openrails_mock.renderer import CameraModel, Renderer, View
     from openrails_mock.scene import Scene
 
     railml = ROOT / "scenarios" / "railway" / "data" / "annaberg-schwarzenberg.railml"
     renderer = Renderer(Scene.of_infrastructure(load_infrastructure(railml)),
-                        conditions=Conditions(**conditions))  # fmt: skip
+                        conditions=Conditions(**conditions), threads=1)  # fmt: skip
     rgb = CameraModel(width=800, height=600, fov_deg=45.0)
     renderer.render(rgb, 100.0, View(speed_mps=16.0))  # compile or load the kernels
-    took = []
-    for k in range(positions):
-        view = View(elapsed_s=10.0 * k, clock_s=12 * 3600.0 + 10.0 * k, speed_mps=16.0)
-        begun = time.process_time()
-        renderer.render(rgb, 60.0 + 250.0 * k, view).pixels.tobytes()
-        took.append(time.process_time() - begun)
-    return frames * statistics.median(took)
+    front_at_start_m = PRESETS["br642"].length_m  # the mock's train starts with its rear at 0
+    took = 0.0
+    with results.open(encoding="utf-8", newline="") as file:
+        for row in csv.DictReader(file):
+            t = float(row["time"])
+            view = View(elapsed_s=t, clock_s=start_clock_s + t,
+                        speed_mps=abs(float(row["OpenRails.speed"])))  # fmt: skip
+            begun = time.process_time()
+            renderer.render(rgb, front_at_start_m + float(row["OpenRails.distance"]), view)
+            took += time.process_time() - begun
+    return took
 
 
 CAMPAIGN = """[scenario]
@@ -175,9 +187,8 @@ async def perception(
     for name, (parameters, conditions) in cases.items():
         log(f"perception run, {name}: {sizes.perception_stop_s:g} s of the line")
         ran = await asyncio.to_thread(run, work, sizes.perception_stop_s, parameters, free_ports(7))
-        floor_s = await asyncio.to_thread(
-            render_floor_s, ran.steps, conditions, sizes.render_positions
-        )
+        start_clock_s = float(parameters.get("OpenRails.time_of_day", MOCK_START_CLOCK_S))
+        floor_s = await asyncio.to_thread(render_floor_s, ran.results, conditions, start_clock_s)
         floor = ran.stop_s / floor_s
         figures[name] = {"frames": ran.steps, "stepping_s": round(ran.stepping_s, 2),
                          "render_alone_s": round(floor_s, 2),

@@ -84,6 +84,24 @@ def test_the_same_seed_gives_the_same_bytes_and_another_seed_other_bytes(scene: 
     assert later.pixels.tobytes() != first.pixels.tobytes()  # snow falls, noise is drawn anew
 
 
+@pytest.mark.parametrize("conditions", ["clear", "everything"])
+def test_two_render_threads_give_the_bytes_and_labels_of_one(scene: Scene, conditions: str) -> None:
+    everything = {"light": "sun", "season": "winter", "weather": "snow", "rain_mm_per_h": 2.0,
+                  "visibility_m": 300.0, "dirt": 0.5, "leaves_per_m2": 0.5, "trees_per_km": 40.0,
+                  "platform_roofs": True, "noise": True, "motion_blur": True,
+                  "jpeg_quality": 80}  # fmt: skip
+    world = Conditions(**everything) if conditions == "everything" else Conditions()  # type: ignore[arg-type]
+    one, two = Renderer(scene, conditions=world), Renderer(scene, conditions=world, threads=2)
+    for k, front_m in enumerate((0.0, 20.0, 45.0, 60.0, 68.0, 110.0)):  # the split moves
+        view = View(clock_s=15 * 3600.0, elapsed_s=0.4 * k, speed_mps=16.0)
+        alone, shared = one.render(CAMERA, front_m, view), two.render(CAMERA, front_m, view)
+        assert shared.pixels.tobytes() == alone.pixels.tobytes(), front_m
+        assert shared.labels == alone.labels, front_m
+        depth = one.depth(CAMERA, front_m, 60.0)
+        assert two.depth(CAMERA, front_m, 60.0).tobytes() == depth.tobytes()
+    assert two.with_conditions(Conditions()).bands is two.bands
+
+
 def test_the_default_is_the_clear_noon_look_whatever_the_clock(scene: Scene) -> None:
     noon = render(scene, 50.0, NOON)
     night = render(scene, 50.0, View(clock_s=23 * 3600.0))

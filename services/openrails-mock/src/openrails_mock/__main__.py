@@ -80,6 +80,12 @@ def _parse(argv: list[str] | None) -> MockConfig:
     parser.add_argument("--camera-height", type=float, dest="camera_height_m")
     parser.add_argument("--camera-pitch", type=float, dest="camera_pitch_deg")
     parser.add_argument(
+        "--render-threads",
+        type=int,
+        dest="render_threads",
+        help="threads a frame is rendered on, 1 or 2 (default: 2 on two cores or more)",
+    )
+    parser.add_argument(
         "--no-reset",
         action="store_false",
         dest="reset",

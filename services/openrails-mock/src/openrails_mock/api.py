@@ -220,7 +220,8 @@ def _cameras(config: MockConfig, route: Route) -> Cameras | None:
     else:
         scene = Scene(route)
     mount = Mount(height_m=config.camera_height_m, pitch_deg=config.camera_pitch_deg)
-    return Cameras(specs, Renderer(scene, mount, config.build_conditions()))
+    renderer = Renderer(scene, mount, config.build_conditions(), threads=config.render_threads)
+    return Cameras(specs, renderer)
 
 
 def _error(status: int, message: str) -> web.Response:

@@ -7,6 +7,7 @@ Consist figures start from a preset and can be overridden one by one with
 from __future__ import annotations
 
 import dataclasses
+import os
 from pathlib import Path
 from typing import Any, Literal
 
@@ -103,6 +104,10 @@ class MockConfig(BaseSettings):
     """Height of the sensors above the top of the rails, at the train's front."""
     camera_pitch_deg: float = Field(default=4.0, ge=-45, le=45)
     """How far the sensors look down from the track's direction [deg]."""
+    render_threads: int = Field(default_factory=lambda: 2 if (os.cpu_count() or 1) > 1 else 1,
+                                ge=1, le=2)  # fmt: skip
+    """Threads a frame's pixels are computed on (1 or 2; default 2 where the machine has
+    two cores or more): the frame's rows split between them, the bytes the same."""
     season: str | None = None
     """OpenRails' season (spring, summer, autumn, winter or 0-3); unset: summer."""
     weather: str | None = None

@@ -96,13 +96,15 @@ def _plane(quad, focal, half_w, half_h):  # type: ignore[no-untyped-def]
 
 
 @_jit
-def rasterise(quads, background, width, height, focal, near, ids, inverse_z):  # type: ignore[no-untyped-def]
-    """Fill ``ids`` (face index + 1; 0 nothing) and ``inverse_z`` (1 / z) from ``quads``
-    (n, 4, 3) in camera coordinates, in their order: background faces (the terrain) paint
-    over each other and lie behind everything; other faces win where they are nearer, or
-    within ``TIE`` of the nearest (so the later of two coplanar faces shows)."""
-    ids[:, :] = 0
-    inverse_z[:, :] = 0.0
+def rasterise(quads, background, width, height, focal, near, ids, inverse_z, row_begin, row_end):  # type: ignore[no-untyped-def]
+    """Fill rows ``row_begin`` to ``row_end`` (exclusive) of ``ids`` (face index + 1; 0
+    nothing) and ``inverse_z`` (1 / z) from ``quads`` (n, 4, 3) in camera coordinates, in
+    their order: background faces (the terrain) paint over each other and lie behind
+    everything; other faces win where they are nearer, or within ``TIE`` of the nearest (so
+    the later of two coplanar faces shows). A pixel depends on its own row alone, so bands of
+    rows filled apart (in threads) give the frame filled whole."""
+    ids[row_begin:row_end, :] = 0
+    inverse_z[row_begin:row_end, :] = 0.0
     half_w = width / 2.0
     half_h = height / 2.0
     poly = np.empty((MAX_VERTICES, 2))
@@ -119,8 +121,8 @@ def rasterise(quads, background, width, height, focal, near, ids, inverse_z):  #
         for i in range(count):
             top = min(top, poly[i, 1])
             bottom = max(bottom, poly[i, 1])
-        r0 = max(math.ceil(top - 0.5), 0)
-        r1 = min(math.ceil(bottom - 0.5), height)
+        r0 = max(math.ceil(top - 0.5), row_begin)
+        r1 = min(math.ceil(bottom - 0.5), row_end)
         back = background[f]
         for r in range(r0, r1):
             yc = r + 0.5
@@ -235,6 +237,8 @@ def shade(  # type: ignore[no-untyped-def]
     pixels,
     snowed,
     boxes,
+    row_begin,
+    row_end,
 ):
     """The light each pixel receives from what it shows, in the frame's units (255: a white
     surface under the clear-noon light): albedo times (ambient + direct sun * cos * unshadowed
@@ -245,7 +249,10 @@ def shade(  # type: ignore[no-untyped-def]
     Faces' arrays are indexed by id (row 0: nothing). ``camera`` is the eye in world
     coordinates, ``axes`` rows its right, up and forward vectors; ``normals`` face the
     camera. A textured face (``texture`` >= 0) is a balise top: its (u, v) in [0, 1) pick a
-    cell of ``snow_masks[texture]``, and a cell under snow shows snow."""
+    cell of ``snow_masks[texture]``, and a cell under snow shows snow.
+
+    Only rows ``row_begin`` to ``row_end`` (exclusive): bands shaded apart, each with its own
+    counts and boxes, summed and spanned after, give the frame shaded whole."""
     height, width = ids.shape
     half_w = width / 2.0
     half_h = height / 2.0
@@ -255,7 +262,7 @@ def shade(  # type: ignore[no-untyped-def]
     lamp_reach = math.sqrt(lamp_candela / (0.002 * daylight)) + 2.0 if daylight > 0 else 1e300
     mask_u = snow_masks.shape[1]
     mask_v = snow_masks.shape[2]
-    for r in range(height):
+    for r in range(row_begin, row_end):
         yr = -(r + 0.5 - half_h) / focal
         for col in range(width):
             face = ids[r, col]
@@ -434,22 +441,34 @@ DEVIATES = np.random.default_rng(20240601).standard_normal(65536)
 
 
 @_jit
-def finish(image, scale, per_electron, electrons_per_unit, read_noise_e, key, table, out):  # type: ignore[no-untyped-def]
+def finish(  # type: ignore[no-untyped-def]
+    image,
+    scale,
+    per_electron,
+    electrons_per_unit,
+    read_noise_e,
+    key,
+    table,
+    out,
+    row_begin,
+    row_end,
+):
     """``out`` (uint8) = ``image`` * ``scale`` with sensor noise when ``per_electron`` > 0:
     a pixel at value y collected y * ``electrons_per_unit`` photo-electrons; shot noise
     (their square root) and read noise (``read_noise_e``) in electrons, times
     ``per_electron`` (digital numbers per electron, the gain), the deviation looked up per
     quarter DN of the level. Each pixel's three normal
     deviates are picked from ``table`` (65536 of them) by 16-bit parts of a hash of ``key``
-    and the pixel's index, so the noise is the same for the same key."""
-    height, width = image.shape[0], image.shape[1]
+    and the pixel's index, so the noise is the same for the same key (and for a band of rows
+    ``row_begin`` to ``row_end``, the rows this call finishes, as for the whole frame)."""
+    width = image.shape[1]
     mix = np.uint64(key)
     read2 = read_noise_e * read_noise_e
     # the noise's standard deviation [DN] by level, every quarter DN up to full scale
     sigma = np.empty(1025)
     for i in range(1025):
         sigma[i] = per_electron * math.sqrt(i / 4.0 * electrons_per_unit + read2)
-    for r in range(height):
+    for r in range(row_begin, row_end):
         for c in range(width):
             word = np.uint64(0)
             if per_electron > 0.0:

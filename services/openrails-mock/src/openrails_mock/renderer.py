@@ -45,6 +45,9 @@ from __future__ import annotations
 
 import io
 import math
+import time
+from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from functools import lru_cache
 from typing import Any
@@ -340,18 +343,28 @@ class Renderer:
     """Colour and depth frames of ``scene`` from a camera on ``mount`` under ``conditions``."""
 
     def __init__(
-        self, scene: Scene, mount: Mount | None = None, conditions: Conditions | None = None
+        self,
+        scene: Scene,
+        mount: Mount | None = None,
+        conditions: Conditions | None = None,
+        *,
+        threads: int = 1,
     ) -> None:
         self.scene = scene
         self.mount = mount or Mount()
         self.conditions = conditions or Conditions()
+        self.bands = _Bands(threads)
+        """How the per-pixel kernels share a frame's rows out (``threads``: 1 or 2; the
+        bytes are the same either way)."""
         self._balise_looks: dict[int, tuple[npt.NDArray[np.float64], list[int]]] = {}
         self._snow_masks: list[npt.NDArray[np.uint8]] = []
         self._sun: FloatArray | None = None
 
     def with_conditions(self, conditions: Conditions) -> Renderer:
-        """The same scene and mount under other conditions."""
-        return Renderer(self.scene, self.mount, conditions)
+        """The same scene and mount under other conditions (and the same threads)."""
+        renderer = Renderer(self.scene, self.mount, conditions)
+        renderer.bands = self.bands
+        return renderer
 
     # --- the camera ------------------------------------------------------------------------
 
@@ -386,7 +399,7 @@ class Renderer:
             pose, camera, distance_m, RANGE_M, objects, light.sun if light.shadows else None
         )
         k = _Prepared(faces, pose, camera)
-        ids, inverse_z = k.rasterise()
+        ids, inverse_z = k.rasterise(self.bands)
         height, width = camera.height, camera.width
         shadow = np.zeros((height, width), dtype=np.uint8)
         if light.shadows and faces.casters:
@@ -399,7 +412,7 @@ class Renderer:
         masks = np.stack(self._snow_masks) if self._snow_masks else np.zeros((1, 1, 1), np.uint8)
         lamp, lamp_axis = self._headlight(distance_m)
         extinction = c.extinction_per_m
-        raster.shade(
+        shaded = (
             ids,
             inverse_z,
             k.focal,
@@ -425,10 +438,8 @@ class Renderer:
             light.airlight,
             self._sky(pose, camera, light, extinction),
             radiance,
-            pixels,
-            snowed,
-            boxes,
         )
+        self.bands.shade(shaded, height, pixels, snowed, boxes)
         full = np.zeros(count, dtype=np.int64)
         if count:
             raster.coverage(k.quads, k.objects[1:], count, width, height, k.focal, NEAR_M, full)
@@ -438,7 +449,9 @@ class Renderer:
         self._precipitation(radiance, camera, view, light)
         out = np.empty((height, width, 3), dtype=np.uint8)
         per_electron = gain * 255.0 / c.full_well_e if c.noise else 0.0
-        raster.finish(
+        self.bands.run(
+            raster.finish,
+            height,
             radiance,
             exposure_ms * gain,
             per_electron,
@@ -480,7 +493,7 @@ class Renderer:
         pose = self.pose(distance_m)
         faces = self._faces(pose, camera, distance_m, max_distance_m, _Objects(), None)
         k = _Prepared(faces, pose, camera)
-        ids, inverse_z = k.rasterise()
+        ids, inverse_z = k.rasterise(self.bands)
         frame = np.empty((camera.height, camera.width, 3), dtype=np.uint16)
         raster.depth_words(
             ids, inverse_z, k.normals_camera, k.codes, k.focal, max_distance_m, frame
@@ -1074,6 +1087,79 @@ def _tree_quads(
     return stems, crowns
 
 
+class _Bands:
+    """A frame's rows shared out between the calling thread and, with two threads, one helper
+    thread. The per-pixel kernels (rasterise, shade, finish) compute a pixel from its own row
+    alone and release the GIL, so two bands run side by side and give the bytes the whole
+    frame gives. Where the rows split follows where the time went the frame before (a row of
+    sky costs less than a row of track): that moves the cost between the threads, never a
+    byte."""
+
+    def __init__(self, threads: int) -> None:
+        if threads not in (1, 2):
+            raise ValueError(f"render threads must be 1 or 2, not {threads}")
+        self.threads = threads
+        self._helper = (
+            ThreadPoolExecutor(1, thread_name_prefix="render-band") if threads == 2 else None
+        )
+        self._split: dict[str, float] = {}
+        """Each kernel's share of the rows the calling thread takes (the top ones)."""
+
+    def run(self, kernel: Callable[..., None], height: int, *args: Any) -> None:
+        """``kernel(*args, row_begin, row_end)`` over rows 0 to ``height``."""
+        self._two(kernel, height, args, args)
+
+    def shade(
+        self,
+        args: tuple[Any, ...],
+        height: int,
+        pixels: npt.NDArray[np.int64],
+        snowed: npt.NDArray[np.int64],
+        boxes: npt.NDArray[np.int64],
+    ) -> None:
+        """``raster.shade`` over rows 0 to ``height``; each band counts its objects' pixels
+        and spans their boxes apart, and the counts are summed and the boxes joined after."""
+        if self._helper is None:
+            self._two(raster.shade, height, (*args, pixels, snowed, boxes), ())
+            return
+        counted = (np.zeros_like(pixels), np.zeros_like(snowed), boxes.copy())
+        self._two(raster.shade, height, (*args, pixels, snowed, boxes), (*args, *counted))
+        pixels += counted[0]
+        snowed += counted[1]
+        np.minimum(boxes[:, :2], counted[2][:, :2], out=boxes[:, :2])
+        np.maximum(boxes[:, 2:], counted[2][:, 2:], out=boxes[:, 2:])
+
+    def _two(
+        self,
+        kernel: Callable[..., None],
+        height: int,
+        mine: tuple[Any, ...],
+        theirs: tuple[Any, ...],
+    ) -> None:
+        if self._helper is None:
+            kernel(*mine, 0, height)
+            return
+        name = getattr(kernel, "__name__", "")
+        share = self._split.get(name, 0.5)
+        split = min(max(round(height * share), 1), height - 1)
+        began = time.perf_counter()
+        other = self._helper.submit(_timed, kernel, (*theirs, split, height))
+        kernel(*mine, 0, split)
+        took = time.perf_counter() - began
+        their_took = other.result()
+        # the rows each thread would take to finish together, at this frame's cost per row
+        top, bottom = took / split, their_took / (height - split)
+        if top > 0.0 and bottom > 0.0:
+            balanced = bottom / (top + bottom)
+            self._split[name] = min(max((share + balanced) / 2.0, 0.1), 0.9)
+
+
+def _timed(kernel: Callable[..., None], args: tuple[Any, ...]) -> float:
+    began = time.perf_counter()
+    kernel(*args)
+    return time.perf_counter() - began
+
+
 class _Prepared:
     """The faces in drawing order, in camera coordinates, as the kernels take them."""
 
@@ -1107,10 +1193,12 @@ class _Prepared:
         self.axes = np.stack([pose.right, pose.up, pose.forward])
         self._colours = np.concatenate(faces.colours)[rank]
 
-    def rasterise(self) -> tuple[npt.NDArray[np.int32], npt.NDArray[np.float64]]:
+    def rasterise(self, bands: _Bands) -> tuple[npt.NDArray[np.int32], npt.NDArray[np.float64]]:
         ids = np.empty((self.camera.height, self.camera.width), dtype=np.int32)
         inverse_z = np.empty((self.camera.height, self.camera.width), dtype=np.float64)
-        raster.rasterise(
+        bands.run(
+            raster.rasterise,
+            self.camera.height,
             self.quads,
             self.background,
             self.camera.width,
