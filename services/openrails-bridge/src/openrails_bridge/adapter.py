@@ -422,14 +422,17 @@ class OpenRailsAdapter(Adapter):
 
     async def _fetch_frames(self, time_s: float, *, call: str = "step") -> dict[str, bytes]:
         """Every sensor's current frame as a serialized Image, fetched side by side; each
-        colour sensor's labels right after its frame (into ``_labels``)."""
+        colour sensor's labels beside its frame (into ``_labels``)."""
         frames = await _together(*(self._frame_and_labels(s, time_s, call) for s in self.sensors))
         return {sensor.name: frame for sensor, frame in zip(self.sensors, frames, strict=True)}
 
     async def _frame_and_labels(self, sensor: Sensor, time_s: float, call: str) -> bytes:
-        frame = await self._frame(sensor, time_s, call)
-        if sensor.labelled:
-            self._labels[sensor.name] = await self._frame_labels(sensor, time_s, call)
+        if not sensor.labelled:
+            return await self._frame(sensor, time_s, call)
+        # side by side: OpenRails renders the frame once and answers both from that render
+        frame, self._labels[sensor.name] = await _together(
+            self._frame(sensor, time_s, call), self._frame_labels(sensor, time_s, call)
+        )
         return frame
 
     async def _frame_labels(self, sensor: Sensor, time_s: float, call: str) -> bytes:
