@@ -20,6 +20,7 @@ from collections.abc import Mapping
 from pathlib import Path
 
 import numpy as np
+import pyarrow.parquet as pq
 import pytest
 from PIL import Image as PILImage
 
@@ -116,6 +117,22 @@ def test_coupler_run_writes_the_perception_report(tmp_path: Path) -> None:
     ]
     written = json.loads((out / "perception-report.json").read_text())
     assert written["recall"] == report["recall"] and len(written["balises"]) == 3
+    # the Parquet table holds the CSV's rows, typed, an empty cell as null
+    table = pq.read_table(out / "perception-detections.parquet")
+    with (out / "perception-detections.csv").open(newline="") as file:
+        rows = list(csv.DictReader(file))
+    assert table.num_rows == len(rows) == 5
+    kinds = {"sensor": "string", "outcome": "string", "frame": "string", "left": "int64",
+             "balise_id": "int64", "error_m": "double", "time_s": "double"}  # fmt: skip
+    for name, kind in kinds.items():
+        assert str(table.schema.field(name).type) == kind, name
+    for name in table.column_names:
+        values = table.column(name).to_pylist()
+        for cell, value in zip((r[name] for r in rows), values, strict=True):
+            if cell == "":
+                assert value in (None, ""), (name, value)
+            else:
+                assert value == type(value)(cell), (name, cell, value)
     assert (out / "perception-report.csv").read_text().count("\n") == 4  # header + 3 balises
 
 

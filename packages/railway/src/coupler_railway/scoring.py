@@ -721,9 +721,30 @@ def _write_parquet(path: Path, rows: Sequence[DetectionRow]) -> Path | None:
         import pyarrow.parquet as pq
     except ImportError:
         return None
-    columns = {f.name: [getattr(r, f.name) for r in rows] for f in fields(DetectionRow)}
-    pq.write_table(pa.table(columns), path)
+    named = fields(DetectionRow)
+    columns = [_arrow_column(pa, [getattr(r, f.name) for r in rows], str(f.type)) for f in named]
+    pq.write_table(pa.Table.from_arrays(columns, names=[f.name for f in named]), path)
     return path
+
+
+def _arrow_column(pa: Any, values: list[Any], kind: str) -> Any:
+    """One typed column from its buffers. ``pa.array`` of Python values would import pandas
+    to ask whether they are pandas' (half a second of every run that writes a report)."""
+    import numpy as np
+
+    if kind == "str":
+        data = [v.encode() for v in values]
+        offsets = np.cumsum([0, *map(len, data)], dtype=np.int32)
+        return pa.Array.from_buffers(
+            pa.string(), len(data), [None, pa.py_buffer(offsets), pa.py_buffer(b"".join(data))]
+        )
+    numbers = np.array([0 if v is None else v for v in values],
+                       dtype=np.float64 if kind.startswith("float") else np.int64)  # fmt: skip
+    valid = np.packbits(np.array([v is not None for v in values], bool), bitorder="little")
+    arrow_type = pa.float64() if kind.startswith("float") else pa.int64()
+    return pa.Array.from_buffers(
+        arrow_type, len(values), [pa.py_buffer(valid), pa.py_buffer(numbers)]
+    )
 
 
 def markdown(report: Report) -> str:
