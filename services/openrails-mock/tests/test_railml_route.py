@@ -18,6 +18,7 @@ from coupler_railway import load_infrastructure, load_network
 from coupler_railway.openrails.export import export_route
 from coupler_railway.openrails.world import WorldFrame
 from openrails_mock.config import MockConfig
+from openrails_mock.world import ROUTE_CACHE, open_world
 
 from .support import Serve, body
 
@@ -123,3 +124,36 @@ async def test_exported_junction_left_and_right(
     assert train["rotation"] == pytest.approx(
         math.remainder(math.radians(expected.heading_deg), math.tau), abs=1e-3
     )
+
+
+def test_an_exported_route_is_kept_and_exported_anew_when_the_file_changes(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    cache = tmp_path / "cache"
+    monkeypatch.setenv(ROUTE_CACHE, str(cache))
+    railml = tmp_path / "line.railml"
+    railml.write_bytes(TEST_LINE.read_bytes())
+    first = open_world(None, railml=railml)
+    [kept] = cache.iterdir()  # one folder, no partial one left
+    assert kept.stat().st_mode & 0o777 == 0o700
+    tdb = kept / "line" / "line.tdb"
+    written = tdb.stat().st_mtime_ns
+    again = open_world(None, railml=railml)  # from the cache: not written again
+    assert list(cache.iterdir()) == [kept] and tdb.stat().st_mtime_ns == written
+    assert again.folder.folder == first.folder.folder == kept / "line"
+    assert (again.player.node, again.player.offset) == (first.player.node, first.player.offset)
+    railml.write_text(railml.read_text().replace("SYNTHETIC", "Synthetic"), encoding="utf-8")
+    open_world(None, railml=railml)  # another file: exported anew, beside the first
+    assert len(list(cache.iterdir())) == 2
+
+
+def test_a_cache_that_cannot_be_written_exports_to_a_temporary_folder(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    blocked = tmp_path / "a-file"
+    blocked.write_text("not a folder")
+    monkeypatch.setenv(ROUTE_CACHE, str(blocked / "cache"))
+    world = open_world(None, railml=TEST_LINE)
+    assert world.player.node >= 0 and blocked.read_text() == "not a folder"
+    monkeypatch.setenv(ROUTE_CACHE, "")  # no cache at all
+    assert open_world(None, railml=TEST_LINE).player.node == world.player.node

@@ -11,6 +11,9 @@ index, and every train's route is replanned beyond the track it stands on.
 
 from __future__ import annotations
 
+import hashlib
+import os
+import shutil
 import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -156,14 +159,72 @@ def open_world(
     path: Path | None = None,
     trains: Path | None = None,
 ) -> TrackWorld:
-    """Load the route folder ``route`` (or export ``railml`` to a temporary one first)."""
+    """Load the route folder ``route`` (or export ``railml`` to one first: the one exported
+    before from the same file by the same exporter when the cache holds it)."""
     if route is None:
         if railml is None:
             raise ValueError("give a route folder or a railML file")
+        cached = _cached_export(railml)
+        if cached is not None:
+            return _open(cached, path, trains, railml_mode=True)
         with tempfile.TemporaryDirectory(prefix="openrails-mock-") as tmp:
             exported = _export(railml, Path(tmp) / railml.stem.replace(" ", "_"))
             return _open(exported, path, trains, railml_mode=True)
     return _open(route, path, trains, railml_mode=False)
+
+
+ROUTE_CACHE = "OPENRAILS_MOCK_ROUTE_CACHE"
+"""The environment variable naming the folder of exported routes (empty: no cache)."""
+
+
+def route_cache() -> Path | None:
+    """Where exported routes are kept: ``$OPENRAILS_MOCK_ROUTE_CACHE``, else the user's cache
+    folder (``$XDG_CACHE_HOME`` or ``~/.cache``) ``/coupler/openrails-mock-routes``."""
+    named = os.environ.get(ROUTE_CACHE)
+    if named is not None:
+        return Path(named) if named else None
+    base = os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache"
+    return Path(base) / "coupler" / "openrails-mock-routes"
+
+
+def _cached_export(railml: Path) -> Path | None:
+    """``railml``'s route folder from the cache, exported into it first when missing; None
+    when there is no cache to use (unset, not writable: the caller exports to a temporary
+    folder). The key is the railML file's bytes and the exporter's own sources, so a changed
+    file or a changed exporter exports anew; a folder appears whole (renamed into place) or
+    not at all, and a cache folder is the user's alone (0700)."""
+    root = route_cache()
+    if root is None:
+        return None
+    import coupler_railway
+
+    try:
+        digest = hashlib.sha256(railml.read_bytes())
+    except OSError:
+        return None  # the export says what is wrong with the file
+    for source in sorted(Path(coupler_railway.__file__).parent.rglob("*.py")):
+        digest.update(source.read_bytes())
+    folder = root / digest.hexdigest()[:32]
+    route = folder / railml.stem.replace(" ", "_")
+    if route.is_dir():
+        return route
+    try:
+        root.mkdir(mode=0o700, parents=True, exist_ok=True)
+        partial = Path(tempfile.mkdtemp(prefix=".partial-", dir=root))
+    except OSError:
+        return None
+    try:
+        _export(railml, partial / route.name)
+        try:
+            partial.rename(folder)
+        except OSError:  # another mock put the same export there first
+            if not route.is_dir():
+                raise
+    except OSError:
+        return None
+    finally:
+        shutil.rmtree(partial, ignore_errors=True)
+    return route
 
 
 def _export(railml: Path, out: Path) -> Path:
