@@ -97,8 +97,10 @@ class NativeSteps(StepTransport):
         """The open stream (a ``cs_stream *``)."""
         self._sent: list[Any] = []
         """The pieces of the request under way (``_send``)."""
-        self._read: Callable[[memoryview], Values | None] | None = None
-        """Reads an answer's outputs in C when it is in its plain form (``_answers``)."""
+        self._read: Callable[[memoryview], tuple[Values, float, float] | None] | None = None
+        """Reads an answer's outputs and cost in C when it is in its plain form (``_answers``)."""
+        self.reported: wire.StepCost = (None, None)
+        """What the last answer said its step cost the participant (``wire.step_cost``)."""
 
     def start(self, participant: RemoteParticipant) -> bool:
         capabilities = participant.codec.description.capabilities
@@ -109,7 +111,7 @@ class NativeSteps(StepTransport):
         codec, read = participant.codec, answers()
         if read is not None:
             made = read.AnswerRead(codec.answer_fields(), codec.policy.max_message_bytes)
-            self._read = made.outputs
+            self._read = made.read
         return True
 
     def _open(self, remote: RemoteParticipant) -> Any:
@@ -211,12 +213,15 @@ class NativeSteps(StepTransport):
         """The answer to the request sent; blocks up to the call deadline."""
         assert self._remote is not None
         data = self._answered()
-        if self._read is not None and (outputs := self._read(data)) is not None:
-            return outputs  # the plain answer of every step, read in C
+        if self._read is not None and (found := self._read(data)) is not None:
+            outputs, seconds, waited = found  # the plain answer of every step, read in C
+            self.reported = wire.cost_of(seconds, waited)
+            return outputs
         try:
             response, large = wire.step_answer(data)
         except DecodeError as exc:
             raise self._not_an_answer(exc) from None
+        self.reported = wire.step_cost(response)
         return self._remote.step_outputs(response, large)
 
     def _answer(self) -> pb.DoStepResponse:
