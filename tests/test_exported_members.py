@@ -58,6 +58,7 @@ DECLARED = {
         "Value",
         "Values",
         "ValueType",
+        "waiting",
     ],
     "coupler_orchestrator": [
         "Algorithm",

@@ -5,15 +5,17 @@
  * coupler_orchestrator.master.native_step_channel makes one AnswerRead per remote participant
  * (`fields`: each output channel -> (its VariableBinding field number, the weight of a value's
  * length in a message's size, whether a Real must be finite), from Codec.answer_fields;
- * `max_bytes`: the size the codec allows its values) and calls `outputs(data)` with each
- * answer's bytes.
+ * `max_bytes`: the size the codec allows its values) and calls `read(data)` with each
+ * answer's bytes: (outputs, step_seconds, waited_seconds), the step's cost as the participant
+ * reported it (0.0 where the answer does not say).
  *
- * It reads only the plain form every protobuf library writes: the message holds `outputs` and
- * nothing else (no `terminate`), each binding its `channel` and then one value, each of the
- * field and wire type its channel expects, every string valid UTF-8, every Real finite where it
- * must be, the values within max_bytes. Anything else answers None, and the caller reads the
- * bytes through protobuf and the codec, which read it or say what is wrong with it: the values
- * are the same either way (tests/test_answers.py compares them).
+ * It reads only the plain form every protobuf library writes: the message holds `outputs` and,
+ * anywhere among them, at most `step_seconds` and `waited_seconds` (doubles), nothing else (no
+ * `terminate`), each binding its `channel` and then one value, each of the field and wire type
+ * its channel expects, every string valid UTF-8, every Real finite where it must be, the values
+ * within max_bytes. Anything else answers None, and the caller reads the bytes through protobuf
+ * and the codec, which read it or say what is wrong with it: the values are the same either way
+ * (tests/test_answers.py compares them).
  *
  *   2 real     fixed64 -> float           3 integer  varint -> int (int32, as protobuf cuts it)
  *   4 boolean  varint -> bool (not 0)     5 text     bytes -> str      6 binary  bytes -> bytes
@@ -34,7 +36,7 @@
 
 enum { VARINT = 0, FIXED64 = 1, LEN = 2 };
 enum { CHANNEL = 1, REAL = 2, INTEGER = 3, BOOLEAN = 4, TEXT = 5, BINARY = 6 };
-enum { OUTPUTS = 1 };
+enum { OUTPUTS = 1, STEP_SECONDS = 4, WAITED_SECONDS = 5 };
 
 typedef struct {
     PyObject_HEAD
@@ -129,23 +131,33 @@ done:
     return result;
 }
 
-static PyObject *AnswerRead_outputs(PyObject *self_, PyObject *data) {
+static PyObject *AnswerRead_read(PyObject *self_, PyObject *data) {
     AnswerRead *self = (AnswerRead *)self_;
     Py_buffer view;
     if (PyObject_GetBuffer(data, &view, PyBUF_SIMPLE) < 0) return NULL;
     const unsigned char *at = view.buf, *end = at + view.len;
     PyObject *values = PyDict_New();
     Py_ssize_t size = 0;
+    double cost[2] = {0.0, 0.0}; /* step_seconds, waited_seconds: the last of each counts */
     int read = values != NULL;
     while (read > 0 && at < end) {
         uint64_t key;
         const unsigned char *start;
         Py_ssize_t length;
-        if (!varint(&at, end, &key) || key != (OUTPUTS << 3 | LEN) ||
-            !body(&at, end, &start, &length))
+        if (!varint(&at, end, &key)) {
             read = 0;
-        else
+        } else if (key == (STEP_SECONDS << 3 | FIXED64) || key == (WAITED_SECONDS << 3 | FIXED64)) {
+            if (end - at < 8) {
+                read = 0;
+            } else {
+                memcpy(&cost[(key >> 3) - STEP_SECONDS], at, 8); /* little-endian, as written */
+                at += 8;
+            }
+        } else if (key != (OUTPUTS << 3 | LEN) || !body(&at, end, &start, &length)) {
+            read = 0;
+        } else {
             read = binding(self, start, start + length, values, &size);
+        }
     }
     PyBuffer_Release(&view);
     if (read < 0) {
@@ -156,7 +168,7 @@ static PyObject *AnswerRead_outputs(PyObject *self_, PyObject *data) {
         Py_DECREF(values);
         Py_RETURN_NONE;
     }
-    return values;
+    return Py_BuildValue("(Ndd)", values, cost[0], cost[1]); /* takes `values` */
 }
 
 static void AnswerRead_dealloc(PyObject *self_) {
@@ -211,9 +223,10 @@ static PyObject *AnswerRead_new(PyTypeObject *type, PyObject *args, PyObject *kw
 }
 
 static PyMethodDef AnswerRead_methods[] = {
-    {"outputs", AnswerRead_outputs, METH_O,
-     "outputs(data) -> dict | None: the outputs of a serialized DoStepResponse in its plain "
-     "form, else None"},
+    {"read", AnswerRead_read, METH_O,
+     "read(data) -> (outputs, step_seconds, waited_seconds) | None: a serialized DoStepResponse "
+     "in its plain form (its outputs as a dict, the step's cost as reported, 0.0 where not), "
+     "else None"},
     {NULL, NULL, 0, NULL},
 };
 

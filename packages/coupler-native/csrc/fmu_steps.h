@@ -1,6 +1,7 @@
 /* The native FMU step's interface: what Python prepares and the one call that steps a base
- * step. Declared here only: fmu_steps.c includes it, and the cffi binding reads it (its cdef;
- * so no preprocessor lines here: the includer brings <stdbool.h> and <stddef.h>).
+ * step. Declared here only: fmu_steps.c includes it, and so does its Python face,
+ * fmu_steps_module.c, which builds these structs from what Python gives it (no preprocessor
+ * lines here: the includer brings <stdbool.h> and <stddef.h>).
  *
  * Python (coupler_orchestrator.master.native_fmu_step) fills one ck_member per member, in stepping order:
  * its FMI instance and fmi2DoStep/fmi3DoStep, its setter and getter calls (each a function,

@@ -1,6 +1,6 @@
 // The orchestrator's native step channel (step_streams.h;
-// coupler_orchestrator/master/native_step_channel.py calls it through the cffi binding of that
-// header): a remote member's StepStream driven from the calling thread through a completion
+// coupler_orchestrator/master/native_step_channel.py calls it through its Python face,
+// step_streams_module.c): a remote member's StepStream driven from the calling thread through a completion
 // queue of its own, without gRPC's asyncio integration in between. Messages stay serialized (the Python side encodes DoStepRequest and decodes
 // DoStepResponse), so this file knows the protocol only by the method's name; a request's
 // pieces are sent from the caller's memory, so a camera frame is not copied on its way out.

@@ -1,5 +1,5 @@
-/* The native step channel's interface (step_streams.cc implements it; the cffi binding reads
- * this file as its cdef, so no preprocessor lines here: the includer brings <stddef.h>).
+/* The native step channel's interface (step_streams.cc implements it; step_streams_module.c,
+ * its Python face, calls it; no preprocessor lines here: the includer brings <stddef.h>).
  *
  * A remote member's StepStream, driven from the calling thread. A step is split in two, so
  * that the requests of every member are on the wire before any answer is awaited: cs_send()

@@ -17,6 +17,7 @@ from grpc_health.v1 import health_pb2, health_pb2_grpc
 
 from coupler.channels import Description, RunSetup, Value
 from coupler.client import RemoteParticipant, parse_address
+from coupler.costs import waiting
 from coupler.errors import ParticipantError, ParticipantUnavailable, ScenarioError
 from coupler.examples.gain import GainParticipant
 from coupler.participant import EndRun, HealthReport, Values
@@ -534,3 +535,45 @@ async def test_calls_of_the_run_without_its_secret_are_refused_and_fail_the_run(
     async with RemoteParticipant(gain_server.address) as next_one:  # the participant is free
         await eventually(lambda: next_one.initialize(setup("next")), retry=ParticipantError)
         await next_one.terminate()
+
+
+class Waiting(GainParticipant):
+    """Takes ``own`` seconds of its own per step and waits ``outside`` seconds for an outside
+    program (``waiting()``)."""
+
+    def __init__(self, own: float, outside: float) -> None:
+        super().__init__()
+        self.own, self.outside = own, outside
+
+    async def do_step(self, time: float, step: float, inputs: Mapping[str, Value]) -> Values:
+        await asyncio.sleep(self.own)
+        with waiting():
+            await asyncio.sleep(self.outside)
+        if time >= 1.0:
+            raise EndRun("enough", await super().do_step(time, step, inputs))
+        return await super().do_step(time, step, inputs)
+
+
+@pytest.mark.parametrize("streaming", [False, True])
+async def test_every_answer_says_what_its_step_cost_and_what_it_waited(streaming: bool) -> None:
+    """The runtime measures each step around the participant's ``do_step`` and sends the
+    figure with the outputs (``DoStepResponse.step_seconds``; the part marked with
+    ``waiting()``: ``waited_seconds``), over DoStep and StepStream, on an answer that ends the
+    run too; the client keeps what the last one said (``RemoteParticipant.reported``)."""
+    server = ParticipantServer(Waiting(own=0.03, outside=0.04))
+    await server.start()
+    try:
+        async with RemoteParticipant(server.address, streaming=streaming) as remote:
+            await remote.initialize(setup())
+            assert remote.reported == (None, None)
+            for time in (0.0, 0.5, 1.0):
+                try:
+                    await remote.do_step(time, 0.5, {"u": 1.0})
+                except EndRun:
+                    assert time == 1.0
+                seconds, waited = remote.reported
+                assert seconds is not None and waited is not None
+                assert 0.04 <= waited < seconds and seconds >= 0.07, remote.reported
+            await remote.terminate()
+    finally:
+        await server.stop(grace=0.1)

@@ -1,14 +1,16 @@
 """Coupler's native code, compiled when this wheel was built (nothing compiles at run time):
 
-- ``coupler_native._fmu_steps``: the in-process FMUs' step loop in C (``csrc/fmu_steps.c``),
-  a cffi API-mode module whose ``ffi`` declares the structs of ``csrc/fmu_steps.h``;
+Every module is a CPython extension of the stable ABI (one binding technology):
+
+- ``coupler_native._fmu_steps``: the in-process FMUs' step loop in C (``csrc/fmu_steps.c``,
+  declared by ``csrc/fmu_steps.h``; its Python face ``csrc/fmu_steps_module.c``);
 - ``coupler_native._step_streams``: remote members' StepStream over C++ gRPC
-  (``csrc/step_streams.cc``, declared by ``csrc/step_streams.h``);
+  (``csrc/step_streams.cc``, declared by ``csrc/step_streams.h``; its Python face
+  ``csrc/step_streams_module.c``);
 - ``coupler_native._rows``: results.csv's lines made in one pass, the native FMU step's rows
-  read from its arrays and its row log, step latencies counted (``csrc/rows.c``, a CPython
-  extension of the stable ABI);
+  read from its arrays and its row log, step latencies counted (``csrc/rows.c``);
 - ``coupler_native._answers``: a remote member's step answer read from its bytes
-  (``csrc/answers.c``, the same kind of extension);
+  (``csrc/answers.c``);
 - ``PROXY``: the folder of the proxy FMU's binaries (``CouplerProxy.so``, FMI 2 and 3, its
   gRPC client library and every library they load), which ``coupler export-fmu`` copies
   into each FMU's ``binaries/<platform>/``.

@@ -9,6 +9,7 @@ class AnswerRead:
     a Real must be finite); ``max_bytes`` bounds the weighted sum."""
 
     def __init__(self, fields: dict[str, tuple[int, int, bool]], max_bytes: int) -> None: ...
-    def outputs(self, data: Any) -> dict[str, Any] | None:
-        """The outputs of a serialized DoStepResponse in its plain form (as
-        ``coupler.wire.Codec.decode`` makes them); None for any other."""
+    def read(self, data: Any) -> tuple[dict[str, Any], float, float] | None:
+        """A serialized DoStepResponse in its plain form: its outputs (as
+        ``coupler.wire.Codec.decode`` makes them), its ``step_seconds`` and ``waited_seconds``
+        (0.0 where it does not say); None for any other."""

@@ -26,6 +26,7 @@ if TYPE_CHECKING:
         ValueType,
     )
     from coupler.client import RemoteParticipant
+    from coupler.costs import waiting
     from coupler.errors import (
         ChannelValueError,
         CouplerError,
@@ -81,6 +82,7 @@ _HOMES = {
     "serve": "server",
     "serve_main": "settings",
     "step_end": "grid",
+    "waiting": "costs",
 }
 """Each public name and the module of this package that defines it."""
 
@@ -121,6 +123,7 @@ __all__ = [
     "serve",
     "serve_main",
     "step_end",
+    "waiting",
 ]
 
 

@@ -237,6 +237,9 @@ class RemoteParticipant(Participant):
         """The run's id and secret, carried by every call after Initialize."""
         self._requests: wire.StepRequests | None = None
         """The run's step requests, one prepared message (``step_request_pieces``)."""
+        self.reported: wire.StepCost = (None, None)
+        """What the last step's answer said the step cost the participant, and how much of it
+        it waited for an outside program (``wire.step_cost``)."""
 
     @property
     def metadata(self) -> tuple[tuple[str, str], ...]:
@@ -411,6 +414,7 @@ class RemoteParticipant(Participant):
         outputs = self._response(
             "DoStep", lambda: wire.outputs_from_pb(response, self.codec, large)
         )
+        self.reported = wire.step_cost(response)
         reason = wire.termination_requested(response)
         if reason is not None:
             raise EndRun(reason, outputs)

@@ -47,6 +47,7 @@ from grpc_reflection.v1alpha import reflection
 
 from coupler import durations, ports, wire
 from coupler.channels import Description
+from coupler.costs import StepMeter
 from coupler.errors import (
     ChannelValueError,
     MessageTooLarge,
@@ -281,24 +282,29 @@ class _Servicer(pb_grpc.GRPCComponentServiceServicer):
                 f"step_size={step.step!r}, current_time={step.time!r}",
             )
         run.busy += 1
+        cost = StepMeter()
+        cost.start()
         try:
             outputs = await self.participant.do_step(step.time, step.step, step.inputs)
         except EndRun as end:
+            cost.stop()
             last, reason = end.outputs, end.reason
             log.info("run_end_requested", run_id=run.id, participant=self.name, reason=reason)
             return await _guard(
-                context, lambda: wire.step_response(last, codec, terminate_reason=reason)
+                context,
+                lambda: wire.step_response(last, codec, terminate_reason=reason, cost=cost),
             )
         except Exception as exc:
             await _refuse(context, exc)
         finally:
+            cost.stop()
             run.busy -= 1
             run.last_call = time.monotonic()
         run.reached = step.time + step.step
         try:
             if answers is not None:
-                return answers.answer(outputs)
-            return wire.step_response(outputs, codec)
+                return answers.answer(outputs, cost)
+            return wire.step_response(outputs, codec, cost=cost)
         except Exception as exc:
             await _refuse(context, exc)
 

@@ -30,6 +30,8 @@ if TYPE_CHECKING:
     from google.protobuf.internal.containers import RepeatedCompositeFieldContainer
     from google.protobuf.message import Message
 
+    from coupler.costs import StepMeter
+
     RepeatedBindings = RepeatedCompositeFieldContainer[pb.VariableBinding]
 from coupler.values import (
     DEFAULT_POLICY,
@@ -633,12 +635,19 @@ def answer_pieces(answer: Answer) -> list[bytes]:
 
 
 def step_response(
-    outputs: Mapping[str, object], codec: Codec, *, terminate_reason: str | None = None
+    outputs: Mapping[str, object],
+    codec: Codec,
+    *,
+    terminate_reason: str | None = None,
+    cost: StepMeter | None = None,
 ) -> Answer:
-    """The answer to a step; with ``terminate_reason`` it asks to end the run. Long Binary
-    outputs (``LARGE_BYTES`` or more) are written apart: the answer is then the message without
-    them, serialized, followed by each one's binding (``step_answer`` reads either)."""
+    """The answer to a step; with ``terminate_reason`` it asks to end the run; with ``cost``
+    it says what the step cost the participant (``step_seconds``, ``waited_seconds``). Long
+    Binary outputs (``LARGE_BYTES`` or more) are written apart: the answer is then the message
+    without them, serialized, followed by each one's binding (``step_answer`` reads either)."""
     response, large = _response_apart(outputs, codec)
+    if cost is not None:
+        response.step_seconds, response.waited_seconds = cost.seconds, cost.waited
     if terminate_reason is not None:
         response.terminate = True
         response.terminate_reason = terminate_reason
@@ -743,19 +752,26 @@ class StepAnswers(_Prepared):
         super().__init__(codec, _OUTPUTS)
         self._response: pb.DoStepResponse | None = None
 
-    def answer(self, outputs: Mapping[str, object]) -> Answer:
-        """The answer carrying ``outputs`` (each checked against its channel)."""
+    def answer(self, outputs: Mapping[str, object], cost: StepMeter | None = None) -> Answer:
+        """The answer carrying ``outputs`` (each checked against its channel), and what the
+        step cost the participant (``cost``; else none said)."""
         response = self._response
         if response is None or not self._fits(outputs):
-            return self._prepare(outputs)
+            return self._prepare(outputs, cost)
         large = self._set(outputs)
         if large is None:
-            return self._prepare(outputs)
+            return self._prepare(outputs, cost)
+        if cost is not None:
+            response.step_seconds, response.waited_seconds = cost.seconds, cost.waited
+        else:
+            response.step_seconds = response.waited_seconds = 0.0
         return _joined(response, large) if large else response
 
-    def _prepare(self, outputs: Mapping[str, object]) -> Answer:
+    def _prepare(self, outputs: Mapping[str, object], cost: StepMeter | None) -> Answer:
         self._response = None  # until the new one is complete
         response, large = _response_apart(outputs, self._codec)
+        if cost is not None:
+            response.step_seconds, response.waited_seconds = cost.seconds, cost.waited
         self._prepared(response.outputs, large)
         self._response = response
         return _joined(response, large) if large else response
@@ -802,6 +818,26 @@ def outputs_from_pb(
 ) -> dict[str, Value]:
     """The outputs an answer carries, with those ``step_answer`` cut out of it (``large``)."""
     return codec.decode(response.outputs, _OUTPUTS, large)
+
+
+StepCost: TypeAlias = tuple[float | None, float | None]
+"""What a step cost the participant by its own account, and how much of it it waited for an
+outside program [s] (``DoStepResponse.step_seconds``, ``waited_seconds``); None for what it
+did not say."""
+
+
+def step_cost(response: pb.DoStepResponse) -> StepCost:
+    """What the answer says its step cost the participant (``cost_of``)."""
+    return cost_of(response.step_seconds, response.waited_seconds)
+
+
+def cost_of(seconds: float, waited: float) -> StepCost:
+    """The figures of an answer as reported: each None when 0 (not reported), negative or not
+    finite."""
+    return (
+        seconds if 0 < seconds < math.inf else None,
+        waited if 0 < waited < math.inf else None,
+    )
 
 
 def termination_requested(response: pb.DoStepResponse) -> str | None:

@@ -50,6 +50,7 @@ import structlog
 
 from coupler.adapter import Adapter
 from coupler.channels import RunSetup, Value
+from coupler.costs import waiting
 from coupler.errors import ChannelValueError, ParticipantUnavailable, ScenarioError
 from coupler.grid import step_end
 from coupler.participant import HealthReport
@@ -191,22 +192,23 @@ class OpenRailsAdapter(Adapter):
 
     async def advance(self, time: float, step: float) -> None:
         end = step_end(time, step)  # on the run's decimal grid, as the orchestrator records it
-        if self.settings.mode == "lockstep":
-            for _ in range(self._steps(step)):
-                self._train = await self._post_lockstep()
-            assert self._train is not None  # a step is one post or more
-            self._map, self._frames = await _together(
-                self._map_of(self._train), self._fetch_frames(end)
-            )
-            self._stale = False
-        else:
-            answer = await self.client.send(
-                "POST", "/API/CABCONTROLS", body=[self._control(t) for t in self._controls]
-            )
-            self.client.check(answer, "POST", "/API/CABCONTROLS")
-            wall_end = self._wall_start + (end - self._sim_start) / self.settings.speedup
-            await asyncio.sleep(max(0.0, wall_end - wallclock.monotonic()))
-            await self._poll()
+        with waiting():  # OpenRails' time (its physics, its rendering): summary.json waited_ms
+            if self.settings.mode == "lockstep":
+                for _ in range(self._steps(step)):
+                    self._train = await self._post_lockstep()
+                assert self._train is not None  # a step is one post or more
+                self._map, self._frames = await _together(
+                    self._map_of(self._train), self._fetch_frames(end)
+                )
+                self._stale = False
+            else:
+                answer = await self.client.send(
+                    "POST", "/API/CABCONTROLS", body=[self._control(t) for t in self._controls]
+                )
+                self.client.check(answer, "POST", "/API/CABCONTROLS")
+                wall_end = self._wall_start + (end - self._sim_start) / self.settings.speedup
+                await asyncio.sleep(max(0.0, wall_end - wallclock.monotonic()))
+                await self._poll()
         self._time = end
 
     async def get_state(self) -> Mapping[str, Any]:

@@ -125,15 +125,28 @@ class Observer:
         """How long each member's step just taken lasted [s], aligned with ``RunInfo.members``;
         None for a member that was not due."""
 
+    def costed(self, seconds: Sequence[float | None], waited: Sequence[float | None]) -> None:
+        """What each member's step just taken cost the member itself [s], aligned with
+        ``RunInfo.members`` (after ``timed``): its own account (a remote participant's
+        ``DoStepResponse.step_seconds``; a step computed in this process: its latency), and
+        how much of that it waited for an outside program it fronts (``waited_seconds``);
+        None for a member that was not due or did not say."""
+
     def stepped_batch(self, steps: Steps) -> None:
-        """Several communication points at once, in order: ``stepped`` (and ``timed``, when
-        overridden) for each, by default. Override it where one call for all of them does the
-        same in less time."""
+        """Several communication points at once, in order: ``stepped`` (and ``timed`` and
+        ``costed``, when overridden) for each, by default. Override it where one call for all
+        of them does the same in less time. (Every member of such a batch computes in this
+        process: its cost is its latency.)"""
         timed = type(self).timed is not Observer.timed
+        costed = type(self).costed is not Observer.costed
         for j, time in enumerate(steps.times):
             self.stepped(time, steps.row(j))
-            if timed:
-                self.timed(steps.seconds(j))
+            if timed or costed:
+                seconds = steps.seconds(j)
+                if timed:
+                    self.timed(seconds)
+                if costed:
+                    self.costed(seconds, [None] * len(seconds))
 
     def closing(self, end: RunEnd) -> None:
         """The run has ended (``end``, as far as the steps go): write what is still buffered.

@@ -2,7 +2,8 @@
 step channel) gives exactly what protobuf and the codec give (``wire.step_answer``, then
 ``RemoteParticipant.step_outputs``' decoding), or None, and the caller reads it that way:
 
-    answer bytes --AnswerRead.outputs--> dict  (the plain form: outputs only, channel + value)
+    answer bytes --AnswerRead.read--> (dict, step_seconds, waited_seconds)  (the plain form:
+                 |                    outputs, each channel + value, and the step's cost only)
                  \\-> None --> step_answer --> Codec.decode --> dict, EndRun or the error
 
 Every answer a participant's runtime writes (``wire.StepAnswers``) is in the plain form; any
@@ -21,6 +22,7 @@ from hypothesis import strategies as st
 
 from coupler import values, wire
 from coupler.channels import Causality, Channel, Description, ValueType
+from coupler.costs import StepMeter
 from coupler_orchestrator.master import native_step_channel
 
 from ..support import require_native
@@ -68,15 +70,24 @@ def key(found: dict[str, Any]) -> list[tuple[str, type, Any]]:
     ]
 
 
-def protobufs(data: bytes, codec: wire.Codec) -> dict[str, Any] | None:
-    """What the native step channel makes of an answer without C: its outputs, or None when
-    it is refused or asks to end the run."""
+def protobufs(data: bytes, codec: wire.Codec) -> tuple[dict[str, Any], float, float] | None:
+    """What the native step channel makes of an answer without C: its outputs and the step's
+    cost as reported, or None when it is refused or asks to end the run."""
     try:
         response, large = wire.step_answer(data)
         found = wire.outputs_from_pb(response, codec, large)
     except Exception:  # protobuf's DecodeError, the codec's refusals (CouplerError)
         return None
-    return None if wire.termination_requested(response) is not None else found
+    if wire.termination_requested(response) is not None:
+        return None
+    return found, response.step_seconds, response.waited_seconds
+
+
+def same(found: tuple[dict[str, Any], float, float], expected: Any) -> bool:
+    """The same outputs (``key``) and the same cost figures, bit for bit."""
+    assert expected is not None
+    (outputs, *cost), (outputs_, *cost_) = found, expected
+    return key(outputs) == key(outputs_) and struct.pack("<dd", *cost) == struct.pack("<dd", *cost_)
 
 
 def reader(policy: values.ValuePolicy = values.DEFAULT_POLICY) -> tuple[Any, wire.Codec]:
@@ -84,7 +95,7 @@ def reader(policy: values.ValuePolicy = values.DEFAULT_POLICY) -> tuple[Any, wir
     if native is None:
         require_native(native_step_channel.answers)
     codec = wire.Codec(DESCRIPTION, policy)
-    return native.AnswerRead(codec.answer_fields(), policy.max_message_bytes).outputs, codec
+    return native.AnswerRead(codec.answer_fields(), policy.max_message_bytes).read, codec
 
 
 POLICIES = st.sampled_from(
@@ -96,25 +107,31 @@ POLICIES = st.sampled_from(
 )
 
 
+COSTS = st.sampled_from([0.0, 0.25, -1.0, math.nan]) | st.floats(width=64)
+
+
 @settings(max_examples=400, deadline=None)
 @given(
     outputs=st.lists(bindings(), max_size=8),
     terminate=st.sampled_from([None, "", "enough"]),
+    cost=st.tuples(COSTS, COSTS),
     policy=POLICIES,
 )
 def test_any_answer_is_read_as_protobuf_reads_it_or_left_to_it(
-    outputs: list[wire.pb.VariableBinding], terminate: str | None, policy: values.ValuePolicy
+    outputs: list[wire.pb.VariableBinding],
+    terminate: str | None,
+    cost: tuple[float, float],
+    policy: values.ValuePolicy,
 ) -> None:
     read, codec = reader(policy)
     response = wire.pb.DoStepResponse(outputs=outputs)
+    response.step_seconds, response.waited_seconds = cost
     if terminate is not None:
         response.terminate, response.terminate_reason = True, terminate
     data = response.SerializeToString()
     found = read(memoryview(data))
     if found is not None:
-        expected = protobufs(data, codec)
-        assert expected is not None, (outputs, found)
-        assert key(found) == key(expected)
+        assert same(found, protobufs(data, codec)), (outputs, found)
 
 
 @settings(max_examples=400, deadline=None)
@@ -125,8 +142,7 @@ def test_any_bytes_are_read_as_protobuf_reads_them_or_left_to_it(
     read, codec = reader(policy)
     found = read(data)
     if found is not None:
-        expected = protobufs(data, codec)
-        assert expected is not None and key(found) == key(expected)
+        assert same(found, protobufs(data, codec))
 
 
 @given(
@@ -139,15 +155,17 @@ def test_any_bytes_are_read_as_protobuf_reads_them_or_left_to_it(
 )
 @example(speed=1.0, count=2, mode=3, on=True, label="x", data=bytes(range(256)) * 300)  # apart
 def test_every_answer_a_participant_writes_is_read_in_c(**outputs: Any) -> None:
-    """What the runtime answers (``StepAnswers``: the plain form) is read in C, the values
-    protobuf gives; a negative Integer (ten bytes on the wire) as well."""
+    """What the runtime answers (``StepAnswers``: the plain form, with the step's cost) is
+    read in C, the values protobuf gives; a negative Integer (ten bytes on the wire) as well."""
     read, codec = reader()
     answers = wire.StepAnswers(codec)
-    for step in (outputs, {**outputs, "count": -1}):
-        data = wire.serialized(answers.answer(step))  # long Binary values written apart too
+    cost = StepMeter()
+    for k, step in enumerate((outputs, {**outputs, "count": -1})):
+        cost.seconds, cost.waited = 0.125 * (k + 1), 0.0625 * k  # as ``stop`` measures them
+        data = wire.serialized(answers.answer(step, cost))  # long Binary values apart too
         found = read(memoryview(data))
-        assert found is not None
-        assert key(found) == key(protobufs(data, codec) or {})
+        assert found is not None and found[1:] == (cost.seconds, cost.waited)
+        assert same(found, protobufs(data, codec))
 
 
 @pytest.mark.parametrize(

@@ -166,7 +166,7 @@ def test_the_row_read_in_c_is_the_row_sliced_in_python(
 
     def both(self: kernel.Kernel) -> list[Any]:
         row = read(self)
-        sliced = self.sliced_row()
+        sliced = self.sliced.row()
         assert [(type(v), v) for v in row] == [(type(v), v) for v in sliced]
         compared.append(row)
         return row
@@ -178,7 +178,7 @@ def test_the_row_read_in_c_is_the_row_sliced_in_python(
         ssd = chain(tmp_path / source, fmus, source, ROUTES)
         outcome = coupler("run", ssd, "--out", tmp_path / source / "out", *PARAMS)
         assert outcome.code == 0, outcome.err
-    assert all(made is not None and made._read is not None for made in prepared)
+    assert all(made is not None and made.reader is not made.sliced for made in prepared)
     assert len(compared) == 2 * 201  # t = 0 .. 2 s, twice
     assert {type(v) for v in compared[-1]} == {float, int, bool, str}
 

@@ -27,7 +27,6 @@ from hypothesis import strategies as st
 from coupler_orchestrator.master import native_fmu_step as kernel
 from coupler_orchestrator.model import TimeGrid
 from coupler_orchestrator.observer import Column
-from coupler_orchestrator.outputs import latency
 from coupler_orchestrator.outputs.csv import native_row_format
 
 from ..support import require_native
@@ -73,6 +72,12 @@ def key(value: Any) -> Any:
     if isinstance(value, float):
         return float, struct.pack("<d", value)
     return type(value), value
+
+
+def arrays() -> tuple[Any, Any, Any]:
+    """The arrays a step writes: each member's timing, the watchdog's (nothing under way) and
+    the stop's."""
+    return (ctypes.c_double * 1)(), (ctypes.c_double * 3)(-1.0, 0, 0), (ctypes.c_int * 3)()
 
 
 class Member:
@@ -128,35 +133,27 @@ def test_the_log_holds_what_one_step_per_call_reads(
     if native is None or rows_module is None:
         require_native(kernel.library)
         require_native(kernel.rows)
-    ffi, lib = native.ffi, native.lib
     codes, rows = drawn
     member = Member(codes, rows, fail_at)
-    members = ffi.new("ck_member[]", 1)
-    members[0].do_step = ffi.cast("void *", ctypes.cast(member.function, ctypes.c_void_p).value)
-    members[0].version, members[0].step, members[0].slot = 2, step, 0
     addresses = [ctypes.addressof(slot) for slot in member.slots]
-    cells = ffi.new(
-        "ck_cell[]",
-        [(ffi.cast("void *", a), c.encode()) for a, c in zip(addresses, codes, strict=True)],
-    )
-    log = ffi.gc(lib.ck_log_new(len(codes), cells, 1, capacity), lib.ck_log_free)
-    read = rows_module.RowLog(int(ffi.cast("uintptr_t", log)), log)
-    timing, watch, stop = (
-        ffi.new("double[1]"),
-        ffi.new("double[3]", [-1.0, 0, 0]),
-        ffi.new("int[3]"),
+    log = native.Log(list(zip(addresses, codes, strict=True)), 1, capacity)
+    read = rows_module.RowLog(log.address, log)
+    kept = _, watch, stop = arrays()
+    function = ctypes.cast(member.function, ctypes.c_void_p).value or 0
+    members = native.Members(
+        [(0, function, step, 2, 0, [], [], [])], *map(ctypes.addressof, kept), True
     )
     grid = TimeGrid(start=start, step=step, steps=k0 + len(rows))
     exact = grid.in_doubles()
     assert exact is not None
 
-    index = lib.ck_steps(members, 1, 1, *exact, k0, len(rows), 60.0, timing, watch, stop, log)
+    index = members.steps(*exact, k0, len(rows), 60.0, log)
 
     done = min(len(rows), capacity, len(rows) if fail_at is None else fail_at)
     if fail_at is not None and fail_at < min(len(rows), capacity):
-        assert index == 0 and list(stop) == [lib.CK_CALL_STEP, 0, 3]
+        assert index == 0 and list(stop) == [native.CK_CALL_STEP, 0, 3]
     else:
-        assert index == lib.CK_DONE
+        assert index == native.CK_DONE
     assert len(read) == done
     assert member.times == [grid.time(k0 + j) for j in range(member.stepped)]
     assert read.times() == [grid.time(k0 + j + 1) for j in range(done)]
@@ -187,13 +184,12 @@ def test_lines_are_none_where_a_column_is_not_made_in_c() -> None:
     if native is None or rows_module is None:
         require_native(kernel.library)
         require_native(kernel.rows)
-    ffi, lib = native.ffi, native.lib
     slot = ctypes.c_int(7)
-    cells = ffi.new("ck_cell[]", [(ffi.cast("void *", ctypes.addressof(slot)), b"i")])
-    log = ffi.gc(lib.ck_log_new(1, cells, 0, 4), lib.ck_log_free)
-    read = rows_module.RowLog(int(ffi.cast("uintptr_t", log)), log)
-    timing, watch, stop = ffi.new("double[1]"), ffi.new("double[3]"), ffi.new("int[3]")
-    assert lib.ck_steps(ffi.NULL, 0, 1, 0.0, 1.0, 10.0, 0, 3, 60.0, timing, watch, stop, log) == -1
+    log = native.Log([(ctypes.addressof(slot), "i")], 0, 4)
+    read = rows_module.RowLog(log.address, log)
+    kept = arrays()
+    members = native.Members([], *map(ctypes.addressof, kept), True)  # no member at all
+    assert members.steps(0.0, 1.0, 10.0, 0, 3, 60.0, log) == native.CK_DONE
     assert len(read) == 3 and read.row(-1) == [7] and read.times() == [0.1, 0.2, 0.3]
     for kind in ("Real", "Binary"):
         made = native_row_format([Column(name="c", unit="", type=kind)], [0])
@@ -202,18 +198,6 @@ def test_lines_are_none_where_a_column_is_not_made_in_c() -> None:
     assert made.lines(read, 1, 1) == "0.2,7\n0.3,7\n"
     with pytest.raises(IndexError):
         read.row(3)
-
-
-@given(st.lists(st.floats(min_value=0.0, max_value=1e4) | st.just(1e-7), min_size=1))
-def test_latencies_counted_in_c_are_counted_as_in_python(samples: list[float]) -> None:
-    """``log_buckets`` gives each sample the bucket Python's expression gives it."""
-    require_native(kernel.rows)
-    in_c, in_python = latency.LatencyStats(), latency.LatencyStats()
-    in_c.add_all(samples)
-    in_python.add_all(tuple(samples))  # not a list: counted in Python
-    assert in_c._buckets == in_python._buckets
-    assert (in_c.count, in_c.maximum) == (in_python.count, in_python.maximum)
-    assert math.isclose(in_c.total, in_python.total, rel_tol=1e-12, abs_tol=1e-300)
 
 
 @given(

@@ -417,6 +417,8 @@ class DoStepResponse(_message.Message):
     OUTPUTS_FIELD_NUMBER: _builtins.int
     TERMINATE_FIELD_NUMBER: _builtins.int
     TERMINATE_REASON_FIELD_NUMBER: _builtins.int
+    STEP_SECONDS_FIELD_NUMBER: _builtins.int
+    WAITED_SECONDS_FIELD_NUMBER: _builtins.int
     terminate: _builtins.bool
     """The participant asks to end the run after this step (FMI 3's terminateSimulation, FMI 2's
     terminated status): the outputs above are its last, at current_time + step_size. The
@@ -425,6 +427,19 @@ class DoStepResponse(_message.Message):
     """
     terminate_reason: _builtins.str
     """Why, for people: e.g. "the tank is empty". Empty when terminate is false."""
+    step_seconds: _builtins.float
+    """What this step cost the participant itself [s]: the wall time from its step's start to its
+    outputs, measured by the participant (Coupler's runtime: around the simulator's step, without
+    the transport and the encoding). The orchestrator reports it per participant beside the
+    latency it sees itself (summary.json `step_cost_ms`), which also holds the time on the wire
+    and, when it waits for several participants at once, the others' time. Finite and >= 0; 0
+    (what a participant that predates the field sends): not reported.
+    """
+    waited_seconds: _builtins.float
+    """Of step_seconds, the time the participant waited for an outside program it fronts, e.g. a
+    bridge's calls to the simulator it wraps (the OpenRails bridge: the mock's physics and
+    rendering); summary.json `waited_ms`. 0: none, or not reported.
+    """
     @_builtins.property
     def outputs(self) -> _containers.RepeatedCompositeFieldContainer[Global___VariableBinding]:
         """Outputs at current_time + step_size."""
@@ -435,10 +450,12 @@ class DoStepResponse(_message.Message):
         outputs: _abc.Iterable[Global___VariableBinding] | None = ...,
         terminate: _builtins.bool = ...,
         terminate_reason: _builtins.str = ...,
+        step_seconds: _builtins.float = ...,
+        waited_seconds: _builtins.float = ...,
     ) -> None: ...
     _HasFieldArgType: _TypeAlias = _Never  # noqa: Y015
     def HasField(self, field_name: _HasFieldArgType) -> _builtins.bool: ...
-    _ClearFieldArgType: _TypeAlias = _typing.Literal["outputs", b"outputs", "terminate", b"terminate", "terminate_reason", b"terminate_reason"]  # noqa: Y015
+    _ClearFieldArgType: _TypeAlias = _typing.Literal["outputs", b"outputs", "step_seconds", b"step_seconds", "terminate", b"terminate", "terminate_reason", b"terminate_reason", "waited_seconds", b"waited_seconds"]  # noqa: Y015
     def ClearField(self, field_name: _ClearFieldArgType) -> None: ...
     def WhichOneof(self, oneof_group: _Never) -> None: ...
 

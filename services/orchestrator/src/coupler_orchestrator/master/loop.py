@@ -162,6 +162,10 @@ class Master:
         steps finish on this thread, and the awaited ones."""
         self._slot = {m.name: i for i, m in enumerate(plan.members)}
         self._timing: list[float | None] = [None] * len(plan.members)
+        """Each member's step latency at this communication point (None: not due)."""
+        self._costs: list[float | None] = [None] * len(plan.members)
+        self._waits: list[float | None] = [None] * len(plan.members)
+        """What each member's step cost it, and how much of that it waited (None: not said)."""
         self.store: dict[Key, Value] = {}
         """Every member's latest outputs (the native FMU step keeps its own, in C arrays)."""
         self.completed_steps = 0
@@ -188,8 +192,9 @@ class Master:
         """The watchdog ended the run from its thread: nothing more is told to observers."""
         self._stepped: list[Callable[[float, Sequence[Value]], None]] = []
         self._timed: list[Callable[[Sequence[float | None]], None]] = []
-        """The observers' ``stepped`` and the ``timed`` of those that take it (made when the
-        run starts): what each communication point calls."""
+        self._costed: list[Callable[[Sequence[float | None], Sequence[float | None]], None]] = []
+        """The observers' ``stepped`` and the ``timed`` and ``costed`` of those that take them
+        (made when the run starts): what each communication point calls."""
         self._batched: list[Callable[[Steps], None]] = []
         """The observers' ``stepped_batch``: what the points of several steps call."""
         self._telling = threading.Lock()
@@ -213,6 +218,7 @@ class Master:
         self._stepped = [o.stepped for o in self.observers]
         self._batched = [o.stepped_batch for o in self.observers]
         self._timed = [o.timed for o in self.observers if type(o).timed is not Observer.timed]
+        self._costed = [o.costed for o in self.observers if type(o).costed is not Observer.costed]
         try:
             for observer in self.observers:
                 observer.started(self.info)
@@ -289,9 +295,13 @@ class Master:
         self._ended = reason
         self._request = (by, reason)
 
-    def took(self, m: Member, seconds: float) -> None:
-        """A step of ``m`` took ``seconds`` (its latency at this communication point)."""
-        self._timing[self._slot[m.name]] = seconds
+    def took(self, m: Member, stepper: Stepper) -> None:
+        """``stepper`` took a step of ``m``: its latency and its cost at this communication
+        point noted."""
+        slot = self._slot[m.name]
+        self._timing[slot] = stepper.took
+        self._costs[slot] = stepper.cost
+        self._waits[slot] = stepper.waited
 
     @property
     def abandoned(self) -> bool:
@@ -433,7 +443,7 @@ class Master:
             outputs = stepper.finish()
         except EndRun as end:
             outputs = self._ask_to_end(m, k, end)
-        self._timing[self._slot[m.name]] = stepper.took
+        self.took(m, stepper)
         if self._abandoned:  # it came back after the watchdog had ended the run
             raise asyncio.CancelledError
         return outputs
@@ -444,7 +454,7 @@ class Master:
             outputs = await stepper.whole(self.plan.grid.time(k), m.step, self._inputs(m))
         except EndRun as end:
             outputs = self._ask_to_end(m, k, end)
-        self._timing[self._slot[m.name]] = stepper.took
+        self.took(m, stepper)
         if self._abandoned:
             raise asyncio.CancelledError
         return outputs
@@ -491,6 +501,8 @@ class Master:
         if self._abandoned:  # it came back after the watchdog had ended the run
             raise asyncio.CancelledError
         self._timing = native.timing[:]
+        if self._costed:  # computed here: each step's cost is its latency
+            self._costs = self._timing[:]
 
     async def _jacobi_step(self, k: int, pending: dict[int, list[tuple[Member, Values]]]) -> None:
         """Every due member on the outputs of t_k: the awaited ones in flight while the others
@@ -581,6 +593,11 @@ class Master:
         for timed in self._timed:
             timed(timing)
         self._timing = [None] * len(timing)
+        if self._costed:
+            costs, waits = self._costs, self._waits
+            for costed in self._costed:
+                costed(costs, waits)
+            self._costs, self._waits = [None] * len(costs), [None] * len(waits)
 
     async def _pace(self, wall_start: float, simulated: float) -> None:
         assert self.plan.realtime_factor

@@ -6,7 +6,8 @@ type), each far dearer than the FMU's own work for a small model. The native FMU
 over them in C instead: each member's inputs copied from the outputs they are
 connected to, set, stepped, every output read into one array per type. The step's results row
 is then read from those arrays in one call into C too (``coupler_native._rows.RowRead``), or
-with one slice per array where that module is missing.
+with one slice per array where that module is missing (``SlicedRow``: the same
+``native.RowReader``, the same row).
 
 It is used when it means exactly what the step in Python means: every member an in-process FMU
 with prepared calls (``coupler.fmu.calls``: FMI 2.0/3.0 scalars), stepping every base step
@@ -16,8 +17,9 @@ with ``--no-native-steps`` / ``COUPLER_NATIVE_STEPS=0``, the members step throug
 the same results (``tests/test_native_kernel.py`` compares them byte for byte).
 
 It is compiled when the coupler-native wheel is built; its structs are declared once, by
-``csrc/fmu_steps.h``, which its cffi binding reads. Without coupler-native installed, runs step
-through Python.
+``csrc/fmu_steps.h``, and built from the plain numbers this module gives
+``coupler_native._fmu_steps.Members`` (the addresses ctypes holds). Without coupler-native
+installed, runs step through Python.
 """
 
 from __future__ import annotations
@@ -34,7 +36,7 @@ from coupler.fmu import FmuParticipant
 from coupler.fmu.calls import CONVERT, Group
 from coupler_orchestrator.master.watchdog import IN_PROCESS, Armed
 from coupler_orchestrator.model import Algorithm, Member, Plan
-from coupler_orchestrator.native import fmu_steps, rows
+from coupler_orchestrator.native import RowReader, fmu_steps, rows
 
 log = structlog.get_logger("coupler.kernel")
 
@@ -44,7 +46,8 @@ BATCH = 512
 OFF = "native steps are off (--no-native-steps or COUPLER_NATIVE_STEPS=0)"
 
 library = fmu_steps
-"""``library()``: the native FMU step (``ffi``, ``lib``), or None (why is said once)."""
+"""``library()``: the native FMU step (``coupler_native._fmu_steps``), or None (why is said
+once)."""
 
 
 def _address(pointer: Any) -> int:
@@ -98,7 +101,7 @@ class Kernel:
     """The in-process FMUs of one plan, stepped in C (``unsuitable(plan)`` must be None)."""
 
     def __init__(self, plan: Plan, native: Any) -> None:
-        self._ffi, self._lib = native.ffi, native.lib
+        self._native = native
         self._order = plan.order
         slots = {m.name: i for i, m in enumerate(plan.members)}
         planes: dict[tuple[Any, str], _Plane] = {}
@@ -124,9 +127,12 @@ class Kernel:
             for j, channel in enumerate(group.names):
                 self._slot[(name, channel)] = (plane, first + j, group)
         columns = [self._slot[(m.name, c.name)] for m in plan.members for c in m.outputs]
-        self._row = _row_getter([plane.start + index for plane, index, _ in columns])
-        self._read = _reader(columns)
-        """Reads the row in C, when every column's type allows it; else None."""
+        self.sliced = SlicedRow(
+            self._planes, _row_getter([plane.start + index for plane, index, _ in columns])
+        )
+        """Reads the row in Python."""
+        self.reader: RowReader = _reader(columns) or self.sliced
+        """Reads the row: in C, when every column's type allows it; else ``sliced``."""
         self._grid = plan.grid.in_doubles()
         self._grid_time = plan.grid.time
         self._log, self._logged = self._row_log(columns, len(plan.members))
@@ -135,27 +141,26 @@ class Kernel:
         feeds: dict[str, list[tuple[str, tuple[str, str]]]] = {}
         for link in plan.links:
             feeds.setdefault(link.target, []).append((link.input, (link.source, link.output)))
-        self._keep: list[Any] = []  # every array the C side points into
         self._sets: list[list[Group]] = []
         """Each member's setter groups (in stepping order), to name a failed one."""
-        self._members = self._ffi.new("ck_member[]", len(plan.order))
-        for i, m in enumerate(plan.order):
-            self._fill(
-                self._members[i], m, slots[m.name], gets.get(m.name, []), feeds.get(m.name, [])
-            )
+        described = [
+            self._described(m, slots[m.name], gets.get(m.name, []), feeds.get(m.name, []))
+            for m in plan.order
+        ]
         self.timing = (ctypes.c_double * len(plan.members))()
         watch = ctypes.c_double * 3
         self._watch = watch.from_buffer(plan.progress) if plan.progress else watch()
         self._watch[0], self._watch[1], self._watch[2] = -1.0, 0.0, 0.0
         self._stop = (ctypes.c_int * 3)()
-        pointer = self._ffi.cast
-        self._arrays = (
-            pointer("double *", ctypes.addressof(self.timing)),
-            pointer("double *", ctypes.addressof(self._watch)),
-            pointer("int *", ctypes.addressof(self._stop)),
+        self._members = native.Members(
+            described,
+            ctypes.addressof(self.timing),
+            ctypes.addressof(self._watch),
+            ctypes.addressof(self._stop),
+            plan.algorithm is Algorithm.JACOBI,
         )
-        """``timing``, the watchdog's and the stop's arrays as the C side takes them."""
-        self._jacobi = int(plan.algorithm is Algorithm.JACOBI)
+        """The members as the C side steps them (every array it points into is this
+        kernel's, or its participants')."""
         self._what = [f"{m.name}.DoStep" for m in plan.members]
         self._deadline = [m.deadline for m in plan.members]
 
@@ -166,20 +171,12 @@ class Kernel:
         native, codes = rows(), _codes(columns)
         if native is None or codes is None or self._grid is None:
             return None, None
-        ffi = self._ffi
-        cells = ffi.new(
-            "ck_cell[]",
-            [
-                (ffi.cast("void *", plane.address(index)), code.encode())
-                for (plane, index, _), code in zip(columns, codes, strict=True)
-            ]
-            or 1,
-        )
-        made = self._lib.ck_log_new(len(columns), cells, slots, BATCH)
-        if made == ffi.NULL:
-            raise MemoryError("no memory for the native FMU step's row log")
-        log = ffi.gc(made, self._lib.ck_log_free)
-        return log, native.RowLog(int(ffi.cast("uintptr_t", log)), log)
+        cells = [
+            (plane.address(index), code)
+            for (plane, index, _), code in zip(columns, codes, strict=True)
+        ]
+        made = self._native.Log(cells, slots, BATCH)  # MemoryError when there is none
+        return made, native.RowLog(made.address, made)
 
     @property
     def logs(self) -> bool:
@@ -191,53 +188,29 @@ class Kernel:
         assert isinstance(m.participant, FmuParticipant)
         return m.participant
 
-    def _calls(self, calls: Sequence[tuple[Any, Any, int, int]]) -> Any:
-        """A ``ck_call[]`` of (function, value references, count, buffer address)."""
-        pointer = self._ffi.cast
-        made = self._ffi.new(
-            "ck_call[]",
-            [
-                (
-                    pointer("void *", _address(function)),
-                    pointer("unsigned int *", ctypes.addressof(refs)),
-                    count,
-                    pointer("void *", buffer),
-                )
-                for function, refs, count, buffer in calls
-            ]
-            or 1,
-        )
-        self._keep.append(made)
-        return made
+    @staticmethod
+    def _calls(calls: Sequence[tuple[Any, Any, int, int]]) -> list[tuple[int, int, int, int]]:
+        """Each call as ``ck_call`` holds it: (function, value references, count, buffer), as
+        addresses."""
+        return [
+            (_address(function), ctypes.addressof(refs), count, buffer)
+            for function, refs, count, buffer in calls
+        ]
 
-    def _fill(
+    def _described(
         self,
-        native: Any,
         m: Member,
         slot: int,
         gets: Sequence[tuple[Group, _Plane, int]],
         feed: Sequence[tuple[str, tuple[str, str]]],
-    ) -> None:
+    ) -> tuple[Any, ...]:
+        """Member ``m`` as ``Members`` takes it (a ``ck_member``: see its docstring)."""
         participant = self._participant(m)
         calls = participant.prepared()
         assert calls is not None
         parts = calls.native
-        pointer = self._ffi.cast
-        native.instance = pointer("void *", _address(parts.instance))
-        native.do_step = pointer("void *", _address(parts.do_step))
-        native.step = m.step
-        native.version = 3 if parts.version == "3.0" else 2
-        native.slot = slot
-        native.gets = len(gets)
-        native.get = self._calls(
-            [(g.function, g.refs, g.count, plane.address(first)) for g, plane, first in gets]
-        )
         source = dict(feed)
         sets = participant.input_groups(tuple(source)) if source else []
-        native.sets = len(sets)
-        native.set = self._calls(
-            [(g.function, g.refs, g.count, ctypes.addressof(g.buffer)) for g in sets]
-        )
         copies = []
         for group in sets:
             size = ctypes.sizeof(_element(group))
@@ -248,17 +221,21 @@ class Kernel:
                         f"{m.name}.{name} ({group.kind}) is fed a {origin.kind} by "
                         f"{source[name][0]}.{source[name][1]}"
                     )
-                copies.append(
-                    (
-                        pointer("void *", ctypes.addressof(group.buffer) + j * size),
-                        pointer("void *", plane.address(index)),
-                        size,
-                    )
-                )
-        copy = self._ffi.new("ck_copy[]", copies or 1)
-        self._keep.append(copy)
-        native.copies, native.copy = len(copies), copy
+                target = ctypes.addressof(group.buffer) + j * size
+                copies.append((target, plane.address(index), size))
         self._sets.append(sets)
+        return (
+            _address(parts.instance),
+            _address(parts.do_step),
+            m.step,
+            3 if parts.version == "3.0" else 2,
+            slot,
+            copies,
+            self._calls([(g.function, g.refs, g.count, ctypes.addressof(g.buffer)) for g in sets]),
+            self._calls(
+                [(g.function, g.refs, g.count, plane.address(first)) for g, plane, first in gets]
+            ),
+        )
 
     def place(self, member: str, outputs: Mapping[str, Value]) -> None:
         """Put a member's outputs (its Initialize answer, or those it ended the run with)
@@ -272,25 +249,14 @@ class Kernel:
 
     def row(self) -> list[Value]:
         """Every member's outputs, in the results' column order."""
-        if self._read is not None:
-            return self._read()
-        return self.sliced_row()
-
-    def sliced_row(self) -> list[Value]:
-        """``row`` read in Python: one slice per array, converted, picked."""
-        values: list[Value] = []
-        for plane in self._planes:
-            values += plane.values()
-        return self._row(values)
+        return self.reader.row()
 
     def step(self, time: float, start: int = 0) -> tuple[int, Exception] | None:
         """Step the members from ``start`` (in stepping order) at ``time``; None when all
         stepped, else the index of the member that stopped the step and what it means (an
         error, or ``EndRun``: step on from the next member)."""
-        index = self._lib.ck_step(
-            self._members, len(self._order), self._jacobi, start, time, *self._arrays
-        )
-        if index == self._lib.CK_DONE:
+        index = self._members.step(start, time)
+        if index == self._native.CK_DONE:
             return None
         return index, self._meaning(index, time)
 
@@ -301,12 +267,9 @@ class Kernel:
         member stopped the next one, its index and what it means, as ``step`` does (the members
         after it have not stepped: ``step(time, index + 1)`` goes on)."""
         assert self._grid is not None
-        lib = self._lib
-        index = lib.ck_steps(
-            self._members, len(self._order), self._jacobi, *self._grid, k, count, budget,
-            *self._arrays, self._log,
-        )  # fmt: skip
-        done = lib.ck_log_take(self._log)
+        lib = self._native
+        index = self._members.steps(*self._grid, k, count, budget, self._log)
+        done = self._log.take()
         if index in (lib.CK_DONE, lib.CK_CLAIMED):  # claimed: the watchdog tells the rows
             return done, None
         if index == lib.CK_NO_MEMORY:
@@ -321,7 +284,7 @@ class Kernel:
         """From another thread while ``steps`` is under way (a member hangs in its step): the
         steps it has taken whole so far, which its caller will then not be given (``steps``
         takes no more); None when there are none, or they were handed over already."""
-        if self._log is None or self._lib.ck_log_claim(self._log) == 0:
+        if self._log is None or self._log.claim() == 0:
             return None
         return LoggedSteps(self._logged)
 
@@ -329,9 +292,9 @@ class Kernel:
         m = self._order[index]
         participant = self._participant(m)
         call, group, status = self._stop
-        lib = self._lib
+        lib = self._native
         if call == lib.CK_CALL_TERMINATE:
-            return participant.terminated(time, m.step, self._members[index].last)
+            return participant.terminated(time, m.step, self._members.last(index))
         calls = participant.prepared()
         assert calls is not None
         if call == lib.CK_CALL_GET:
@@ -396,15 +359,32 @@ def _codes(columns: Sequence[tuple[_Plane, int, Group]]) -> str | None:
     return "".join(codes)
 
 
-def _reader(columns: Sequence[tuple[_Plane, int, Group]]) -> Callable[[], list[Value]] | None:
-    """``RowRead(...).row`` over the columns' slots; None without the module, or for a C type
-    it does not read."""
+def _reader(columns: Sequence[tuple[_Plane, int, Group]]) -> RowReader | None:
+    """``coupler_native._rows.RowRead`` over the columns' slots; None without the module, or
+    for a C type it does not read."""
     native, codes = rows(), _codes(columns)
     if native is None or codes is None:
         return None
     addresses = [plane.address(index) for plane, index, _ in columns]
-    read: Callable[[], list[Value]] = native.RowRead(addresses, codes).row
+    read: RowReader = native.RowRead(addresses, codes)
     return read
+
+
+class SlicedRow:
+    """``RowReader`` in Python: one slice per array, converted, the columns picked (the twin
+    of ``coupler_native._rows.RowRead``)."""
+
+    def __init__(
+        self, planes: Sequence[_Plane], pick: Callable[[list[Value]], list[Value]]
+    ) -> None:
+        self._planes = planes
+        self._pick = pick
+
+    def row(self) -> list[Value]:
+        values: list[Value] = []
+        for plane in self._planes:
+            values += plane.values()
+        return self._pick(values)
 
 
 def _row_getter(positions: Sequence[int]) -> Callable[[list[Value]], list[Value]]:

@@ -8,12 +8,15 @@ calling thread instead, through a completion queue of its own, and splits each s
 (``steppers.Split``): the master sends every due member its request, computes what it
 computes itself, then receives the answers. Requests and answers are encoded and decoded
 here, by the same codec as everywhere else, so the values are the same bytes either way; an
-answer in the plain form every participant writes (outputs only, each binding its channel and
-one value of its channel's type) is read from its bytes in C (``coupler_native._answers``),
-into the same values, and any other through protobuf and the codec, which say what is wrong.
+answer in the plain form every participant writes (outputs and the step's cost only, each
+binding its channel and one value of its channel's type) is read from its bytes in C
+(``coupler_native._answers``), into the same values as its Python twin ``ProtobufAnswers``
+reads (one ``native.AnswerReader``), and any other through protobuf and the codec, which say
+what is wrong.
 
 It is compiled, with C++ gRPC bundled, when the coupler-native wheel is built (its functions
-declared once, by ``csrc/step_streams.h``, which its cffi binding reads); without
+declared once, by ``csrc/step_streams.h``; ``coupler_native._step_streams.Stream`` drives them,
+without the GIL while it waits); without
 coupler-native installed, or with ``--no-native-steps`` / ``COUPLER_NATIVE_STEPS=0``, remote
 steps go through ``grpc.aio`` with the same meaning, the same errors and the same results.
 
@@ -42,8 +45,8 @@ from coupler.errors import ParticipantError, ParticipantTimeout, answered_unaske
 from coupler.participant import Values
 from coupler.security import read_secret
 from coupler.v1 import component_pb2 as pb
+from coupler_orchestrator.native import AnswerReader, step_streams
 from coupler_orchestrator.native import answers as answers
-from coupler_orchestrator.native import step_streams
 
 _CODES = {code.value[0]: code for code in grpc.StatusCode}
 log = structlog.get_logger("coupler.master")
@@ -52,7 +55,8 @@ STREAM = ("native step channel", "its StepStream over C++ gRPC")
 """How summary.json names a member stepped over its StepStream, and why."""
 
 library = step_streams
-"""``library()``: the native step channel (``ffi``, ``lib``), or None (why is said once)."""
+"""``library()``: the native step channel (``coupler_native._step_streams``), or None (why is
+said once)."""
 
 
 def enabled(asked: bool = True) -> bool:
@@ -85,20 +89,15 @@ class NativeSteps(StepTransport):
         """How summary.json names the way this member steps, and why (``steppers.Split``)."""
         native = library()
         assert native is not None, "NativeSteps without the native step channel"
-        self._ffi, self._lib = native.ffi, native.lib
-        self._data = native.ffi.new("const char **")
-        self._size = native.ffi.new("size_t *")
-        self._code = native.ffi.new("int *")
-        self._piece = native.ffi.new("const char *[1]")
-        self._piece_size = native.ffi.new("size_t[1]")
-        """A request of one piece, as ``cs_send`` takes it (made once)."""
+        self._library = native
         self._remote: RemoteParticipant | None = None
         self._native: Any = None
-        """The open stream (a ``cs_stream *``)."""
-        self._sent: list[Any] = []
-        """The pieces of the request under way (``_send``)."""
-        self._read: Callable[[memoryview], Values | None] | None = None
-        """Reads an answer's outputs in C when it is in its plain form (``_answers``)."""
+        """The open stream (a ``coupler_native._step_streams.Stream``)."""
+        self._reader: AnswerReader | None = None
+        """Reads an answer's outputs and cost when it only answers the step (in C where
+        coupler-native's ``_answers`` is at hand, else ``ProtobufAnswers``)."""
+        self.reported: wire.StepCost = (None, None)
+        """What the last answer said its step cost the participant (``wire.step_cost``)."""
 
     def start(self, participant: RemoteParticipant) -> bool:
         capabilities = participant.codec.description.capabilities
@@ -107,9 +106,11 @@ class NativeSteps(StepTransport):
         self._remote = participant
         self._native = self._open(participant)
         codec, read = participant.codec, answers()
-        if read is not None:
-            made = read.AnswerRead(codec.answer_fields(), codec.policy.max_message_bytes)
-            self._read = made.outputs
+        self._reader = (
+            read.AnswerRead(codec.answer_fields(), codec.policy.max_message_bytes)
+            if read is not None
+            else ProtobufAnswers(codec)
+        )
         return True
 
     def _open(self, remote: RemoteParticipant) -> Any:
@@ -128,22 +129,17 @@ class NativeSteps(StepTransport):
                 (security.cert, "TLS certificate"),
             )
         ]
-        pairs = [
-            self._ffi.new("char[]", text.encode()) for pair in remote.metadata for text in pair
-        ]
-        metadata = self._ffi.new("char *[]", pairs or 1)
-        stream = self._lib.cs_open(
+        stream = self._library.Stream(
             remote.target.encode(),
-            int(tls),
+            tls,
             *pems,
-            metadata,
-            len(remote.metadata),
+            remote.metadata,
             remote.call_timeout,
             *remote.limits.transport,  # received, sent: from the participant's declarations
         )
-        error = self._ffi.string(self._lib.cs_error(stream)).decode(errors="replace")
+        error = stream.error
         if error:
-            self._lib.cs_close(stream, 0.0)
+            stream.close(0.0)
             raise ParticipantError(
                 f"{error} ({remote.address})", participant=remote.name, call="StepStream"
             )
@@ -152,22 +148,15 @@ class NativeSteps(StepTransport):
     def _open_socket(self, remote: RemoteParticipant, path: str) -> Any:
         """The participant's step socket opened, or None (said in the run's log): its
         StepStream does the same."""
-        stream = self._lib.cs_open(
-            f"steps:{path}".encode(),
-            0,
-            b"",
-            b"",
-            b"",
-            self._ffi.new("char *[]", 1),
-            0,
-            remote.call_timeout,
+        stream = self._library.Stream(
+            f"steps:{path}".encode(), False, b"", b"", b"", (), remote.call_timeout,
             *remote.limits.transport,
-        )
-        error = self._ffi.string(self._lib.cs_error(stream)).decode(errors="replace")
+        )  # fmt: skip
+        error = stream.error
         if not error:
             self.described = ("native step socket", f"its step socket {path}, without gRPC")
             return stream
-        self._lib.cs_close(stream, 0.0)
+        stream.close(0.0)
         self.described = (STREAM[0], f"{STREAM[1]}: its step socket did not open ({error})")
         log.warning(
             "step_socket_unavailable",
@@ -188,18 +177,10 @@ class NativeSteps(StepTransport):
         self._send(self._remote.step_request_pieces(time, step, inputs))
 
     def _send(self, pieces: list[bytes]) -> None:
-        """Send a request given as pieces whose concatenation is the message."""
+        """Send a request given as pieces whose concatenation is the message (sent from these
+        objects, not copied: the stream holds them until the next step or its end)."""
         assert self._remote is not None
-        # sent from these objects, not copied: kept until the next step or the stream's end
-        if len(pieces) == 1:  # a step's request without a long Binary input
-            self._sent = [self._ffi.from_buffer(pieces[0])]
-            self._piece[0], self._piece_size[0] = self._sent[0], len(pieces[0])
-            sent = self._lib.cs_send(self._native, self._piece, self._piece_size, 1)
-        else:
-            self._sent = [self._ffi.from_buffer(piece) for piece in pieces]
-            sizes = [len(piece) for piece in pieces]
-            sent = self._lib.cs_send(self._native, self._sent, sizes, len(pieces))
-        if sent != self._lib.CS_OK:
+        if not self._native.send(pieces):
             self._answer()  # the stream has ended: its status says why
             raise ParticipantError(
                 "a step was sent before the previous answer was received",
@@ -211,12 +192,17 @@ class NativeSteps(StepTransport):
         """The answer to the request sent; blocks up to the call deadline."""
         assert self._remote is not None
         data = self._answered()
-        if self._read is not None and (outputs := self._read(data)) is not None:
-            return outputs  # the plain answer of every step, read in C
-        try:
+        assert self._reader is not None
+        found = self._reader.read(data)
+        if found is not None:  # the answer of every step
+            outputs, seconds, waited = found
+            self.reported = wire.cost_of(seconds, waited)
+            return outputs
+        try:  # an end of the run asked for, or an answer that is refused: said here
             response, large = wire.step_answer(data)
         except DecodeError as exc:
             raise self._not_an_answer(exc) from None
+        self.reported = wire.step_cost(response)
         return self._remote.step_outputs(response, large)
 
     def _answer(self) -> pb.DoStepResponse:
@@ -238,27 +224,25 @@ class NativeSteps(StepTransport):
     def _answered(self) -> memoryview:
         """The serialized answer to the request sent (valid until the next receive)."""
         assert self._remote is not None and self._native is not None
-        lib, remote = self._lib, self._remote
-        result = lib.cs_receive(
-            self._native, remote.call_timeout, self._data, self._size, self._code
-        )
-        if result == lib.CS_TIMEOUT:
+        remote, stream = self._remote, self._native
+        data: memoryview | None = stream.receive(remote.call_timeout)
+        if data is not None:
+            return data
+        result, code = stream.failure
+        if result == self._library.CS_TIMEOUT:
             raise ParticipantTimeout(
                 f"no answer within {remote.call_timeout:g} s",
                 participant=remote.name,
                 call="DoStep",
                 status="DEADLINE_EXCEEDED",
             )
-        if result != lib.CS_OK:
-            details = self._ffi.string(lib.cs_error(self._native)).decode(errors="replace")
-            raise translate(
-                _CODES.get(self._code[0], grpc.StatusCode.UNKNOWN),
-                details,
-                participant=remote.name,
-                call="DoStep",
-                address=remote.address,
-            )
-        return memoryview(self._ffi.buffer(self._data[0], self._size[0]))
+        raise translate(
+            _CODES.get(code, grpc.StatusCode.UNKNOWN),
+            stream.error,
+            participant=remote.name,
+            call="DoStep",
+            address=remote.address,
+        )
 
     async def step(self, request: pb.DoStepRequest) -> pb.DoStepResponse:
         self._send([request.SerializeToString()])
@@ -269,8 +253,7 @@ class NativeSteps(StepTransport):
         way, the stream's end only confirms it -- unless answers came that no request asked
         for (ABORTED: the participant answered a request twice)."""
         stream, self._native = self._native, None
-        self._sent = []
-        if stream is not None and (unasked := self._lib.cs_close(stream, timeout)) > 0:
+        if stream is not None and (unasked := stream.close(timeout)) > 0:
             assert self._remote is not None
             raise ParticipantError(
                 answered_unasked(unasked),
@@ -278,6 +261,24 @@ class NativeSteps(StepTransport):
                 call="Terminate",
                 status="ABORTED",
             )
+
+
+class ProtobufAnswers:
+    """``AnswerReader`` in Python: an answer read by protobuf and the codec (the twin of
+    ``coupler_native._answers.AnswerRead``; the same values)."""
+
+    def __init__(self, codec: wire.Codec) -> None:
+        self._codec = codec
+
+    def read(self, data: Any, /) -> tuple[Values, float, float] | None:
+        try:
+            response, large = wire.step_answer(data)
+            if response.terminate:
+                return None
+            outputs = wire.outputs_from_pb(response, self._codec, large)
+        except Exception:  # DecodeError, the codec's refusals: the caller reads it to say so
+            return None
+        return outputs, response.step_seconds, response.waited_seconds
 
 
 def transport(asked: bool = True, step_socket: bool = True) -> Callable[[], StepTransport | None]:

@@ -233,7 +233,7 @@ class OpenMcxMaster(Master):
             outputs = stepper.finish()
         else:
             outputs = await stepper.whole(time, step, inputs)
-        self.took(m, stepper.took)
+        self.took(m, stepper)
         if self.abandoned:  # it came back after the watchdog had ended the run
             raise asyncio.CancelledError
         return outputs

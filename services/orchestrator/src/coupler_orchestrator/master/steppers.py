@@ -12,9 +12,17 @@
   call in flight (``landing``), ``finish`` takes its answer once it has landed.
 
 A run of in-process FMUs only is stepped whole by the native FMU batch (``native_fmu_step``),
-every member at once in C. Every way has the meaning and the errors of ``Participant.do_step``:
-``finish`` returns the outputs, or raises what the participant raised (``EndRun``: it asks to
-end the run).
+every member at once in C.
+
+Each stepper notes how long the member's last step took as the master saw it (``took``: its
+latency) and what it cost the member itself (``cost``, ``waited``): a step computed here costs
+its latency; a remote participant says what its step cost (``DoStepResponse.step_seconds``).
+On the native step channel the master receives the answers one after another, after it has
+sent every request, so a member's latency holds the wait for the members received before it;
+its cost does not (summary.json reports both).
+
+Every way has the meaning and the errors of ``Participant.do_step``: ``finish`` returns the
+outputs, or raises what the participant raised (``EndRun``: it asks to end the run).
 """
 
 from __future__ import annotations
@@ -28,6 +36,7 @@ from typing import Protocol, runtime_checkable
 
 from coupler.channels import Value
 from coupler.participant import Participant, Values
+from coupler.wire import StepCost
 from coupler_orchestrator.master import native_fmu_step, native_step_channel
 from coupler_orchestrator.master.watchdog import IN_PROCESS, Watchdog
 from coupler_orchestrator.model import Member, Plan
@@ -46,6 +55,8 @@ class Halves(Protocol):
 
     described: tuple[str, str]
     """How summary.json names this way of stepping (``StepPath``), and why."""
+    reported: StepCost
+    """What the last answer received said its step cost the participant."""
 
     def send(self, time: float, step: float, inputs: Mapping[str, Value]) -> None: ...
 
@@ -58,6 +69,14 @@ class StepsHere(Protocol):
     OpenMCx built-in) and can step on the caller's thread, never waiting on anything."""
 
     def step_now(self, time: float, step: float, inputs: Mapping[str, Value]) -> Values: ...
+
+
+@runtime_checkable
+class Reports(Protocol):
+    """A participant whose answers say what each step cost it (``RemoteParticipant``)."""
+
+    reported: StepCost
+    """What the last step's answer said the step cost the participant."""
 
 
 @runtime_checkable
@@ -78,6 +97,10 @@ class Stepper(ABC):
     """The answer under way on the event loop (``Awaited``); None: ``finish`` gives it here."""
     took: float = 0.0
     """How long the last step took [s] (the member's latency)."""
+    cost: float | None = None
+    """What the last step cost the member itself [s]; None: not said."""
+    waited: float | None = None
+    """Of ``cost``, the time the member waited for an outside program [s]; None: not said."""
     here: bool = True
     """Its steps run or are waited for on the master's thread (watched by the watchdog)."""
 
@@ -158,7 +181,7 @@ class InProcess(Watched):
         finally:
             if not self._holding:
                 self._watchdog.disarm()
-            self.took = wallclock.perf_counter() - started
+            self.took = self.cost = wallclock.perf_counter() - started
 
 
 class InHalves(Watched):
@@ -187,6 +210,7 @@ class InHalves(Watched):
             if not self._holding:
                 self._watchdog.disarm()
             self.took = wallclock.perf_counter() - self._sent
+            self.cost, self.waited = self._halves.reported
 
 
 class Awaited(Stepper):
@@ -197,6 +221,7 @@ class Awaited(Stepper):
 
     def __init__(self, participant: Participant, path: StepPath) -> None:
         self._participant = participant
+        self._reports = participant if isinstance(participant, Reports) else None
         self.path = path
 
     def begin(self, time: float, step: float, inputs: Values) -> None:
@@ -214,6 +239,8 @@ class Awaited(Stepper):
             return await self._participant.do_step(time, step, inputs)
         finally:
             self.took = wallclock.perf_counter() - started
+            if self._reports is not None:
+                self.cost, self.waited = self._reports.reported
 
 
 def steppers_of(

@@ -11,10 +11,11 @@ and an interrupted or failed run keeps every completed row.
 
 A row's line is made in one pass in C by the native CSV row (``coupler_native._rows``:
 ``packages/coupler-native/csrc/rows.c``): the Real, Integer, Boolean and String cells there,
-the other columns' cells by their Python formatters; the same text as ``row_formatter``'s
-%-format, which makes it where coupler-native is not installed (``tests/test_csv_rows.py``
-compares them). The rows of several base steps the native FMU step took in one call are
-written from its row log in one call into C too (``RowFormat.lines``), the same lines.
+the other columns' cells by their Python formatters; the same text as its Python twin
+``RowTemplate`` (``row_formatter``'s %-format) makes where coupler-native is not installed:
+the same ``native.RowLines``, the same bytes (``tests/test_twins.py``, ``test_csv_rows.py``).
+The rows of several base steps the native FMU step took in one call are written from its row
+log in one call into C too (``RowFormat.lines``), the same lines.
 """
 
 from __future__ import annotations
@@ -30,6 +31,7 @@ from typing import IO, Any
 
 from coupler import messages
 from coupler.channels import Value
+from coupler_orchestrator.native import RowLines
 from coupler_orchestrator.native import rows as native_rows
 from coupler_orchestrator.observer import Column, Observer, RunEnd, RunInfo, Steps
 from coupler_orchestrator.outputs.files import ResultsError
@@ -130,6 +132,17 @@ def row_formatter(columns: Sequence[Column], picked: Sequence[int]) -> Callable[
     return line
 
 
+class RowTemplate:
+    """``RowLines`` in Python: ``row_formatter``'s lines (the twin of
+    ``coupler_native._rows.RowFormat``)."""
+
+    def __init__(self, columns: Sequence[Column], picked: Sequence[int]) -> None:
+        self._line = row_formatter(columns, picked)
+
+    def line(self, time: float, row: Sequence[Value], /) -> str:
+        return self._line(time, row)
+
+
 def csv_field(text: str) -> str:
     """``text`` as a field of a CSV row, quoted when it holds a comma, a quote or a newline:
     exactly what the csv module writes with lineterminator "\\n" (a lone carriage return is
@@ -193,9 +206,10 @@ class CsvRecorder(Observer):
         picked = self.selection.columns(info.columns)
         columns = [info.columns[i] for i in picked]
         self._frames = [(i, info.columns[i].name) for i in picked if is_frame(info.columns[i])]
-        made = native_row_format(info.columns, picked)
-        self._line = made.line if made is not None else row_formatter(info.columns, picked)
-        self._lines = made.lines if made is not None and not self._frames else None
+        native = native_row_format(info.columns, picked)
+        made: RowLines = native if native is not None else RowTemplate(info.columns, picked)
+        self._line = made.line
+        self._lines = native.lines if native is not None and not self._frames else None
         try:
             self.path.parent.mkdir(parents=True, exist_ok=True)
             self._file = self.path.open("w", encoding="utf-8", newline="", buffering=1 << 16)

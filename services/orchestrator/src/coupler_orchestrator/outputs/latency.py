@@ -1,6 +1,7 @@
 """Step latencies in constant memory (a log-bucketed histogram): a run of a million steps costs
 what a run of ten does. A batch's buckets are counted in C where coupler-native is installed
-(``coupler_native._rows.log_buckets``: the same buckets, ``tests/test_latency.py``)."""
+(``coupler_native._rows.log_buckets``), else by its Python twin ``log_buckets``: the same
+``native.BucketCount``, the same buckets (``tests/test_twins.py``)."""
 
 from __future__ import annotations
 
@@ -8,7 +9,21 @@ import math
 from collections import Counter
 from collections.abc import Sequence
 
-from coupler_orchestrator.native import rows
+from coupler_orchestrator.native import BucketCount, rows
+
+
+def log_buckets(
+    samples: Sequence[float], floor: float, per_bucket: float, base: float
+) -> tuple[float, float, Counter[int]]:
+    """``BucketCount`` in Python (``coupler_native._rows.log_buckets``' twin)."""
+    log = math.log
+    total = 0.0
+    for s in samples:  # in order, as C sums them (sum() may compensate)
+        total += s
+    counts = Counter(  # Counter counts an iterable in C
+        [int((log(s) - floor) * per_bucket) if s > base else 0 for s in samples]
+    )
+    return total, max(samples), counts
 
 
 class LatencyStats:
@@ -29,22 +44,15 @@ class LatencyStats:
         every ``SummaryWriter.BATCH`` steps)."""
         if not samples:
             return
-        log, base = math.log, self._BASE
-        floor, per_bucket = log(base), 1 / self._WIDTH
+        base = self._BASE
         native = rows()
-        if native is not None and type(samples) is list:
-            total, maximum, counts = native.log_buckets(samples, floor, per_bucket, base)
-            self.count += len(samples)
-            self.total += total
-            self.maximum = max(self.maximum, maximum)
-            self._buckets.update(counts)
-            return
+        count: BucketCount = native.log_buckets if native is not None else log_buckets
+        listed = samples if type(samples) is list else list(samples)
+        total, maximum, counts = count(listed, math.log(base), 1 / self._WIDTH, base)
         self.count += len(samples)
-        self.total += sum(samples)
-        self.maximum = max(self.maximum, *samples)
-        self._buckets.update(  # Counter counts an iterable in C
-            [int((log(s) - floor) * per_bucket) if s > base else 0 for s in samples]
-        )
+        self.total += total
+        self.maximum = max(self.maximum, maximum)
+        self._buckets.update(counts)
 
     def percentile(self, q: float) -> float:
         """The ``q`` quantile (0..1) [s], within 1 %."""

@@ -107,6 +107,8 @@ class MonitorState(Observer):
         self.row: Sequence[Value] = ()
         self.latency: list[float | None] = []
         """Each member's last step latency [ms]."""
+        self.cost: list[float | None] = []
+        """What each member's last step cost it, by its own account [ms] (None: not said)."""
         self.values = Decimated(points)
         self.latencies = Decimated(points)
         self._started = 0.0
@@ -134,6 +136,7 @@ class MonitorState(Observer):
         self.waiting_for.clear()
         self.values, self.latencies = Decimated(self.points), Decimated(self.points)
         self.time, self.latency = None, [None] * len(info.members)
+        self.cost = [None] * len(info.members)
         self._numeric = [i for i, c in enumerate(info.columns) if c.type in NUMERIC]
         self._whole = len(self._numeric) == len(info.columns)
         self._kept = {
@@ -154,6 +157,9 @@ class MonitorState(Observer):
         if self.time is not None:
             self.latencies.offer(self.time, self.latency)
 
+    def costed(self, seconds: Sequence[float | None], waited: Sequence[float | None]) -> None:
+        self.cost = [None if s is None else s * 1e3 for s in seconds]
+
     def stepped_batch(self, steps: Steps) -> None:
         """Several steps: the rows (and latencies) the history keeps, and the last ones."""
         times = steps.times
@@ -169,7 +175,7 @@ class MonitorState(Observer):
         self.values.offer_all(times, kept)
         self.latencies.offer_all(times, milliseconds)
         self.time, self.row = times[-1], steps.row(-1)
-        self.latency = milliseconds(-1)
+        self.latency = self.cost = milliseconds(-1)  # computed here: cost = latency
         self.version += 1
 
     def finished(self, end: RunEnd) -> None:
@@ -202,6 +208,7 @@ class MonitorState(Observer):
             "realtime_factor": rtf,
             "eta_s": (span - reached) / rtf if rtf and self._ended is None else None,
             "latency_ms": dict(zip(info.members, self.latency, strict=False)),
+            "cost_ms": dict(zip(info.members, self.cost, strict=False)),
         }
 
     def layout(self) -> dict[str, Any]:

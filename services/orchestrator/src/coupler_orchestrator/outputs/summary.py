@@ -1,6 +1,7 @@
 """summary.json: it exists from the start of a run (status ``running``), is refreshed every few
 seconds while it runs and rewritten when it ends, always atomically (never half-written): status,
-reason, steps, wall time, real-time factor, each member's step latency, the recorded columns,
+reason, steps, wall time, real-time factor, each member's step latency (what the master saw)
+and step cost (what the member's step cost it, by its own account), the recorded columns,
 and at the end of a completed (or terminated) run the reports installed packages make from its
 results (``outputs.reports``)."""
 
@@ -35,8 +36,13 @@ class SummaryWriter(Observer):
         self.summary: dict[str, Any] = {}
         self._info: RunInfo | None = None
         self._latency: list[LatencyStats] = []
+        self._cost: list[LatencyStats] = []
+        self._waited: list[LatencyStats] = []
         self._timings: list[Sequence[float | None]] = []
         """Each step's latencies (one per member) not yet folded into ``_latency``."""
+        self._costs: list[Sequence[float | None]] = []
+        self._waits: list[Sequence[float | None]] = []
+        """Each step's costs and waits (one per member) not yet folded into their stats."""
         self._time = 0.0
         self._points = 0
         self._wall_start = wallclock.monotonic()
@@ -45,6 +51,8 @@ class SummaryWriter(Observer):
     def started(self, info: RunInfo) -> None:
         self._info = info
         self._latency = [LatencyStats() for _ in info.members]
+        self._cost = [LatencyStats() for _ in info.members]
+        self._waited = [LatencyStats() for _ in info.members]
         self._time = info.start_time
         self._wall_start = wallclock.monotonic()
         self._write(None)
@@ -60,12 +68,18 @@ class SummaryWriter(Observer):
         if len(self._timings) >= self.BATCH:
             self._fold()
 
+    def costed(self, seconds: Sequence[float | None], waited: Sequence[float | None]) -> None:
+        self._costs.append(seconds)
+        self._waits.append(waited)
+
     def stepped_batch(self, steps: Steps) -> None:
         """Several steps: each member's latencies counted in one batch."""
         self._time = steps.times[-1]
         self._points += len(steps.times)
-        for i, stats in enumerate(self._latency):
-            stats.add_all(steps.samples(i))
+        for i, (stats, cost) in enumerate(zip(self._latency, self._cost, strict=True)):
+            samples = steps.samples(i)
+            stats.add_all(samples)
+            cost.add_all(samples)  # computed here: a step's cost is its latency
         if wallclock.monotonic() - self._written >= SUMMARY_EVERY_S:
             self._write(None)
 
@@ -79,10 +93,16 @@ class SummaryWriter(Observer):
         self._write(end)
 
     def _fold(self) -> None:
-        """The kept steps' latencies into each member's statistics, member by member."""
-        timings, self._timings = self._timings, []
-        for i, stats in enumerate(self._latency):
-            stats.add_all([s for row in timings if (s := row[i]) is not None])
+        """The kept steps' latencies, costs and waits into each member's statistics, member by
+        member."""
+        for kept, statistics in (
+            (self._timings, self._latency),
+            (self._costs, self._cost),
+            (self._waits, self._waited),
+        ):
+            for i, stats in enumerate(statistics):
+                stats.add_all([s for row in kept if (s := row[i]) is not None])
+            kept.clear()
 
     def _write(self, end: RunEnd | None) -> None:
         info = self._info
@@ -109,9 +129,16 @@ class SummaryWriter(Observer):
                     "multiple": multiple,
                     "steps": stats.count,
                     "do_step_latency_ms": stats.summary_ms(),
+                    "step_cost_ms": cost.summary_ms(),
+                    "waited_ms": waited.summary_ms(),
                 }
-                for name, multiple, stats in zip(
-                    info.members, info.multiples, self._latency, strict=True
+                for name, multiple, stats, cost, waited in zip(
+                    info.members,
+                    info.multiples,
+                    self._latency,
+                    self._cost,
+                    self._waited,
+                    strict=True,
                 )
             },
             "columns": [

@@ -61,12 +61,15 @@ function showHeader(h) {
   text("run", h.run_id ? `run ${h.run_id}` : "");
   const body = document.querySelector("#latency-table tbody");
   body.innerHTML = "";
+  const costs = h.cost_ms || {};
   for (const [member, ms] of Object.entries(h.latency_ms || {})) {
     const row = body.insertRow();
     row.insertCell().textContent = member;
-    const cell = row.insertCell();
-    cell.className = "num";
-    cell.textContent = ms === null ? "–" : `${fmt(ms, 3)} ms`;
+    for (const value of [ms, costs[member] ?? null]) {
+      const cell = row.insertCell();
+      cell.className = "num";
+      cell.textContent = value === null ? "–" : `${fmt(value, 3)} ms`;
+    }
   }
 }
 
