@@ -685,7 +685,11 @@ class ParticipantServer:
 def run(main: Coroutine[Any, Any, T]) -> T:
     """``asyncio.run(main)`` on uvloop's event loop when uvloop is installed (a dependency of
     this package on Linux and macOS): a participant's step round trip measured 12-17 % faster
-    with it (docs/performance.md); on the standard loop otherwise."""
+    with it (docs/performance.md); on the standard loop otherwise. The process keeps the
+    memory it frees for its next frames (``coupler.heap``)."""
+    from coupler.heap import keep_freed_memory
+
+    keep_freed_memory()
     try:
         import uvloop
     except ImportError:
