@@ -235,6 +235,7 @@ def _line_chart(envelope: Envelope, axis: str, figure: str, label: str, threshol
                 f'<text x="{width - right - 2}" y="{py(t) - 2:.1f}" font-size="9" '
                 f'text-anchor="end" fill="#666">recall {t}</text>'
             )
+    labels = 0  # crossing labels drawn so far: each on a line of its own at the top
     for i, (detector, points) in enumerate(series.items()):
         colour = COLOURS[i % len(COLOURS)]
         path = " ".join(f"{px(x):.1f},{py(y):.1f}" for x, y in points)
@@ -250,9 +251,10 @@ def _line_chart(envelope: Envelope, axis: str, figure: str, label: str, threshol
                 parts.append(
                     f'<line x1="{px(crossing):.1f}" x2="{px(crossing):.1f}" y1="{top}" '
                     f'y2="{height - bottom}" stroke="{colour}" stroke-dasharray="2 2"/>'
-                    f'<text x="{px(crossing) + 2:.1f}" y="{top + 10}" font-size="9" '
-                    f'fill="{colour}">{t} at {crossing:.3g}</text>'
+                    f'<text x="{px(crossing) + 2:.1f}" y="{top + 10 + 10 * labels}" '
+                    f'font-size="9" fill="{colour}">{t} at {crossing:.3g}</text>'
                 )
+                labels += 1
     parts.append("</svg>")
     return "".join(parts)
 
