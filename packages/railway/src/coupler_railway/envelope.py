@@ -191,7 +191,7 @@ def _colour(recall: float) -> str:
 
 
 def _line_chart(envelope: Envelope, axis: str, figure: str, label: str, thresholds: bool) -> str:
-    width, height, left, bottom, top, right = 420, 240, 50, 34, 12, 12
+    width, height, left, bottom, top, right = 420, 240, 50, 34, 12, 24  # the last value's tick
     series = {d: along(envelope, axis, d, figure) for d in envelope.detectors}
     xs = [x for points in series.values() for x, _ in points]
     ys = [y for points in series.values() for _, y in points]
@@ -248,11 +248,16 @@ def _line_chart(envelope: Envelope, axis: str, figure: str, label: str, threshol
                 )
         for t in THRESHOLDS if thresholds else ():
             for crossing in boundary(points, t):
+                x = px(crossing)
+                text = f"{t} at {float(f'{crossing:.3g}'):g}"  # 62900, not 6.29e+04
+                # right of the line, or left of it where the text would leave the chart
+                right_of = x + 2 + 5 * len(text) <= width - right
                 parts.append(
-                    f'<line x1="{px(crossing):.1f}" x2="{px(crossing):.1f}" y1="{top}" '
-                    f'y2="{height - bottom}" stroke="{colour}" stroke-dasharray="2 2"/>'
-                    f'<text x="{px(crossing) + 2:.1f}" y="{top + 10 + 10 * labels}" '
-                    f'font-size="9" fill="{colour}">{t} at {crossing:.3g}</text>'
+                    f'<line x1="{x:.1f}" x2="{x:.1f}" y1="{top}" y2="{height - bottom}" '
+                    f'stroke="{colour}" stroke-dasharray="2 2"/>'
+                    f'<text x="{x + 2 if right_of else x - 2:.1f}" y="{top + 10 + 10 * labels}" '
+                    f'font-size="9" text-anchor="{"start" if right_of else "end"}" '
+                    f'fill="{colour}">{text}</text>'
                 )
                 labels += 1
     parts.append("</svg>")
