@@ -9,15 +9,19 @@ Here: fog visibility x sun elevation, recall falling with fog and at low sun; tw
 from __future__ import annotations
 
 import csv
+import itertools
 import json
+import re
 import subprocess
 import sys
+import tomllib
 from pathlib import Path
 
 import pytest
 
 from coupler_railway.envelope import boundary, read_campaign, write_envelope
 
+ROOT = Path(__file__).resolve().parents[3]
 FOG = (50.0, 100.0, 200.0, 400.0)
 SUN = (5.0, 20.0, 45.0)
 
@@ -27,23 +31,27 @@ def recall(fog: float, sun: float, detector: str) -> float:
     return round(min(1.0, made * 1.5) if detector == "learned" else made, 3)
 
 
+def write_run(folder: Path, n: int, variant: dict[str, object], value: float) -> None:
+    """Run ``n`` as `coupler campaign` lays it out: its variant, its scored summary, a frame."""
+    run = folder / "runs" / f"{n:03d}-key{n}"
+    (run / "perception-frames").mkdir(parents=True)
+    report = {"recall": value, "precision": 1.0, "max_abs_error_m": 2 - value,
+              "mean_abs_error_m": 0.1}  # fmt: skip
+    (run / "variant.json").write_text(json.dumps(variant))
+    (run / "summary.json").write_text(json.dumps({"reports": {"perception": report}}))
+    if value < 1:
+        (run / "perception-frames" / "t0012.4.png").write_bytes(b"\x89PNG")
+
+
 def campaign(folder: Path, key: str = "detector", default: str = "") -> Path:
     """Runs naming ``default`` leave the detector out of their variant (the participant's)."""
     n = 0
     for detector in ("colour", "learned"):
         for fog in FOG:
             for sun in SUN:
-                run = folder / "runs" / f"{n:03d}-key{n}"
-                (run / "perception-frames").mkdir(parents=True)
                 named = {} if detector == default else {key: detector}
                 variant = {**named, "OpenRails.fog_m": fog, "OpenRails.sun_deg": sun}
-                value = recall(fog, sun, detector)
-                report = {"recall": value, "precision": 1.0, "max_abs_error_m": 2 - value,
-                          "mean_abs_error_m": 0.1}  # fmt: skip
-                (run / "variant.json").write_text(json.dumps(variant))
-                (run / "summary.json").write_text(json.dumps({"reports": {"perception": report}}))
-                if value < 1:
-                    (run / "perception-frames" / "t0012.4.png").write_bytes(b"\x89PNG")
+                write_run(folder, n, variant, recall(fog, sun, detector))
                 n += 1
     (folder / "runs" / "999-failed").mkdir()  # a run that wrote nothing: left out
     return folder
@@ -58,12 +66,44 @@ def test_the_envelope_reads_the_runs_and_their_axes(tmp_path: Path) -> None:
 
 
 def test_a_detector_named_as_a_parameter_and_the_default_are_series(tmp_path: Path) -> None:
-    """The perception campaign names the learned detector as ``Perception.detector`` and runs
-    the colour one as the participant's default (no key): two series, neither an axis."""
+    """A campaign that names the learned detector as ``Perception.detector`` and runs the
+    colour one as the participant's default (no key): two series, neither an axis."""
     envelope = read_campaign(campaign(tmp_path, "Perception.detector", default="colour"))
     assert envelope.axes == ["OpenRails.fog_m", "OpenRails.sun_deg"]
     assert envelope.detectors == ["", "learned"]
     assert sum(r.detector == "learned" for r in envelope.runs) == 12
+
+
+def test_the_perception_campaign_names_the_detector_of_every_run(tmp_path: Path) -> None:
+    """scenarios/railway/perception-campaign.toml names the colour detector (its [grid]) as
+    well as the learned one (its [table]): the legend says which detector each series is,
+    none is "default"."""
+    spec = tomllib.loads((ROOT / "scenarios/railway/perception-campaign.toml").read_text())
+    grid = [dict(zip(spec["grid"], values, strict=True))
+            for values in itertools.product(*spec["grid"].values())]  # fmt: skip
+    with (ROOT / "scenarios/railway" / spec["table"]["file"]).open(encoding="utf-8") as handle:
+        table = [{k: float(v) if k.startswith("OpenRails.") else v for k, v in row.items()}
+                 for row in csv.DictReader(handle)]  # fmt: skip
+    for n, variant in enumerate(grid + table):
+        write_run(tmp_path, n, variant, 1.0 if variant["OpenRails.visibility"] > 100 else 0.0)
+    envelope = read_campaign(tmp_path)
+    assert len(envelope.runs) == 64 and envelope.detectors == ["colour", "learned"]
+    assert "Perception.detector" not in envelope.axes
+    write_envelope(tmp_path)
+    page = (tmp_path / "envelope.html").read_text(encoding="utf-8")
+    assert "detectors: colour, learned." in page and "default" not in page
+
+
+def test_crossing_labels_each_have_a_line_of_their_own(tmp_path: Path) -> None:
+    """Where the detectors' recall crosses 0.9 and 0.5 near one another, their labels at the
+    top of the chart do not overlap: each is on a line of its own."""
+    write_envelope(campaign(tmp_path))
+    page = (tmp_path / "envelope.html").read_text(encoding="utf-8")
+    label = re.compile(r'<text x="[\d.]+" y="([\d.]+)" font-size="9" [^>]*>0\.\d at')
+    for chart in page.split("<svg")[1:]:
+        lines = label.findall(chart)
+        assert len(lines) == len(set(lines)), lines
+    assert page.count(" at ") >= 3  # crossings of both detectors on one chart
 
 
 def test_the_command_writes_html_png_and_csv_with_boundaries_and_frame_links(

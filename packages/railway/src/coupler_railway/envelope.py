@@ -191,8 +191,16 @@ def _colour(recall: float) -> str:
 
 
 def _line_chart(envelope: Envelope, axis: str, figure: str, label: str, thresholds: bool) -> str:
-    width, height, left, bottom, top, right = 420, 240, 50, 34, 12, 12
     series = {d: along(envelope, axis, d, figure) for d in envelope.detectors}
+    crossings = [
+        (i, t, x)
+        for i, points in enumerate(series.values())
+        for t in (THRESHOLDS if thresholds else ())
+        for x in boundary(points, t)
+    ]
+    # above the chart, a line for each crossing's label (they would cover the lines near 1)
+    above = 11 * len(crossings)
+    width, height, left, bottom, top, right = 420, 240 + above, 50, 34, 12 + above, 24
     xs = [x for points in series.values() for x, _ in points]
     ys = [y for points in series.values() for _, y in points]
     dots = [(_number(r.variant.get(axis)), getattr(r, figure), r.detector) for r in envelope.runs]
@@ -245,14 +253,17 @@ def _line_chart(envelope: Envelope, axis: str, figure: str, label: str, threshol
                     f'<circle cx="{px(x):.1f}" cy="{py(y):.1f}" r="2.5" fill="{colour}" '
                     f'opacity="0.5"/>'
                 )
-        for t in THRESHOLDS if thresholds else ():
-            for crossing in boundary(points, t):
-                parts.append(
-                    f'<line x1="{px(crossing):.1f}" x2="{px(crossing):.1f}" y1="{top}" '
-                    f'y2="{height - bottom}" stroke="{colour}" stroke-dasharray="2 2"/>'
-                    f'<text x="{px(crossing) + 2:.1f}" y="{top + 10}" font-size="9" '
-                    f'fill="{colour}">{t} at {crossing:.3g}</text>'
-                )
+    for line, (i, t, crossing) in enumerate(crossings):
+        colour, x, y = COLOURS[i % len(COLOURS)], px(crossing), 12 + 11 * line
+        text = f"{t} at {float(f'{crossing:.3g}'):g}"  # 62900, not 6.29e+04
+        # right of the line, or left of it where the text would leave the chart
+        right_of = x + 2 + 5 * len(text) <= width - right
+        parts.append(
+            f'<line x1="{x:.1f}" x2="{x:.1f}" y1="{y - 3}" y2="{height - bottom}" '
+            f'stroke="{colour}" stroke-dasharray="2 2"/>'
+            f'<text x="{x + 2 if right_of else x - 2:.1f}" y="{y + 6}" font-size="9" '
+            f'text-anchor="{"start" if right_of else "end"}" fill="{colour}">{text}</text>'
+        )
     parts.append("</svg>")
     return "".join(parts)
 
@@ -260,7 +271,10 @@ def _line_chart(envelope: Envelope, axis: str, figure: str, label: str, threshol
 def _map(envelope: Envelope, x: str, y: str, detector: str) -> str:
     xs, ys, cells = grid_of(envelope, x, y, detector)
     size, left, top = 44, 70, 10
-    width, height = left + size * len(xs) + 10, top + size * len(ys) + 40
+    caption = f"{x} (rows: {y})"
+    # as wide as its caption too (a campaign with two values of x draws a narrow map)
+    width = max(left + size * len(xs) + 10, 6 * len(caption) + 8)
+    height = top + size * len(ys) + 40
     parts = [
         f'<svg xmlns="http://www.w3.org/2000/svg" width="{width}" height="{height}" '
         f'role="img" aria-label="recall over {html.escape(x)} and {html.escape(y)}">'
@@ -303,8 +317,8 @@ def _map(envelope: Envelope, x: str, y: str, detector: str) -> str:
             f'font-size="10" text-anchor="middle">{a:g}</text>'
         )
     parts.append(
-        f'<text x="{left + len(xs) * size / 2}" y="{height - 6}" font-size="11" '
-        f'text-anchor="middle">{html.escape(x)} (rows: {html.escape(y)})</text></svg>'
+        f'<text x="{max(left + len(xs) * size / 2, width / 2)}" y="{height - 6}" '
+        f'font-size="11" text-anchor="middle">{html.escape(caption)}</text></svg>'
     )
     return "".join(parts)
 
