@@ -1098,7 +1098,6 @@ class _Bands:
     def __init__(self, threads: int) -> None:
         if threads not in (1, 2):
             raise ValueError(f"render threads must be 1 or 2, not {threads}")
-        self.threads = threads
         self._helper = (
             ThreadPoolExecutor(1, thread_name_prefix="render-band") if threads == 2 else None
         )
