@@ -7,6 +7,8 @@ PACKAGES="perception"
 build() { :; }
 
 start() {
+  # The learned detector's compiled pass is cached where the unprivileged user may write.
+  export NUMBA_CACHE_DIR="${NUMBA_CACHE_DIR:-/tmp/numba}"
   export PERCEPTION_HOST="${PERCEPTION_HOST:-0.0.0.0}"
   exec python -m perception "$@"
 }

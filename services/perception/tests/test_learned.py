@@ -11,6 +11,7 @@ import json
 import re
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from coupler.channels import RunSetup
@@ -130,3 +131,33 @@ async def test_the_participant_runs_the_learned_detector(
     finally:
         await server.stop(grace=0.1)
     assert out["detection_count"] == 2  # in clear air as the colour detector (101 and 102)
+
+
+@pytest.mark.parametrize(
+    ("light", "clock_h"),
+    [
+        (Conditions(light="sun"), 12.0),
+        (Conditions(light="sun"), 23.0),
+        (Conditions(light="sun", visibility_m=25.0), 23.0),
+        (Conditions(light="sun", season="winter", weather="snow", snow_cover=0.8, dirt=0.8), 8.5),
+    ],
+    ids=["noon", "night", "fog-at-night", "snow-and-dirt"],
+)
+def test_the_compiled_pass_gives_numpys_probabilities_bit_for_bit(
+    model: PixelModel, test_line: Infrastructure, light: Conditions, clock_h: float
+) -> None:
+    """``probability`` (one compiled pass, ``perception.pixels``) against
+    ``probability_numpy`` (the step-by-step numpy the model was trained with) on frames of
+    the test line, on an odd-width crop of them (the median of an odd row) and on noise."""
+    renderer = Renderer(Scene.of_infrastructure(test_line), conditions=light)
+    first = next(b for b in test_line.balises if b.code == 101).distance_m
+    frames = [
+        renderer.render(CAMERA, first - ahead, View(elapsed_s=1.0, clock_s=clock_h * 3600.0)).pixels
+        for ahead in (6.0, 20.0)
+    ]
+    frames.append(frames[0][:, 1:])  # 799 columns
+    frames.append(np.random.default_rng(7).integers(0, 256, (60, 81, 3), dtype=np.uint8))
+    for pixels in frames:
+        expected = model.probability_numpy(pixels)
+        assert (expected > 0).any()  # candidates were judged
+        assert np.array_equal(model.probability(pixels), expected)

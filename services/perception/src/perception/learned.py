@@ -11,9 +11,10 @@ depth 10, balanced classes, a fixed seed); a pixel whose leaf's probability is a
 range, bound -- is the colour detector's (``detector.find`` with this mask).
 
 The model file is JSON (tens of kB: the tree's nodes, the cut, how it was trained and
-validated): read with numpy alone, no pickle, no runtime
-beyond numpy at inference; the same frame gives the same mask on every machine that runs the
-same numpy.
+validated): read with numpy alone, no pickle. At inference one compiled pass (``pixels``,
+numba, IEEE float32 in numpy's order) gives each pixel's probability, the values numpy's
+step-by-step path (``probability_numpy``) gives; the same frame gives the same mask on every
+machine.
 """
 
 from __future__ import annotations
@@ -67,7 +68,18 @@ class PixelModel:
 
     def probability(self, rgb: Pixels) -> npt.NDArray[np.float32]:
         """Each pixel's probability of being a balise's, in the frame's shape (0 where it is
-        no candidate)."""
+        no candidate): ``probability_numpy``'s values, computed in one compiled pass
+        (``pixels``)."""
+        from . import pixels  # numba: imported where a run asks for the learned detector
+
+        return pixels.frame_probability(
+            rgb, self.feature, self.threshold, self.left, self.right, self.probability_of,
+            self.depth,
+        )  # fmt: skip
+
+    def probability_numpy(self, rgb: Pixels) -> npt.NDArray[np.float32]:
+        """``probability`` in numpy, a step at a time: ``candidates``, ``predict``, ``scatter``
+        (what the training script computes; the compiled pass is held to it)."""
         index, x = candidates(rgb)
         return self.scatter(rgb, index, self.predict(x))
 
