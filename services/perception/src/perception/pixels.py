@@ -78,14 +78,8 @@ def probability(rgb, scale, feature, threshold, left, right, leaf, depth, out): 
             x[5], x[6], x[7], x[8], x[9] = dr, dg, db, dr - db, dg - db
             x[10] = (dr + dg - np.float32(2.0) * db) / size
             node = 0
-            for _ in range(depth):
-                if x[feature[node]] <= threshold[node]:
-                    step = left[node]
-                else:
-                    step = right[node]
-                if step == node:  # a leaf: its children are itself
-                    break
-                node = step
+            for _ in range(depth):  # a leaf's children are itself
+                node = left[node] if x[feature[node]] <= threshold[node] else right[node]
             out[row, column] = leaf[node]
 
 
