@@ -161,3 +161,14 @@ def test_the_compiled_pass_gives_numpys_probabilities_bit_for_bit(
         expected = model.probability_numpy(pixels)
         assert (expected > 0).any()  # candidates were judged
         assert np.array_equal(model.probability(pixels), expected)
+
+
+def test_warming_compiles_the_kernel_a_frame_uses(model: PixelModel) -> None:
+    """The participant warms the compiled pass at Initialize (``pixels.warm``): a frame after
+    it needs no other compilation, so no step pays for one."""
+    from perception import pixels
+
+    pixels.warm()
+    compiled = list(pixels.probability.signatures)
+    model.probability(np.zeros((CAMERA.height, CAMERA.width, 3), dtype=np.uint8))
+    assert pixels.probability.signatures == compiled

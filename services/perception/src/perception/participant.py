@@ -142,9 +142,13 @@ class PerceptionParticipant(Participant):
                 expected=" or ".join(DETECTORS),
             )
         try:
-            return _model(self._model.resolve()).mask, LEARNED_MAX_WIDTH
+            model = _model(self._model.resolve())
         except ModelError as exc:
             raise ChannelValueError(str(exc), channel="detector", expected="a model file") from None
+        from . import pixels  # numba, for the learned detector alone
+
+        pixels.warm()  # compiled (or loaded from numba's cache) here, not in the first step
+        return model.mask, LEARNED_MAX_WIDTH
 
     async def do_step(self, time: float, step: float, inputs: Mapping[str, Value]) -> Values:
         self._inputs.update(inputs)

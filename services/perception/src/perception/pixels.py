@@ -1,14 +1,14 @@
 """The learned detector's per-pixel work as one compiled pass (numba): each row's median, the
 candidates, their features and the walk down the tree, a pixel at a time.
 
-``learned.PixelModel.probability`` in numpy builds the float frame, its row medians (a
+``learned.PixelModel.probability_numpy`` builds the float frame, its row medians (a
 partition of every row), the difference frame, the features of every candidate and then walks
 the tree a level at a time over all of them: 13 ms a noon frame and 20 ms a night one (a
 hundred thousand candidates) on one core here, more than the mock takes to render the frame.
 This kernel gives the same probabilities, bit for bit, in a single visit of each pixel: the
 median of a row of bytes is read from a 256-bin count of them, and the arithmetic is numpy's,
-in float32 and in the same order (no ``fastmath``). ``tests/test_learned_kernel.py`` holds the
-two to the same output over rendered frames of every condition. Compiled on first use and
+in float32 and in the same order (no ``fastmath``). ``tests/test_learned.py`` holds the two
+to the same output over rendered frames under several conditions. Compiled by ``warm`` and
 cached beside this file (``cache=True``; NUMBA_CACHE_DIR elsewhere).
 """
 
@@ -84,7 +84,8 @@ def probability(rgb, scale, feature, threshold, left, right, leaf, depth, out): 
 
 
 def warm() -> None:
-    """Compile the kernel (or load it from numba's cache) on a tiny frame."""
+    """Compile the kernel (or load it from numba's cache) on a tiny frame: the participant
+    does so when a run asks for the learned detector, at Initialize."""
     tiny = np.zeros((2, 2, 3), dtype=np.uint8)
     zero, one = np.zeros(1, dtype=np.int64), np.zeros(1, dtype=np.float32)
     probability(tiny, SCALE, zero, one, zero, zero, one, 1, np.empty((2, 2), np.float32))
